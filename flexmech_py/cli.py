@@ -1,0 +1,103 @@
+"""The ``flexmech`` command line.
+
+    flexmech run CASE.toml [--model M] [--dt S] [--elements-per-link N] [--set KEY.PATH=VALUE ...] [--out DIR]
+    flexmech reproduce [--out DIR]
+
+Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import FlexmechError
+
+__all__ = ["main"]
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+    from .case import MODELS
+
+    p = argparse.ArgumentParser(prog="flexmech", description="Finite-element dynamics of flexible planar mechanisms.")
+    p.add_argument("--version", action="version", version=f"flexmech {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    r = sub.add_parser("run", help="run a case file and write timeseries.csv, summary.json and plots")
+    r.add_argument("case", help="TOML case file (see docs/cases.md)")
+    r.add_argument("--model", choices=MODELS, help="rigid-inertia load model (default: the case's solver.model)")
+    r.add_argument("--dt", type=_positive_float, help="time step [s] (default: the case's solver.dt)")
+    r.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (default: the case's mesh)")
+    r.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                   help="override a case value, e.g. --set solver.t_end=0.1 --set links.coupler.area=5e-5")
+    r.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>)")
+    r.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+
+    rp = sub.add_parser("reproduce", help="regenerate the seed paper's Figs. 3-12 and a Markdown report")
+    rp.add_argument("--out", default="reproduce", help="output folder (default: ./reproduce)")
+    rp.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
+    return p
+
+
+def _cmd_run(args) -> int:
+    from .case import load_case
+    from .simulate import simulate
+
+    case = load_case(args.case, overrides=args.set)
+    res = simulate(case, model=args.model, dt=args.dt, elements_per_link=args.elements_per_link)
+    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{res.model}"
+    paths = res.write(out)
+    if not args.no_plots:
+        from .plots import plot_result
+
+        paths += plot_result(res, out)
+    print(res.table())
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _cmd_reproduce(args) -> int:
+    from .reproduce import reproduce
+
+    report = reproduce(args.out, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True))
+    print(f"wrote {report}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return {"run": _cmd_run, "reproduce": _cmd_reproduce}[args.command](args)
+    except FlexmechError as exc:
+        print(f"flexmech: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:  # pragma: no cover
+        print("flexmech: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,44 @@
+"""Exception classes of flexmech.
+
+Every error a user can cause derives from :class:`FlexmechError`; the CLI turns
+any of them into one line on stderr and exit code 2.  Compiled-kernel status
+codes are translated into these exceptions in exactly one place
+(:func:`flexmech_py.kernels.check_status`).
+"""
+
+__all__ = [
+    "FlexmechError",
+    "CaseError",
+    "MechanismError",
+    "SolverError",
+    "OutputError",
+]
+
+
+class FlexmechError(Exception):
+    """Base class of all errors flexmech reports to users."""
+
+
+class CaseError(FlexmechError, ValueError):
+    """A case file (or an override) is invalid: names the field and the fix."""
+
+    def __init__(self, field: str, message: str):
+        self.field = field
+        super().__init__(f"{field}: {message}")
+
+
+class MechanismError(FlexmechError):
+    """The mechanism cannot assemble or cannot move through the requested motion."""
+
+
+class SolverError(FlexmechError, RuntimeError):
+    """A compiled solver stopped (singular matrix, non-finite values, ...)."""
+
+    def __init__(self, message: str, time: float | None = None, code: int | None = None):
+        self.time = time
+        self.code = code
+        super().__init__(message)
+
+
+class OutputError(FlexmechError, ValueError):
+    """A requested output does not exist or cannot be computed for this case."""

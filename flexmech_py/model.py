@@ -1,0 +1,301 @@
+"""Finite-element model of a mechanism: nodes, DOFs, joints, elements, lumped inertias.
+
+Conventions (docs/theory.md):
+
+- Every link is meshed with ``n`` equal beam elements from its *start* (its
+  rigid reference point O) to its *end*; element axes follow the rigid link angle.
+- Each mesh node has two elastic translational DOFs (global X, Y components),
+  shared by the links that meet at a joint.  Rotational DOFs belong to a
+  (node, link) pair; links joined by a ``locked`` joint share one.
+- Ground joints fix the node's translations; ``clamp`` also fixes the rotation
+  of the attached link.  Constrained DOFs are kept in the numbering ("all
+  DOFs") and dropped from the solved system ("free DOFs").
+- Free DOFs are numbered by reverse Cuthill-McKee to keep the band narrow.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+from . import kernels
+from .case import JOINTS_OF, MODELS
+from .errors import CaseError
+
+__all__ = ["FEModel", "Joint", "LOAD_MODEL_CODE"]
+
+LOAD_MODEL_CODE = {"hac": 1, "classic": 2, "classic-translational": 3}
+
+
+@dataclass
+class Joint:
+    """A joint: ``inboard`` link index (None = ground) and ``outboard`` link index, each at an end."""
+
+    name: str
+    inboard: int | None
+    inboard_end: str | None
+    outboard: int
+    outboard_end: str
+    elastic: str
+
+
+def mechanism_joints(case: dict) -> list[Joint]:
+    """The joints of the case's mechanism type, with their elastic conditions."""
+    mtype = case["mechanism"]["type"]
+    el = case["joints"]
+    if mtype == "fourbar":
+        return [Joint("crank_pivot", None, None, 0, "start", el["crank_pivot"]),
+                Joint("crank_coupler", 0, "end", 1, "start", el["crank_coupler"]),
+                Joint("coupler_follower", 1, "end", 2, "end", el["coupler_follower"]),
+                Joint("follower_pivot", None, None, 2, "start", el["follower_pivot"])]
+    n = len(case["links"])
+    joints = [Joint("base", None, None, 0, "start", el["base"])]
+    joints += [Joint(f"joint_{k}", k - 2, "end", k - 1, "start", el[f"joint_{k}"]) for k in range(2, n + 1)]
+    assert [j.name for j in joints] == list(JOINTS_OF(mtype, n))
+    return joints
+
+
+@dataclass
+class FEModel:
+    """The discretized mechanism; build it with :meth:`from_case`."""
+
+    case: dict
+    joints: list[Joint]
+    link_names: list[str]
+    n_el: list[int]                     # elements per link
+    node_of: list[list[int]]            # node_of[link][k] -> global node, k = 0..n_el
+    nnodes: int
+    trans_dof: np.ndarray               # (nnodes, 2) all-DOF numbers (0-based)
+    rot_dof: dict                       # (node, link) -> all-DOF number
+    ndof: int
+    fixed: np.ndarray                   # (ndof,) bool
+    free_of: np.ndarray                 # (ndof,) free-DOF number 1..nfree, 0 = constrained (Fortran)
+    el_link: np.ndarray
+    el_dof: np.ndarray                  # (6, nel) 1-based all-DOF numbers
+    el_prop: np.ndarray                 # (5, nel)
+    lm_link: np.ndarray
+    lm_dof: np.ndarray
+    lm_prop: np.ndarray
+    ri_link: np.ndarray
+    ri_dof: np.ndarray
+    ri_prop: np.ndarray
+    bandwidth: int = 0
+    dof_names: list = field(default_factory=list)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_case(cls, case: dict) -> "FEModel":
+        links = case["links"]
+        names = [ln["name"] for ln in links]
+        n_el = [ln["elements"] for ln in links]
+        joints = mechanism_joints(case)
+        # global nodes: one per (link, k), merged at joints
+        parent = {}
+
+        def find(x):
+            while parent.get(x, x) != x:
+                x = parent[x]
+            return x
+
+        for j in joints:
+            if j.inboard is not None:
+                a = (j.inboard, 0 if j.inboard_end == "start" else n_el[j.inboard])
+                b = (j.outboard, 0 if j.outboard_end == "start" else n_el[j.outboard])
+                parent[find(b)] = find(a)
+        ids, node_of = {}, []
+        for li, n in enumerate(n_el):
+            row = []
+            for k in range(n + 1):
+                root = find((li, k))
+                ids.setdefault(root, len(ids))
+                row.append(ids[root])
+            node_of.append(row)
+        nnodes = len(ids)
+
+        # rotational DOF groups: (node, link) pairs, merged by locked joints
+        rparent = {}
+
+        def rfind(x):
+            while rparent.get(x, x) != x:
+                x = rparent[x]
+            return x
+
+        for j in joints:
+            if j.inboard is not None and j.elastic == "locked":
+                na = node_of[j.inboard][0 if j.inboard_end == "start" else -1]
+                rparent[rfind((na, j.outboard))] = rfind((na, j.inboard))
+        # DOF numbering (before bandwidth reduction): node translations, then rotations
+        trans = np.arange(2 * nnodes).reshape(nnodes, 2)
+        rot, rot_groups = {}, {}
+        dof_names = [f"node{n}.{c}" for n in range(nnodes) for c in ("x", "y")]
+        for li, row in enumerate(node_of):
+            for node in row:
+                g = rfind((node, li))
+                if g not in rot_groups:
+                    rot_groups[g] = 2 * nnodes + len(rot_groups)
+                    dof_names.append(f"node{node}.rot[{names[g[1]]}]")
+                rot[(node, li)] = rot_groups[g]
+        ndof = 2 * nnodes + len(rot_groups)
+        fixed = np.zeros(ndof, bool)
+        for j in joints:
+            if j.inboard is None:
+                node = node_of[j.outboard][0 if j.outboard_end == "start" else -1]
+                fixed[trans[node]] = True
+                if j.elastic == "clamp":
+                    fixed[rot[(node, j.outboard)]] = True
+
+        el_link, el_dof, el_prop = [], [], []
+        for li, ln in enumerate(links):
+            le = ln["length"] / n_el[li]
+            ra, ea, ei = ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"], ln["youngs_modulus"] * ln["second_moment"]
+            for k in range(n_el[li]):
+                n1, n2 = node_of[li][k], node_of[li][k + 1]
+                el_link.append(li + 1)
+                el_dof.append([trans[n1, 0], trans[n1, 1], rot[(n1, li)], trans[n2, 0], trans[n2, 1], rot[(n2, li)]])
+                el_prop.append([le, k * le, ra, ea, ei])
+        el_dof = np.array(el_dof, dtype=np.int32).T  # (6, nel), 0-based for now
+
+        model = cls(case=case, joints=joints, link_names=names, n_el=n_el, node_of=node_of, nnodes=nnodes,
+                    trans_dof=trans, rot_dof=rot, ndof=ndof, fixed=fixed, free_of=np.zeros(ndof, np.int32),
+                    el_link=np.array(el_link, np.int32), el_dof=el_dof + 1,
+                    el_prop=np.asfortranarray(np.array(el_prop, float).T),
+                    lm_link=np.zeros(0, np.int32), lm_dof=np.zeros((2, 0), np.int32), lm_prop=np.zeros((2, 0)),
+                    ri_link=np.zeros(0, np.int32), ri_dof=np.zeros(0, np.int32), ri_prop=np.zeros(0),
+                    dof_names=dof_names)
+        model._number_free_dofs(el_dof)
+        model._lumped(case)
+        return model
+
+    def _number_free_dofs(self, el_dof0: np.ndarray) -> None:
+        free = np.flatnonzero(~self.fixed)
+        if free.size == 0:
+            raise CaseError("joints", "every elastic DOF is constrained: nothing to solve")
+        pos = -np.ones(self.ndof, int)
+        pos[free] = np.arange(free.size)
+        rows, cols = [], []
+        for e in range(el_dof0.shape[1]):
+            f = pos[el_dof0[:, e]]
+            f = f[f >= 0]
+            rows.extend(np.repeat(f, f.size))
+            cols.extend(np.tile(f, f.size))
+        graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(free.size, free.size)).tocsr()
+        perm = reverse_cuthill_mckee(graph, symmetric_mode=True)
+        order = np.empty(free.size, int)
+        order[perm] = np.arange(free.size)
+        self.free_of = np.zeros(self.ndof, np.int32)
+        self.free_of[free] = order + 1
+        self.bandwidth = int(kernels.api.ked_bandwidth(self.free_of, self.el_dof))
+
+    def node_ref(self, ref: str, where: str) -> tuple[int, int, float]:
+        """Resolve '<link>.<start|mid|end|fraction>' to (link index, global node, zeta along the link)."""
+        link, pos = ref.split(".", 1)
+        li = self.link_names.index(link)
+        frac = {"start": 0.0, "mid": 0.5, "end": 1.0}.get(pos)
+        frac = float(pos) if frac is None else frac
+        n = self.n_el[li]
+        k = int(round(frac * n))
+        if abs(frac * n - k) > 1e-9:
+            raise CaseError(where, f"{ref!r} is not at a mesh node ({link} has {n} elements: "
+                                   f"fractions k/{n}); choose a node or change elements_per_link")
+        return li, self.node_of[li][k], k * self.case["links"][li]["length"] / n
+
+    def _lumped(self, case: dict) -> None:
+        lm = [self.node_ref(pm["at"], f"point_masses[{i}].at") + (pm["mass"],)
+              for i, pm in enumerate(case["point_masses"])]
+        if lm:
+            self.lm_link = np.array([li + 1 for li, _, _, _ in lm], np.int32)
+            self.lm_dof = np.asfortranarray(np.array([self.trans_dof[node] + 1 for _, node, _, _ in lm], np.int32).T)
+            self.lm_prop = np.asfortranarray(np.array([[m, z] for _, _, z, m in lm], float).T)
+        ri = []
+        for i, r in enumerate(case["rotary_inertias"]):
+            _, node, _ = self.node_ref(r["at"], f"rotary_inertias[{i}].at")
+            lw = self.link_names.index(r["turns_with"])
+            if (node, lw) not in self.rot_dof:
+                raise CaseError(f"rotary_inertias[{i}].turns_with", f"link {r['turns_with']!r} does not pass through "
+                                f"{r['at']!r}; name a link that meets at that node")
+            ri.append((lw + 1, self.rot_dof[(node, lw)] + 1, r["inertia"]))
+        if ri:
+            self.ri_link = np.array([a for a, _, _ in ri], np.int32)
+            self.ri_dof = np.array([b for _, b, _ in ri], np.int32)
+            self.ri_prop = np.array([c for _, _, c in ri], float)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def nfree(self) -> int:
+        return int(self.free_of.max())
+
+    @property
+    def nel(self) -> int:
+        return self.el_link.size
+
+    def link_elements(self, li: int) -> np.ndarray:
+        """0-based element indices of link ``li`` from its start to its end."""
+        return np.flatnonzero(self.el_link == li + 1)
+
+    def link_lengths(self) -> np.ndarray:
+        return np.array([ln["length"] for ln in self.case["links"]])
+
+    def _system_args(self):
+        # f2py cannot pass zero-length arrays: an absent kind of lumped inertia is
+        # passed as one entry of zero mass (it adds exactly 0 to one diagonal term).
+        lm = (self.lm_link, self.lm_dof, self.lm_prop) if self.lm_link.size else (
+            np.ones(1, np.int32), np.ones((2, 1), np.int32, order="F"), np.zeros((2, 1), order="F"))
+        ri = (self.ri_link, self.ri_dof, self.ri_prop) if self.ri_link.size else (
+            np.ones(1, np.int32), np.ones(1, np.int32), np.zeros(1))
+        return (self.free_of, self.el_link, self.el_dof, self.el_prop) + lm + ri
+
+    def expand(self, x_free: np.ndarray) -> np.ndarray:
+        """Free-DOF vectors (nfree, ...) -> all-DOF vectors (ndof, ...), zeros at constrained DOFs."""
+        out = np.zeros((self.ndof,) + x_free.shape[1:])
+        mask = self.free_of > 0
+        out[mask] = x_free[self.free_of[mask] - 1]
+        return out
+
+    def restrict(self, x_all: np.ndarray) -> np.ndarray:
+        """All-DOF vectors (ndof, ...) -> free-DOF vectors (nfree, ...)."""
+        out = np.zeros((self.nfree,) + x_all.shape[1:])
+        mask = self.free_of > 0
+        out[self.free_of[mask] - 1] = x_all[mask]
+        return out
+
+    # ------------------------------------------------------------------ kernel calls
+    def matrices(self, rig: np.ndarray, model: str = "hac", rayleigh=(0.0, 0.0)):
+        """Dense (M, C, K) over the free DOFs and the rigid-inertia load over all DOFs at one rigid sample."""
+        rig = np.asfortranarray(rig, float)
+        mm, cm, km, f, status = kernels.api.ked_matrices(
+            self.nfree, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig)
+        kernels.check_status(status, "ked_matrices")
+        return mm, cm, km, f
+
+    def loads(self, rig: np.ndarray, model: str) -> np.ndarray:
+        """Rigid-inertia loads F_rigid over all DOFs, (ndof, ns), at rigid samples rig (5, nlinks, ns)."""
+        if model not in MODELS:
+            raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
+        f, status = kernels.api.ked_loads(*self._system_args(), LOAD_MODEL_CODE[model], np.asfortranarray(rig, float))
+        kernels.check_status(status, "ked_loads")
+        return f
+
+    def run(self, rig, model, dt, *, beta=0.25, gamma=0.5, out_every=1, rayleigh=(0.0, 0.0),
+            q_free=None, q_val=None, u0=None, v0=None, t0=0.0):
+        """Newmark run over rig (5, nlinks, nsteps+1); returns (uf, vf, af) frames over the free DOFs.
+
+        Raises SolverError (naming the time) if the compiled loop stops.
+        """
+        rig = np.asfortranarray(rig, float)
+        nsteps = rig.shape[2] - 1
+        nframes = nsteps // out_every + 1
+        nf = self.nfree
+        u = np.zeros(nf) if u0 is None else np.array(u0, float)
+        v = np.zeros(nf) if v0 is None else np.array(v0, float)
+        a = np.zeros(nf)
+        if q_free is None:  # no applied elastic loads: one zero entry (f2py cannot pass empty arrays)
+            q_free = np.ones(1, np.int32)
+            q_val = np.zeros((1, nsteps + 1), order="F")
+        uf, vf, af, status, fail = kernels.api.ked_run(
+            nframes, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
+            np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, beta, gamma, out_every, 1, u, v, a)
+        kernels.check_status(status, "Newmark integration", time=t0 + fail * dt if fail else t0)
+        return uf, vf, af

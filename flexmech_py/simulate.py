@@ -1,0 +1,228 @@
+"""Run a case: rigid-body motion first, then the superposition KED model in Fortran."""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+
+import numpy as np
+
+from . import rigid
+from .case import MODELS
+from .errors import CaseError
+from .model import FEModel
+from .outputs import evaluate_outputs, output_unit
+from .results import Result
+
+__all__ = ["simulate", "simulate_models", "Prepared", "build_mechanism", "link_masses", "rigid_motion", "time_grid", "RigidMotion"]
+
+
+def build_mechanism(case: dict):
+    """The rigid mechanism (rigid.FourBar or rigid.SerialChain) of a resolved case."""
+    L = [ln["length"] for ln in case["links"]]
+    mech = case["mechanism"]
+    if mech["type"] == "fourbar":
+        q0 = case["initial"]["angles"][0]
+        fb = rigid.FourBar.open_assembly(L[0], L[1], L[2], mech["ground_length"], q0)
+        if mech["assembly"] == "crossed":
+            fb = rigid.FourBar(L[0], L[1], L[2], mech["ground_length"], branch=-fb.branch)
+        return fb
+    return rigid.SerialChain(L, base=tuple(mech["base"]))
+
+
+def link_masses(case: dict, fe: FEModel) -> list:
+    """Rigid mass properties per link, equal to those of the FE model (bars + lumped inertias)."""
+    masses = [rigid.LinkMass.from_bar(ln["density"] * ln["area"], ln["length"]) for ln in case["links"]]
+    for i, pm in enumerate(case["point_masses"]):
+        li, _, zeta = fe.node_ref(pm["at"], f"point_masses[{i}].at")
+        masses[li].add_point_mass(pm["mass"], zeta)
+    for r in case["rotary_inertias"]:
+        masses[fe.link_names.index(r["turns_with"])].add_rotary_inertia(r["inertia"])
+    return masses
+
+
+def torque_value(tq: dict, theta):
+    """Joint torque law tau(theta) = constant + sum_k sin_k sin(k theta) + cos_k cos(k theta) [N m]."""
+    tau = tq["constant"] + 0.0 * theta
+    for k, a in enumerate(tq["sin"], start=1):
+        tau = tau + a * np.sin(k * theta)
+    for k, b in enumerate(tq["cos"], start=1):
+        tau = tau + b * np.cos(k * theta)
+    return tau
+
+
+def time_grid(case: dict, dt: float | None = None, out_every: int | None = None):
+    """(nsteps, dt_eff, out_every): nsteps a multiple of out_every and dt_eff = t_end / nsteps <= dt."""
+    sol = case["solver"]
+    dt = sol["dt"] if dt is None else dt
+    out_every = sol["output_every"] if out_every is None else out_every
+    if not dt > 0 or dt > sol["t_end"]:
+        raise CaseError("solver.dt", f"must satisfy 0 < dt <= t_end = {sol['t_end']} s, got {dt}")
+    nsteps = max(1, math.ceil(sol["t_end"] / dt - 1e-9))
+    nsteps = out_every * math.ceil(nsteps / out_every)
+    return nsteps, sol["t_end"] / nsteps, out_every
+
+
+class RigidMotion:
+    """Rigid-body motion sampled on a time grid: q, qd, qdd (N, ndof) and the link motion."""
+
+    def __init__(self, t, q, qd, qdd, motion):
+        self.t, self.q, self.qd, self.qdd, self.motion = t, q, qd, qdd, motion
+
+    def kernel_samples(self, gravity, idx=slice(None)) -> np.ndarray:
+        """(5, nlinks, N) array [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] for the kernels."""
+        m = self.motion
+        rig = np.stack([m.phi[idx], m.omega[idx], m.alpha[idx], m.ax[idx] - gravity[0], m.ay[idx] - gravity[1]])
+        return np.asfortranarray(rig.transpose(0, 2, 1))
+
+
+def _joint_links(fe, name):
+    j = next(j for j in fe.joints if j.name == name)
+    return j
+
+
+def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMotion:
+    """Rigid-body motion on the grid t: kinematic drive, or torque-driven forward dynamics."""
+    mech = build_mechanism(case) if mech is None else mech
+    drive = case["drive"]
+    q0 = np.array(case["initial"]["angles"], float)
+    qd0 = np.array(case["initial"]["speeds"], float)
+    if drive["type"] == "kinematic":
+        if drive["law"] == "constant_speed":
+            q, qd, qdd = rigid.constant_speed(t, q0[0], drive["speed"])
+        else:
+            q, qd, qdd = rigid.spinup(t, drive["final_speed"], drive["spinup_time"], q0=q0[0])
+        if isinstance(mech, rigid.FourBar):
+            rigid.check_motion(mech, q, t)
+    else:
+        masses = link_masses(case, fe)
+        torques = [(tq, _joint_links(fe, tq["joint"])) for tq in drive["torques"]]
+
+        def gen_force(_t, q, qd):
+            km = mech.kinematics(q[None, :], qd[None, :] * 0.0, qd[None, :] * 0.0)
+            Q = np.zeros(mech.ndof)
+            for tq, j in torques:
+                theta = km.phi[0, j.outboard] - (km.phi[0, j.inboard] if j.inboard is not None else 0.0)
+                Q += rigid.joint_torque_generalized_force(mech, q[None, :], j.outboard, j.inboard,
+                                                          torque_value(tq, theta))[0]
+            return Q
+
+        q, qd, qdd = rigid.integrate(mech, masses, q0, qd0, t, gen_force, gravity=tuple(case["loads"]["gravity"]),
+                                     rtol=case["solver"]["rigid_rtol"], atol=case["solver"]["rigid_atol"])
+    return RigidMotion(t, q, qd, qdd, mech.kinematics(q, qd, qdd))
+
+
+def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion):
+    """Applied joint torques as generalized forces on the free elastic DOFs: (q_free, q_val) or (None, None).
+
+    Assembled over all DOFs (constrained ones included) and restricted to the free
+    DOFs; rows that vanish identically (torques on clamped DOFs, or action and
+    reaction on one locked rotation) are dropped, so they cost nothing.
+    """
+    drive = case["drive"]
+    if drive["type"] != "torque":
+        return None, None
+    q_all = np.zeros((fe.ndof, rm.t.size))
+    for tq in drive["torques"]:
+        j = _joint_links(fe, tq["joint"])
+        theta = rm.motion.phi[:, j.outboard] - (rm.motion.phi[:, j.inboard] if j.inboard is not None else 0.0)
+        tau = torque_value(tq, theta)
+        node = fe.node_of[j.outboard][0 if j.outboard_end == "start" else -1]
+        q_all[fe.rot_dof[(node, j.outboard)]] += tau
+        if j.inboard is not None:
+            q_all[fe.rot_dof[(node, j.inboard)]] -= tau
+    qf = fe.restrict(q_all)
+    rows = np.flatnonzero(np.any(qf != 0.0, axis=1))
+    if rows.size == 0:
+        return None, None
+    return (rows + 1).astype(np.int32), np.asfortranarray(qf[rows])
+
+
+def check_elastic_problem(fe: FEModel, rig0: np.ndarray) -> None:
+    """Reject an elastic problem with zero-stiffness modes (an unconstrained mechanism motion)."""
+    if fe.nfree > 1500:  # a dense eigenvalue check would cost more than the run; skipped
+        return
+    _, _, k, _ = fe.matrices(rig0[:, :, 0] * np.array([1, 0, 0, 0, 0])[:, None])  # elastic K only
+    ev = np.linalg.eigvalsh(0.5 * (k + k.T))
+    scale = np.max(np.abs(ev))
+    nzero = int(np.sum(np.abs(ev) < 1e-10 * scale))
+    if nzero:
+        raise CaseError("joints", f"the elastic problem has {nzero} zero-stiffness mode(s): the joints leave the "
+                                  "mechanism free to move elastically; clamp the driven ground joint "
+                                  "(crank_pivot/base = 'clamp') or lock a joint")
+
+
+class Prepared:
+    """A case made ready to run: FE model, time grid and rigid motion (shared by every model)."""
+
+    def __init__(self, case: dict, *, dt: float | None = None, elements_per_link: int | None = None,
+                 out_every: int | None = None):
+        t_start = time.perf_counter()
+        if elements_per_link is not None:
+            case = _with_elements(case, elements_per_link)
+        self.case = case
+        self.nsteps, self.dt, self.out_every = time_grid(case, dt, out_every)
+        self.t = np.linspace(0.0, case["solver"]["t_end"], self.nsteps + 1)
+        self.fe = FEModel.from_case(case)
+        t0 = time.perf_counter()
+        self.rm = rigid_motion(case, self.fe, self.t)
+        self.t_rigid = time.perf_counter() - t0
+        self.gravity = case["loads"]["gravity"]
+        self.rig = self.rm.kernel_samples(self.gravity)
+        check_elastic_problem(self.fe, self.rig)
+        self.q_free, self.q_val = elastic_torque_loads(case, self.fe, self.rm)
+        self.t_prepare = time.perf_counter() - t_start
+
+    def run(self, model: str | None = None) -> Result:
+        """Integrate the elastic equations with one rigid-inertia load model."""
+        t_start = time.perf_counter()
+        case, fe = self.case, self.fe
+        model = case["solver"]["model"] if model is None else model
+        if model not in MODELS:
+            raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
+        sol = case["solver"]
+        t0 = time.perf_counter()
+        uf, vf, af = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
+                            out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free, q_val=self.q_val)
+        t_kernel = time.perf_counter() - t0
+        idx = slice(0, self.nsteps + 1, self.out_every)
+        motion_f = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx]
+                                       for k in rigid.LinkMotion.__dataclass_fields__})
+        rig_f = self.rm.kernel_samples(self.gravity, idx)
+        u_all = fe.expand(uf)
+        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, self.rm.q[idx], self.rm.qd[idx],
+                                   self.rm.qdd[idx], rig_f, model)
+        units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
+        timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
+                  "total_s": self.t_prepare + time.perf_counter() - t_start}
+        return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
+                      q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_all, v=fe.expand(vf),
+                      a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing)
+
+
+def simulate(case: dict, model: str | None = None, *, dt: float | None = None,
+             elements_per_link: int | None = None, out_every: int | None = None) -> Result:
+    """Run one case with one superposition model and return a :class:`Result`.
+
+    ``case`` is a resolved case (:func:`flexmech_py.load_case`); ``model`` one of
+    ``hac``, ``classic``, ``classic-translational`` (default: the case's
+    ``solver.model``); ``dt`` [s], ``elements_per_link`` and ``out_every`` override the case.
+    """
+    return Prepared(case, dt=dt, elements_per_link=elements_per_link, out_every=out_every).run(model)
+
+
+def simulate_models(case: dict, models=MODELS, **kw) -> dict:
+    """Run several models of one case on one shared rigid motion: {model: Result}."""
+    prep = Prepared(case, **kw)
+    return {m: prep.run(m) for m in models}
+
+
+def _with_elements(case: dict, n: int) -> dict:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise CaseError("elements_per_link", f"must be a whole number >= 1, got {n!r}")
+    c = copy.deepcopy(case)
+    c["mesh"]["elements_per_link"] = int(n)
+    for ln in c["links"]:
+        ln["elements"] = int(n)
+    return c

@@ -1,0 +1,207 @@
+!> Thin flat API of flexmech facing f2py: plain arrays and scalars only.
+!> Python wraps it in flexmech_py.kernels (validation, status -> exception).
+!>
+!> System description shared by the ked_* routines (all indices 1-based):
+!>   nlinks            number of links
+!>   free_of(ndof)     free-DOF number of each global DOF, 0 = constrained
+!>   el_link(nel)      link of each element
+!>   el_dof(6,nel)     global DOFs of each element, order [u1 w1 th1 u2 w2 th2]
+!>   el_prop(5,nel)    [L m, zeta0 m (start along its link), rho*A kg/m, E*A N, E*I N m^2]
+!>   lm_link(nlm), lm_dof(2,nlm), lm_prop(2,nlm)   point masses: link, [u w] DOFs, [mass kg, zeta m]
+!>   ri_link(nri), ri_dof(nri), ri_prop(nri)       rotary inertias: link turned with, DOF, J kg m^2
+!>   load_model        1 hac (case I), 2 classic (case II), 3 classic-translational
+!>   rayleigh(2)       Rayleigh damping [a_M 1/s, a_K s]
+!> Rigid samples rig(5,nlinks,...) : [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] per link.
+!> Every routine returns `status` (codes in flexmech_lapack).
+module flexmech_api
+  use flexmech_kinds, only: dp
+  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
+  use flexmech_beam, only: beam_mass, beam_stiffness, beam_gyroscopic, beam_centrifugal, &
+                           beam_hac_coupling, beam_curvature, vec_to_local
+  use flexmech_assembly, only: band_rows, band_to_dense
+  use flexmech_ked, only: ked_system
+  use flexmech_newmark, only: newmark_run, consistent_acceleration
+  implicit none
+  private
+  public :: element_matrices, element_curvatures, ked_run, ked_matrices, ked_loads, ked_bandwidth
+
+contains
+
+  !> Local element matrices of one beam element (DOFs [p1 v1 th1 p2 v2 th2]).
+  !> m mass, k stiffness, g gyroscopic kernel (Coriolis = 2 omega g),
+  !> c centrifugal kernel (inertia stiffness = alpha g + omega^2 c), m0 Hac coupling (6 x 4).
+  subroutine element_matrices(rho_a, ea, ei, length, m, k, g, c, m0)
+    real(dp), intent(in) :: rho_a, ea, ei, length
+    real(dp), intent(out) :: m(6, 6), k(6, 6), g(6, 6), c(6, 6), m0(6, 4)
+    m = beam_mass(rho_a, length)
+    k = beam_stiffness(ea, ei, length)
+    g = beam_gyroscopic(rho_a, length)
+    c = beam_centrifugal(rho_a, length)
+    m0 = beam_hac_coupling(rho_a, length)
+  end subroutine element_matrices
+
+  !> Curvature v'' [1/m] at xi of one element over n frames, from its global DOFs and axis angle.
+  subroutine element_curvatures(n, dglob, phi, length, xi, kappa)
+    integer, intent(in) :: n
+    real(dp), intent(in) :: dglob(6, n)  !< global element DOFs per frame
+    real(dp), intent(in) :: phi(n)       !< element axis angle per frame [rad]
+    real(dp), intent(in) :: length, xi
+    real(dp), intent(out) :: kappa(n)
+    integer :: i
+    do i = 1, n
+      kappa(i) = beam_curvature(vec_to_local(dglob(:, i), cos(phi(i)), sin(phi(i))), length, xi)
+    end do
+  end subroutine element_curvatures
+
+  !> Validate index arrays and build the system. status = STATUS_BAD_INPUT on bad indices.
+  subroutine build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
+                   ri_link, ri_dof, ri_prop, load_model, rayleigh, status)
+    type(ked_system), intent(out) :: sys
+    integer, intent(in) :: nlinks, ndof, free_of(:), el_link(:), el_dof(:, :), lm_link(:), lm_dof(:, :)
+    integer, intent(in) :: ri_link(:), ri_dof(:), load_model
+    real(dp), intent(in) :: el_prop(:, :), lm_prop(:, :), ri_prop(:), rayleigh(2)
+    integer, intent(out) :: status
+    status = STATUS_BAD_INPUT
+    if (size(free_of) /= ndof .or. ndof < 1 .or. nlinks < 1) return
+    if (any(el_link < 1) .or. any(el_link > nlinks)) return
+    if (any(lm_link < 1) .or. any(lm_link > nlinks)) return
+    if (any(ri_link < 1) .or. any(ri_link > nlinks)) return
+    if (any(el_dof < 1) .or. any(el_dof > ndof)) return
+    if (any(lm_dof < 1) .or. any(lm_dof > ndof)) return
+    if (any(ri_dof < 1) .or. any(ri_dof > ndof)) return
+    if (any(el_prop(1, :) <= 0.0_dp)) return
+    if (load_model < 1 .or. load_model > 3) return
+    if (maxval([0, free_of]) < 1) return
+    call sys%init(nlinks, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
+                  ri_link, ri_dof, ri_prop, load_model, rayleigh)
+    status = STATUS_OK
+  end subroutine build
+
+  !> Half bandwidth of the free system (for reporting and benchmarks).
+  subroutine ked_bandwidth(ndof, nel, free_of, el_dof, kb)
+    integer, intent(in) :: ndof, nel
+    integer, intent(in) :: free_of(ndof), el_dof(6, nel)
+    integer, intent(out) :: kb
+    integer :: e, i, lo, hi, f
+    kb = 0
+    do e = 1, nel
+      lo = huge(1); hi = 0
+      do i = 1, 6
+        f = free_of(el_dof(i, e))
+        if (f > 0) then
+          lo = min(lo, f); hi = max(hi, f)
+        end if
+      end do
+      if (hi > 0) kb = max(kb, hi - lo)
+    end do
+  end subroutine ked_bandwidth
+
+  !> Run the superposition KED model with Newmark(beta, gamma) over nsteps steps.
+  !> On entry u0, v0 are the initial state (free DOFs); if init_accel /= 0 the
+  !> initial acceleration is computed from the equations of motion, else a0 is used.
+  !> Outputs frames (nfree, nframes) at steps 0, out_every, ...; the final
+  !> state in u0, v0, a0 (so a long run can be continued chunk by chunk).
+  subroutine ked_run(nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes, &
+                     free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, ri_prop, &
+                     load_model, rayleigh, rig, q_free, q_val, dt, beta, gamma, out_every, init_accel, &
+                     u0, v0, a0, uf, vf, af, status, fail_step)
+    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes
+    integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
+    real(dp), intent(in) :: el_prop(5, nel)
+    integer, intent(in) :: lm_link(nlm), lm_dof(2, nlm)
+    real(dp), intent(in) :: lm_prop(2, nlm)
+    integer, intent(in) :: ri_link(nri), ri_dof(nri)
+    real(dp), intent(in) :: ri_prop(nri)
+    integer, intent(in) :: load_model
+    real(dp), intent(in) :: rayleigh(2)
+    real(dp), intent(in) :: rig(5, nlinks, nsteps + 1)
+    integer, intent(in) :: q_free(nq)
+    real(dp), intent(in) :: q_val(nq, nsteps + 1)
+    real(dp), intent(in) :: dt, beta, gamma
+    integer, intent(in) :: out_every, init_accel
+    real(dp), intent(inout) :: u0(nfree), v0(nfree), a0(nfree)
+    real(dp), intent(out) :: uf(nfree, nframes), vf(nfree, nframes), af(nfree, nframes)
+    integer, intent(out) :: status, fail_step
+    type(ked_system) :: sys
+    uf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp
+    fail_step = 0
+    call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
+               ri_link, ri_dof, ri_prop, load_model, rayleigh, status)
+    if (status /= STATUS_OK) return
+    if (sys%nfree /= nfree .or. any(q_free < 1) .or. any(q_free > nfree)) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    if (init_accel /= 0) then
+      call consistent_acceleration(sys, rig(:, :, 1), q_free, q_val(:, 1), u0, v0, a0, status)
+      if (status /= STATUS_OK) return
+    end if
+    call newmark_run(sys, rig, q_free, q_val, dt, beta, gamma, out_every, u0, v0, a0, uf, vf, af, &
+                     status, fail_step)
+  end subroutine ked_run
+
+  !> Dense system matrices over the free DOFs at one rigid sample:
+  !> mm = M, cm = Cg + Rayleigh, km = K + Kc; f = rigid-inertia load over ALL DOFs.
+  subroutine ked_matrices(nlinks, ndof, nel, nlm, nri, nfree, &
+                          free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, ri_prop, &
+                          load_model, rayleigh, rig, mm, cm, km, f, status)
+    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nfree
+    integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
+    real(dp), intent(in) :: el_prop(5, nel)
+    integer, intent(in) :: lm_link(nlm), lm_dof(2, nlm)
+    real(dp), intent(in) :: lm_prop(2, nlm)
+    integer, intent(in) :: ri_link(nri), ri_dof(nri)
+    real(dp), intent(in) :: ri_prop(nri)
+    integer, intent(in) :: load_model
+    real(dp), intent(in) :: rayleigh(2)
+    real(dp), intent(in) :: rig(5, nlinks)
+    real(dp), intent(out) :: mm(nfree, nfree), cm(nfree, nfree), km(nfree, nfree), f(ndof)
+    integer, intent(out) :: status
+    type(ked_system) :: sys
+    real(dp), allocatable :: ab(:, :), r(:), z(:)
+    mm = 0.0_dp; cm = 0.0_dp; km = 0.0_dp; f = 0.0_dp
+    call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
+               ri_link, ri_dof, ri_prop, load_model, rayleigh, status)
+    if (status /= STATUS_OK) return
+    if (sys%nfree /= nfree) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    allocate (ab(band_rows(sys%kl, sys%ku), nfree), r(nfree), z(nfree))
+    z = 0.0_dp
+    call sys%assemble(rig, 0.0_dp, 0.0_dp, z, z, ab, r)
+    mm = band_to_dense(ab, sys%kl, sys%ku, nfree)
+    call sys%assemble(rig, 1.0_dp, 0.0_dp, z, z, ab, r)
+    cm = band_to_dense(ab, sys%kl, sys%ku, nfree) - mm
+    call sys%assemble(rig, 0.0_dp, 1.0_dp, z, z, ab, r)
+    km = band_to_dense(ab, sys%kl, sys%ku, nfree) - mm
+    call sys%rigid_load(rig, f)
+  end subroutine ked_matrices
+
+  !> Rigid-inertia loads over ALL DOFs at ns rigid samples (for output and comparison).
+  subroutine ked_loads(nlinks, ndof, nel, nlm, nri, ns, &
+                       free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, ri_prop, &
+                       load_model, rig, f, status)
+    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, ns
+    integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
+    real(dp), intent(in) :: el_prop(5, nel)
+    integer, intent(in) :: lm_link(nlm), lm_dof(2, nlm)
+    real(dp), intent(in) :: lm_prop(2, nlm)
+    integer, intent(in) :: ri_link(nri), ri_dof(nri)
+    real(dp), intent(in) :: ri_prop(nri)
+    integer, intent(in) :: load_model
+    real(dp), intent(in) :: rig(5, nlinks, ns)
+    real(dp), intent(out) :: f(ndof, ns)
+    integer, intent(out) :: status
+    type(ked_system) :: sys
+    integer :: i
+    f = 0.0_dp
+    call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
+               ri_link, ri_dof, ri_prop, load_model, [0.0_dp, 0.0_dp], status)
+    if (status /= STATUS_OK) return
+    do i = 1, ns
+      call sys%rigid_load(rig(:, :, i), f(:, i))
+    end do
+  end subroutine ked_loads
+
+end module flexmech_api

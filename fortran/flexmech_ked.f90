@@ -1,0 +1,227 @@
+!> Superposition kineto-elastodynamic (KED) system: elastic equations of a
+!> mechanism about a prescribed rigid-body motion (seed Section 2),
+!>
+!>   M(t) x'' + (C(t) + Cg(t)) x' + (K(t) + Kc(t)) x = Q(t) - F_rigid(t)
+!>
+!> Rigid-motion sample layout, per link j (columns of rig(5, nlinks)):
+!>   rig(1,j) phi [rad], rig(2,j) omega [rad/s], rig(3,j) alpha [rad/s^2],
+!>   rig(4:5,j) acceleration of the link's reference point O minus gravity [m/s^2].
+!> A material point at distance zeta from O along the link has the rigid
+!> acceleration a_O + alpha*Omega*e*zeta - omega^2*e*zeta, e = (cos phi, sin phi).
+!>
+!> Rigid-inertia load models (F_rigid, per element, built in the element frame):
+!>   LOAD_HAC      case I, seed Eq. 15-16: m0 [a_p1, a_v1, a_p2, a_v2]
+!>   LOAD_CLASSIC  case II, seed Eq. 14: m [a_p1, a_v1, alpha, a_p2, a_v2, alpha]
+!>   LOAD_CLASSIC_TRANSLATIONAL  Eq. 14 with the rotational entries set to 0
+!> Lumped point masses carry m*a_rigid(node) in every model; rotary inertias
+!> J*alpha(link they turn with), except in LOAD_CLASSIC_TRANSLATIONAL.
+module flexmech_ked
+  use flexmech_kinds, only: dp
+  use flexmech_beam, only: beam_mass, beam_stiffness, beam_gyroscopic, beam_centrifugal, &
+                           beam_hac_coupling, rotate_to_global, vec_to_local, vec_to_global
+  use flexmech_assembly, only: band_add_element, band_add_diagonal, half_bandwidth
+  implicit none
+  private
+  public :: ked_system, LOAD_HAC, LOAD_CLASSIC, LOAD_CLASSIC_TRANSLATIONAL
+
+  integer, parameter :: LOAD_HAC = 1, LOAD_CLASSIC = 2, LOAD_CLASSIC_TRANSLATIONAL = 3
+
+  type :: ked_system
+    integer :: nlinks = 0, ndof = 0, nfree = 0, nel = 0, nlm = 0, nri = 0, kl = 0, ku = 0
+    integer :: load_model = LOAD_CLASSIC
+    real(dp) :: ray_m = 0.0_dp, ray_k = 0.0_dp   !< Rayleigh damping C = ray_m M + ray_k K
+    integer, allocatable :: el_link(:), el_dof(:, :), el_free(:, :)
+    real(dp), allocatable :: el_len(:), el_z0(:)
+    real(dp), allocatable :: m(:, :, :), k(:, :, :), g(:, :, :), c(:, :, :), m0(:, :, :)
+    integer, allocatable :: lm_link(:), lm_dof(:, :), lm_free(:, :)
+    real(dp), allocatable :: lm_mass(:), lm_z(:)
+    integer, allocatable :: ri_link(:), ri_dof(:), ri_free(:)
+    real(dp), allocatable :: ri_j(:)
+  contains
+    procedure :: init => ked_init
+    procedure :: assemble => ked_assemble
+    procedure :: rigid_load => ked_rigid_load
+    procedure :: element_load
+  end type ked_system
+
+contains
+
+  !> Build the system from flat arrays; local element matrices are computed once here.
+  subroutine ked_init(sys, nlinks, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
+                      ri_link, ri_dof, ri_prop, load_model, rayleigh)
+    class(ked_system), intent(out) :: sys
+    integer, intent(in) :: nlinks
+    integer, intent(in) :: free_of(:)      !< (ndof) free-DOF number of each DOF, 0 = constrained
+    integer, intent(in) :: el_link(:)      !< (nel) link of each element (1-based)
+    integer, intent(in) :: el_dof(:, :)    !< (6, nel) global DOF numbers [u1 w1 th1 u2 w2 th2]
+    real(dp), intent(in) :: el_prop(:, :)  !< (5, nel) [L m, zeta0 m, rho*A kg/m, E*A N, E*I N m^2]
+    integer, intent(in) :: lm_link(:)      !< (nlm) link whose rigid motion carries the point mass
+    integer, intent(in) :: lm_dof(:, :)    !< (2, nlm) DOFs [u, w] of the node
+    real(dp), intent(in) :: lm_prop(:, :)  !< (2, nlm) [mass kg, zeta of the node on its link m]
+    integer, intent(in) :: ri_link(:)      !< (nri) link the rotary inertia turns with
+    integer, intent(in) :: ri_dof(:)       !< (nri) rotational DOF of the node
+    real(dp), intent(in) :: ri_prop(:)     !< (nri) rotary inertia [kg m^2]
+    integer, intent(in) :: load_model      !< LOAD_HAC, LOAD_CLASSIC or LOAD_CLASSIC_TRANSLATIONAL
+    real(dp), intent(in) :: rayleigh(2)    !< [ray_m 1/s, ray_k s]
+    integer :: e, i
+    sys%nlinks = nlinks
+    sys%ndof = size(free_of)
+    sys%nfree = maxval([0, free_of])
+    sys%nel = size(el_link)
+    sys%nlm = size(lm_link)
+    sys%nri = size(ri_link)
+    sys%load_model = load_model
+    sys%ray_m = rayleigh(1)
+    sys%ray_k = rayleigh(2)
+    sys%el_link = el_link
+    sys%el_dof = el_dof
+    allocate (sys%el_free(6, sys%nel))
+    do e = 1, sys%nel
+      do i = 1, 6
+        sys%el_free(i, e) = free_of(el_dof(i, e))
+      end do
+    end do
+    sys%el_len = el_prop(1, :)
+    sys%el_z0 = el_prop(2, :)
+    allocate (sys%m(6, 6, sys%nel), sys%k(6, 6, sys%nel), sys%g(6, 6, sys%nel), &
+              sys%c(6, 6, sys%nel), sys%m0(6, 4, sys%nel))
+    do e = 1, sys%nel
+      sys%m(:, :, e) = beam_mass(el_prop(3, e), el_prop(1, e))
+      sys%k(:, :, e) = beam_stiffness(el_prop(4, e), el_prop(5, e), el_prop(1, e))
+      sys%g(:, :, e) = beam_gyroscopic(el_prop(3, e), el_prop(1, e))
+      sys%c(:, :, e) = beam_centrifugal(el_prop(3, e), el_prop(1, e))
+      sys%m0(:, :, e) = beam_hac_coupling(el_prop(3, e), el_prop(1, e))
+    end do
+    sys%lm_link = lm_link
+    sys%lm_dof = lm_dof
+    sys%lm_mass = lm_prop(1, :)
+    sys%lm_z = lm_prop(2, :)
+    allocate (sys%lm_free(2, sys%nlm))
+    do i = 1, sys%nlm
+      sys%lm_free(:, i) = free_of(lm_dof(:, i))
+    end do
+    sys%ri_link = ri_link
+    sys%ri_dof = ri_dof
+    sys%ri_j = ri_prop
+    allocate (sys%ri_free(sys%nri))
+    do i = 1, sys%nri
+      sys%ri_free(i) = free_of(ri_dof(i))
+    end do
+    sys%kl = half_bandwidth(sys%el_free)
+    sys%ku = sys%kl
+  end subroutine ked_init
+
+  !> Rigid acceleration of the point zeta of a link, global components [m/s^2].
+  pure function point_accel(r, zeta) result(a)
+    real(dp), intent(in) :: r(5), zeta
+    real(dp) :: a(2), c, s
+    c = cos(r(1)); s = sin(r(1))
+    a(1) = r(4) - r(3)*s*zeta - r(2)**2*c*zeta
+    a(2) = r(5) + r(3)*c*zeta - r(2)**2*s*zeta
+  end function point_accel
+
+  !> Rigid-inertia load of element e in the element frame (sign: the load F_rigid, to be subtracted).
+  pure function element_load(sys, e, r) result(f)
+    class(ked_system), intent(in) :: sys
+    integer, intent(in) :: e
+    real(dp), intent(in) :: r(5)   !< rigid sample of the element's link (layout above)
+    real(dp) :: f(6), c, s, ap(2), z1, z2, om2
+    c = cos(r(1)); s = sin(r(1))
+    z1 = sys%el_z0(e); z2 = z1 + sys%el_len(e)
+    om2 = r(2)**2
+    ap(1) = c*r(4) + s*r(5)          ! reference-point acceleration in the link frame
+    ap(2) = -s*r(4) + c*r(5)
+    select case (sys%load_model)
+    case (LOAD_HAC)
+      f = matmul(sys%m0(:, :, e), [ap(1) - om2*z1, ap(2) + r(3)*z1, ap(1) - om2*z2, ap(2) + r(3)*z2])
+    case (LOAD_CLASSIC)
+      f = matmul(sys%m(:, :, e), [ap(1) - om2*z1, ap(2) + r(3)*z1, r(3), ap(1) - om2*z2, ap(2) + r(3)*z2, r(3)])
+    case default
+      f = matmul(sys%m(:, :, e), [ap(1) - om2*z1, ap(2) + r(3)*z1, 0.0_dp, ap(1) - om2*z2, ap(2) + r(3)*z2, 0.0_dp])
+    end select
+  end function element_load
+
+  !> Rigid-inertia load F_rigid over ALL DOFs (constrained ones included) for one rigid sample.
+  subroutine ked_rigid_load(sys, rig, f)
+    class(ked_system), intent(in) :: sys
+    real(dp), intent(in) :: rig(:, :)   !< (5, nlinks)
+    real(dp), intent(out) :: f(:)       !< (ndof)
+    integer :: e, i, j
+    real(dp) :: phi
+    f = 0.0_dp
+    do e = 1, sys%nel
+      j = sys%el_link(e)
+      phi = rig(1, j)
+      f(sys%el_dof(:, e)) = f(sys%el_dof(:, e)) + vec_to_global(sys%element_load(e, rig(:, j)), cos(phi), sin(phi))
+    end do
+    do i = 1, sys%nlm
+      f(sys%lm_dof(:, i)) = f(sys%lm_dof(:, i)) + sys%lm_mass(i)*point_accel(rig(:, sys%lm_link(i)), sys%lm_z(i))
+    end do
+    if (sys%load_model /= LOAD_CLASSIC_TRANSLATIONAL) then
+      do i = 1, sys%nri
+        f(sys%ri_dof(i)) = f(sys%ri_dof(i)) + sys%ri_j(i)*rig(3, sys%ri_link(i))
+      end do
+    end if
+  end subroutine ked_rigid_load
+
+  !> Effective matrix S = M + cc*C + ck*K in band storage and residual
+  !> r = -F_rigid - C v - K u over the free DOFs, for one rigid sample.
+  !> C = Cg + Rayleigh, K = K_elastic + Kc.  u, v are full free-DOF vectors.
+  subroutine ked_assemble(sys, rig, cc, ck, u, v, ab, r)
+    class(ked_system), intent(in) :: sys
+    real(dp), intent(in) :: rig(:, :)    !< (5, nlinks) rigid sample
+    real(dp), intent(in) :: cc, ck       !< coefficients of C and K in S
+    real(dp), intent(in) :: u(:), v(:)   !< (nfree) displacement and velocity where K, C act
+    real(dp), intent(out) :: ab(:, :)    !< (2kl+ku+1, nfree) band storage of S
+    real(dp), intent(out) :: r(:)        !< (nfree) residual
+    integer :: e, i, j, n
+    integer :: idx(6)
+    real(dp) :: cs, sn, om, al, ce(6, 6), ke(6, 6), se(6, 6), ue(6), ve(6), re(6), a(2), mi
+    ab = 0.0_dp
+    r = 0.0_dp
+    do e = 1, sys%nel
+      j = sys%el_link(e)
+      cs = cos(rig(1, j)); sn = sin(rig(1, j)); om = rig(2, j); al = rig(3, j)
+      idx = sys%el_free(:, e)
+      ce = (2.0_dp*om)*sys%g(:, :, e)
+      ke = sys%k(:, :, e) + al*sys%g(:, :, e) + (om*om)*sys%c(:, :, e)
+      if (sys%ray_m /= 0.0_dp) ce = ce + sys%ray_m*sys%m(:, :, e)
+      if (sys%ray_k /= 0.0_dp) ce = ce + sys%ray_k*sys%k(:, :, e)
+      se = sys%m(:, :, e) + cc*ce + ck*ke
+      call band_add_element(ab, sys%kl, sys%ku, idx, rotate_to_global(se, cs, sn))
+      do i = 1, 6
+        n = idx(i)
+        if (n > 0) then
+          ue(i) = u(n); ve(i) = v(n)
+        else
+          ue(i) = 0.0_dp; ve(i) = 0.0_dp
+        end if
+      end do
+      re = -sys%element_load(e, rig(:, j)) - matmul(ce, vec_to_local(ve, cs, sn)) &
+           - matmul(ke, vec_to_local(ue, cs, sn))
+      re = vec_to_global(re, cs, sn)
+      do i = 1, 6
+        if (idx(i) > 0) r(idx(i)) = r(idx(i)) + re(i)
+      end do
+    end do
+    do i = 1, sys%nlm
+      mi = sys%lm_mass(i)
+      a = point_accel(rig(:, sys%lm_link(i)), sys%lm_z(i))
+      do n = 1, 2
+        j = sys%lm_free(n, i)
+        if (j == 0) cycle
+        call band_add_diagonal(ab, sys%kl, sys%ku, j, mi*(1.0_dp + cc*sys%ray_m))
+        r(j) = r(j) - mi*(a(n) + sys%ray_m*v(j))
+      end do
+    end do
+    do i = 1, sys%nri
+      j = sys%ri_free(i)
+      if (j == 0) cycle
+      mi = sys%ri_j(i)
+      call band_add_diagonal(ab, sys%kl, sys%ku, j, mi*(1.0_dp + cc*sys%ray_m))
+      r(j) = r(j) - mi*sys%ray_m*v(j)
+      if (sys%load_model /= LOAD_CLASSIC_TRANSLATIONAL) r(j) = r(j) - mi*rig(3, sys%ri_link(i))
+    end do
+  end subroutine ked_assemble
+
+end module flexmech_ked

@@ -1,0 +1,69 @@
+!> Explicit interfaces to the LAPACK routines flexmech uses, and the
+!> status codes every compiled routine returns.
+!>
+!> Status codes (the only place they are defined; Python turns them into
+!> sentences in `flexmech_py.kernels.check_status`):
+!>   0  success
+!>   1  singular system matrix (LAPACK factorization info > 0)
+!>   2  non-finite value (NaN or Inf) in the solution
+!>   3  illegal argument passed to LAPACK (info < 0): a bug, please report
+!>   4  invalid input to a compiled routine (sizes, indices, coefficients)
+module flexmech_lapack
+  use flexmech_kinds, only: dp
+  implicit none
+  private
+  public :: dgbtrf, dgbtrs, dgetrf, dgetrs
+  public :: STATUS_OK, STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT
+  public :: lapack_status
+
+  integer, parameter :: STATUS_OK = 0, STATUS_SINGULAR = 1, STATUS_NONFINITE = 2, &
+                        STATUS_LAPACK_ARG = 3, STATUS_BAD_INPUT = 4
+
+  interface
+    subroutine dgbtrf(m, n, kl, ku, ab, ldab, ipiv, info)
+      import :: dp
+      integer, intent(in) :: m, n, kl, ku, ldab
+      real(dp), intent(inout) :: ab(ldab, *)
+      integer, intent(out) :: ipiv(*), info
+    end subroutine dgbtrf
+    subroutine dgbtrs(trans, n, kl, ku, nrhs, ab, ldab, ipiv, b, ldb, info)
+      import :: dp
+      character, intent(in) :: trans
+      integer, intent(in) :: n, kl, ku, nrhs, ldab, ldb
+      real(dp), intent(in) :: ab(ldab, *)
+      integer, intent(in) :: ipiv(*)
+      real(dp), intent(inout) :: b(ldb, *)
+      integer, intent(out) :: info
+    end subroutine dgbtrs
+    subroutine dgetrf(m, n, a, lda, ipiv, info)
+      import :: dp
+      integer, intent(in) :: m, n, lda
+      real(dp), intent(inout) :: a(lda, *)
+      integer, intent(out) :: ipiv(*), info
+    end subroutine dgetrf
+    subroutine dgetrs(trans, n, nrhs, a, lda, ipiv, b, ldb, info)
+      import :: dp
+      character, intent(in) :: trans
+      integer, intent(in) :: n, nrhs, lda, ldb
+      real(dp), intent(in) :: a(lda, *)
+      integer, intent(in) :: ipiv(*)
+      real(dp), intent(inout) :: b(ldb, *)
+      integer, intent(out) :: info
+    end subroutine dgetrs
+  end interface
+
+contains
+
+  !> Map a LAPACK `info` to a flexmech status code.
+  pure integer function lapack_status(info) result(status)
+    integer, intent(in) :: info  !< LAPACK info argument
+    if (info == 0) then
+      status = STATUS_OK
+    else if (info > 0) then
+      status = STATUS_SINGULAR
+    else
+      status = STATUS_LAPACK_ARG
+    end if
+  end function lapack_status
+
+end module flexmech_lapack
