@@ -140,7 +140,7 @@ def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS,
 
 
 def _pct(x: float) -> str:
-    return f"{100 * x:.2f} %"
+    return f"{100 * x:.3g} %"
 
 
 def _report(runs, figs, dvec, timings, models) -> str:

@@ -34,7 +34,7 @@ __all__ = [
 
 TOGGLE_TOL = 1e-9   # |sin(theta4 - theta3)| below which kinematics raise
 EVENT_TOL = 1e-6    # |sin(theta4 - theta3)| at which integrate() stops ...
-EVENT_CAP = 1e-2    # ... raised up to this where the crank angle cannot resolve it (FourBar._stop_margin)
+EVENT_CAP = 1e-2    # ... raised up to this when q cannot resolve it (FourBar._stop_margin)
 
 
 @dataclass
@@ -220,6 +220,7 @@ class FourBar(_Mechanism):
         return self._kin(q[:, 0], qd[:, 0], qdd[:, 0], 2)[0]
 
     def jacobian(self, q):
+        """d(ox, oy, phi)/dq, array (N, 3, 3, 1) [m/rad, -]."""
         q = _as2d(q, 1)[:, 0]
         return self._kin(q, np.ones_like(q), np.zeros_like(q), 2)[1]
 
@@ -379,7 +380,8 @@ def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.
               rtol=1e-10, atol=1e-12):
     """Torque-driven forward dynamics M qdd + h = Q from (q0, qd0) at t[0].
 
-    t: increasing output times [s]; generalized_force(t, q, qd) -> Q (ndof,) (None: 0);
+    t: increasing output times [s]; generalized_force(t, q, qd) -> Q, vectorised: t (N,),
+    q and qd (N, ndof) -> Q (N, ndof) (None: 0; the ODE calls it with N = 1);
     gravity (g_x, g_y) [m/s^2].  Solved with DOP853 (scipy solve_ivp), sampled at t.
     Returns (q, qd, qdd), each (N, ndof), qdd from the equations of motion.  A
     FourBar approaching a toggle or assembly limit stops with a MechanismError
@@ -393,7 +395,7 @@ def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.
     if t.ndim != 1 or len(t) < 2 or np.any(np.diff(t) <= 0):
         raise ValueError("t must be an increasing 1-D time grid with at least 2 samples")
     y0 = np.concatenate([_as2d(q0, nd)[0], _as2d(qd0, nd, "qd0")[0]])
-    force = generalized_force or (lambda ti, q, qd: np.zeros(nd))
+    force = generalized_force or (lambda ti, q, qd: np.zeros_like(q))
     events = None
     if isinstance(mech, FourBar):
         if not mech._stop_margin(y0[0], rtol) > 0:
@@ -404,7 +406,7 @@ def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.
 
     def rhs(ti, y):
         M, h = _dynamics(mech, mk, y[None, :nd], y[None, nd:], gravity, strict=False)
-        Q = np.asarray(force(ti, y[:nd], y[nd:]), dtype=float).reshape(nd)
+        Q = np.asarray(force(np.array([ti]), y[None, :nd], y[None, nd:]), dtype=float).reshape(nd)
         return np.concatenate([y[nd:], np.linalg.solve(M[0], Q - h[0])])
 
     sol = solve_ivp(rhs, (t[0], t[-1]), y0, method="DOP853", t_eval=t, events=events,
@@ -419,8 +421,7 @@ def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.
         raise SolverError(f"rigid-body integration failed: {sol.message}", time=float(sol.t[-1]))
     q, qd = sol.y[:nd].T, sol.y[nd:].T
     M, h = _dynamics(mech, mk, q, qd, gravity)
-    Q = np.array([np.asarray(force(ti, qi, qdi), dtype=float).reshape(nd)
-                  for ti, qi, qdi in zip(t, q, qd)])
+    Q = np.broadcast_to(np.asarray(force(t, q, qd), dtype=float), q.shape)
     return q, qd, np.linalg.solve(M, (Q - h)[..., None])[..., 0]
 
 

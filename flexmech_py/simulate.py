@@ -100,12 +100,12 @@ def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMoti
         torques = [(tq, _joint_links(fe, tq["joint"])) for tq in drive["torques"]]
 
         def gen_force(_t, q, qd):
-            km = mech.kinematics(q[None, :], qd[None, :] * 0.0, qd[None, :] * 0.0)
-            Q = np.zeros(mech.ndof)
+            km, jac = mech._motion_and_jacobian(q, qd * 0.0, strict=False)  # angles and d(phi)/dq
+            Q = np.zeros_like(q)
             for tq, j in torques:
-                theta = km.phi[0, j.outboard] - (km.phi[0, j.inboard] if j.inboard is not None else 0.0)
-                Q += rigid.joint_torque_generalized_force(mech, q[None, :], j.outboard, j.inboard,
-                                                          torque_value(tq, theta))[0]
+                theta = km.phi[:, j.outboard] - (km.phi[:, j.inboard] if j.inboard is not None else 0.0)
+                dphi = jac[:, j.outboard, 2, :] - (jac[:, j.inboard, 2, :] if j.inboard is not None else 0.0)
+                Q += torque_value(tq, theta)[:, None] * dphi
             return Q
 
         q, qd, qdd = rigid.integrate(mech, masses, q0, qd0, t, gen_force, gravity=tuple(case["loads"]["gravity"]),
@@ -165,6 +165,9 @@ class Prepared:
         self.nsteps, self.dt, self.out_every = time_grid(case, dt, out_every)
         self.t = np.linspace(0.0, case["solver"]["t_end"], self.nsteps + 1)
         self.fe = FEModel.from_case(case)
+        for name, sp in case["outputs"].items():  # node references must fall on the mesh: check before running
+            if isinstance(sp.get("at"), str):
+                self.fe.node_ref(sp["at"], f"outputs.{name}.at")
         t0 = time.perf_counter()
         self.rm = rigid_motion(case, self.fe, self.t)
         self.t_rigid = time.perf_counter() - t0

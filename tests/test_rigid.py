@@ -1,32 +1,9 @@
 """Physics tests of flexmech_py.rigid (rigid-body kinematics and dynamics)."""
-import importlib
-import os
-import sys
-import types
-
 import numpy as np
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
+from flexmech_py import rigid as R  # the installed package
 
-
-def _import_rigid():
-    """flexmech_py.rigid, also while the package __init__ cannot import yet
-    (e.g. compiled kernels not built): then a bare package stub is used briefly."""
-    try:
-        return importlib.import_module("flexmech_py.rigid")
-    except ImportError:
-        stub = types.ModuleType("flexmech_py")
-        stub.__path__ = [os.path.join(ROOT, "flexmech_py")]
-        sys.modules["flexmech_py"] = stub
-        try:
-            return importlib.import_module("flexmech_py.rigid")
-        finally:
-            sys.modules.pop("flexmech_py", None)
-
-
-R = _import_rigid()
 MechanismError = R.MechanismError
 
 TM = (0.10795, 0.2794, 0.27051, 0.254)          # Turcic-Midha crank-rocker [m]
@@ -98,6 +75,9 @@ def test_crank_ranges_and_assembly_errors():
     qlim = np.arccos((a * a + d * d - (b + c) ** 2) / (2 * a * d))
     assert np.allclose(ng.crank_range(), (-qlim, qlim), atol=1e-12)
     assert np.allclose(ng.crank_range(2 * np.pi + 0.1), (2 * np.pi - qlim, 2 * np.pi + qlim))
+    lo, hi = R.FourBar(0.1, 0.3, 0.2, 0.12).crank_range(-3.0)  # cannot pass q = 0: |b-c| > |d-a|
+    qlo = np.arccos((0.1 ** 2 + 0.12 ** 2 - 0.1 ** 2) / (2 * 0.1 * 0.12))
+    assert np.allclose((lo, hi), (qlo - 2 * np.pi, -qlo), atol=1e-12)
     with pytest.raises(MechanismError, match="cannot assemble.*exceeds coupler"):
         R.FourBar.open_assembly(*NON_GRASHOF, q0=np.pi)
     with pytest.raises(MechanismError, match="cannot assemble at any crank angle"):
@@ -216,7 +196,7 @@ def test_fourbar_energy_balance():
     fb = R.FourBar.open_assembly(*TM)
     ms = tm_masses(fb)
     t = np.linspace(0, 0.25, 2501)
-    q, qd, qdd = R.integrate(fb, ms, 0.0, 0.0, t, lambda t, q, qd: np.array([1 + 0.5 * np.sin(q[0])]))
+    q, qd, qdd = R.integrate(fb, ms, 0.0, 0.0, t, lambda t, q, qd: 1 + 0.5 * np.sin(q))
     work = q[:, 0] + 0.5 * (1 - np.cos(q[:, 0]))     # int (1 + 0.5 sin q) dq, exact
     ke = R.kinetic_energy(fb, ms, q, qd)
     rel = np.abs(ke - work)[1:] / work[1:]

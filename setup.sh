@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# flexmech set-up on Debian/Ubuntu: system packages (gfortran, LAPACK, pkg-config),
+# a virtual environment in .venv, and the package built and installed into it.
+#   bash setup.sh            set up only
+#   bash setup.sh reproduce  set up, then run `flexmech reproduce --out reproduce`
+#   bash setup.sh test       set up, then run the test suite
+set -euo pipefail
+cd "$(dirname "$0")"
+say() { printf 'flexmech setup: %s\n' "$*"; }
+die() { printf 'flexmech setup: ERROR: %s\n' "$*" >&2; exit 1; }
+
+# --- system packages ---------------------------------------------------------------
+need=()
+command -v gfortran >/dev/null 2>&1 || need+=(gfortran)
+command -v pkg-config >/dev/null 2>&1 || need+=(pkg-config)
+pkg-config --exists lapack 2>/dev/null || need+=(liblapack-dev libblas-dev)
+python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || need+=(python3-venv)
+python3 -c 'import sysconfig, os, sys; sys.exit(not os.path.exists(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' \
+  >/dev/null 2>&1 || need+=(python3-dev)
+if [ ${#need[@]} -gt 0 ]; then
+  say "installing system packages: ${need[*]}"
+  if [ "$(id -u)" = 0 ]; then SUDO=""; elif command -v sudo >/dev/null 2>&1; then SUDO="sudo"; else
+    die "missing ${need[*]} and no root/sudo: run 'apt-get install -y ${need[*]}' as root, then re-run this script"; fi
+  command -v apt-get >/dev/null 2>&1 || die "missing ${need[*]} and no apt-get: install them with your package manager, then re-run"
+  $SUDO apt-get update -qq >/dev/null || die "apt-get update failed: check the network/package mirrors, then re-run"
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need[@]}" >/dev/null \
+    || die "apt-get install ${need[*]} failed: install them by hand, then re-run"
+fi
+python3 -c 'import sys; sys.exit(sys.version_info < (3, 10))' || die "Python >= 3.10 is needed (found $(python3 -V)): install a newer python3"
+
+# --- virtual environment and package --------------------------------------------------
+if [ ! -x .venv/bin/python ]; then
+  say "creating virtual environment .venv"
+  python3 -m venv .venv || die "python3 -m venv failed: apt-get install python3-venv, then re-run"
+fi
+PY=.venv/bin/python
+$PY -m pip install -q --upgrade pip >/dev/null
+say "installing build tools and dependencies"
+$PY -m pip install -q "meson-python>=0.15" "meson>=1.1" ninja "numpy>=1.23" "scipy>=1.9" "matplotlib>=3.5" "pytest>=7" \
+  || die "pip could not install the Python dependencies: check access to the package index"
+say "building and installing flexmech (Fortran kernels, f2py)"
+$PY -m pip install -q --no-build-isolation . >/tmp/flexmech-build.log 2>&1 \
+  || { tail -30 /tmp/flexmech-build.log >&2; die "the build failed (full log: /tmp/flexmech-build.log)"; }
+say "ready: $(.venv/bin/flexmech --version)"
+
+case "${1:-}" in
+  reproduce) shift; exec .venv/bin/flexmech reproduce --out reproduce "$@" ;;
+  test) shift; exec .venv/bin/pytest -q "$@" ;;
+  "") ;;
+  *) die "unknown action '$1' (use: reproduce, test)" ;;
+esac

@@ -1,0 +1,94 @@
+"""Case files: validation messages name the field and the fix; overrides; every case file is valid."""
+
+import copy
+
+import pytest
+
+import flexmech_py as fm
+from flexmech_py.case import apply_overrides
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+
+@pytest.fixture
+def raw(cases_dir):
+    return tomllib.loads((cases_dir / "fourbar_hac.toml").read_text())
+
+
+def test_every_case_file_validates(cases_dir):
+    files = sorted(cases_dir.glob("**/*.toml"))
+    assert len(files) >= 4
+    for f in files:
+        case = fm.load_case(f)
+        assert case["solver"]["t_end"] > 0
+
+
+@pytest.mark.parametrize("mutate, field, hint", [
+    (lambda r: r["links"][1].update(colour="red"), "links[1].colour", "unknown key"),
+    (lambda r: r["links"][0].pop("length"), "links[0].length", "missing"),
+    (lambda r: r["links"][0].update(length="long"), "links[0].length", "must be a number"),
+    (lambda r: r["links"][2].update(area=0.0), "links[2].area", "> 0"),
+    (lambda r: r["links"][2].update(youngs_modulus=-1.0), "links[2].youngs_modulus", "> 0"),
+    (lambda r: r["solver"].update(dt=0.0), "solver.dt", "> 0"),
+    (lambda r: r["solver"].update(dt=1.0), "solver.dt", "longer than the run"),
+    (lambda r: r["solver"].update(gamma=0.4), "solver.gamma", ">= 0.5"),
+    (lambda r: r["joints"].update(crank_pivot="weld"), "joints.crank_pivot", "one of"),
+    (lambda r: r.update(solvr={}), "case file.solvr", "unknown key"),
+    (lambda r: r["outputs"].update(x={"kind": "strain", "link": "conrod"}), "outputs.x.link", "one of"),
+    (lambda r: r["outputs"].update(x={"kind": "speed"}), "outputs.x.kind", "one of"),
+    (lambda r: r["outputs"].update(x={"kind": "position", "at": "coupler.end"}), "outputs.x.component", "missing"),
+    (lambda r: r["point_masses"][0].update(at="crank.tip"), "point_masses[0].at", "start, mid, end"),
+    (lambda r: r["drive"]["torques"][0].update(joint="elbow"), "drive.torques[0].joint", "one of"),
+    (lambda r: r["initial"].update(angles=[0.0, 1.0]), "initial.angles", "list of 1"),
+    (lambda r: r["mechanism"].update(type="slider"), "mechanism.type", "one of"),
+])
+def test_bad_input_names_field(raw, mutate, field, hint):
+    bad = copy.deepcopy(raw)
+    mutate(bad)
+    with pytest.raises(fm.CaseError) as exc:
+        fm.validate_case(bad)
+    assert exc.value.field == field
+    assert hint in str(exc.value)
+
+
+def test_node_not_on_mesh_is_rejected(cases_dir):
+    case = fm.load_case(cases_dir / "fourbar_hac.toml",
+                        overrides=['outputs.q = {kind = "displacement", at = "coupler.0.3", component = "x"}'])
+    with pytest.raises(fm.CaseError, match=r"outputs.q.at.*not at a mesh node"):
+        fm.simulate(case)
+
+
+def test_linkage_that_cannot_assemble(cases_dir):
+    case = fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["links.crank.length=1.0"])
+    with pytest.raises(fm.MechanismError, match="cannot assemble"):
+        fm.simulate(case)
+
+
+def test_zero_stiffness_elastic_problem_is_rejected(cases_dir):
+    case = fm.load_case(cases_dir / "manipulator_bricout.toml", overrides=["joints.joint_2=pin", "solver.t_end=0.001"])
+    with pytest.raises(fm.CaseError, match=r"joints.*zero-stiffness"):
+        fm.simulate(case)
+
+
+def test_overrides(raw):
+    out = apply_overrides(raw, ["solver.dt=2e-5", "links.coupler.area=5e-5", "links.0.length=0.1",
+                                'joints.follower_pivot="clamp"', "loads.gravity=[0, -9.81]", "case.title=hello world"])
+    assert out["solver"]["dt"] == 2e-5
+    assert out["links"][1]["area"] == 5e-5
+    assert out["links"][0]["length"] == 0.1
+    assert out["joints"]["follower_pivot"] == "clamp"
+    assert out["loads"]["gravity"] == [0, -9.81]
+    assert out["case"]["title"] == "hello world"
+    assert raw["solver"]["dt"] == 1e-5  # the input is not modified
+    with pytest.raises(fm.CaseError, match="no entry named 'rod'"):
+        apply_overrides(raw, ["links.rod.area=1"])
+    with pytest.raises(fm.CaseError, match="KEY.PATH=VALUE"):
+        apply_overrides(raw, ["solver.dt"])
+
+
+def test_rectangular_section_half_depth(cases_dir):
+    case = fm.load_case(cases_dir / "fourbar_hac.toml")
+    assert case["links"][1]["half_depth"] == pytest.approx(0.8e-3, rel=1e-3)  # 1.6 mm coupler
