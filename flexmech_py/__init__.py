@@ -14,8 +14,8 @@ The compiled kernels are in :mod:`flexmech_py.kernels`.
 __version__ = "0.1.0"
 
 from .case import MODELS, apply_overrides, load_case, validate_case  # noqa: E402
-from .errors import CaseError, FlexmechError, MechanismError, OutputError, SolverError  # noqa: E402
+from .errors import CaseError, FlexmechError, MechanismError, SolverError  # noqa: E402
 from .simulate import simulate  # noqa: E402
 
 __all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "MODELS", "FlexmechError", "CaseError",
-           "MechanismError", "SolverError", "OutputError", "__version__"]
+           "MechanismError", "SolverError", "__version__"]

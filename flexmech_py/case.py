@@ -170,6 +170,9 @@ def _drive(raw, mech: dict, joints, ndof: int) -> dict:
         raise CaseError("drive", "is missing; add a [drive] table (type = 'torque' or 'kinematic')")
     _keys(raw, {"type", "torques", "law", "speed", "final_speed", "spinup_time"}, "drive")
     kind = _str(raw, "type", "drive", required=True, choices=("torque", "kinematic"))
+    other = {"torques"} if kind == "kinematic" else {"law", "speed", "final_speed", "spinup_time"}
+    for key in sorted(other & set(raw)):
+        raise CaseError(f"drive.{key}", f"does not apply to a {kind!r} drive; remove it or change drive.type")
     if kind == "torque":
         tq = raw.get("torques")
         if not isinstance(tq, list) or not tq:
@@ -182,7 +185,11 @@ def _drive(raw, mech: dict, joints, ndof: int) -> dict:
     d = {"type": "kinematic", "law": law}
     if law == "constant_speed":
         d["speed"] = _num(raw, "speed", "drive", required=True)
+        if "final_speed" in raw or "spinup_time" in raw:
+            raise CaseError("drive", "final_speed and spinup_time belong to law = 'spinup'; remove them")
     else:
+        if "speed" in raw:
+            raise CaseError("drive.speed", "belongs to law = 'constant_speed'; a spin-up uses final_speed and spinup_time")
         d["final_speed"] = _num(raw, "final_speed", "drive", required=True)
         d["spinup_time"] = _num(raw, "spinup_time", "drive", required=True, positive=True)
     return d
@@ -308,6 +315,8 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
 
     ini = raw.get("initial", {})
     _keys(ini, {"angles", "speeds"}, "initial")
+    if r["drive"]["type"] == "kinematic" and "speeds" in ini:
+        raise CaseError("initial.speeds", "does not apply to a kinematic drive (the drive law sets the speed); remove it")
     r["initial"] = {"angles": _vec(ini, "angles", "initial", ndof, default=[0.0] * ndof),
                     "speeds": _vec(ini, "speeds", "initial", ndof, default=[0.0] * ndof)}
 
@@ -350,8 +359,8 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
     if gamma < 0.5:
         raise CaseError("solver.gamma", f"must be >= 0.5 (gamma < 1/2 adds negative damping), got {gamma}")
     if beta < 0.25 * (gamma + 0.5) ** 2 - 1e-15:
-        raise CaseError("solver.beta", f"={beta} with gamma={gamma} is only conditionally stable; "
-                                       f"use beta >= (gamma+1/2)^2/4 = {0.25 * (gamma + 0.5) ** 2:g}")
+        raise CaseError("solver.beta", f"beta = {beta} with gamma = {gamma} is only conditionally stable; "
+                                       f"use beta >= (gamma + 1/2)^2 / 4 = {0.25 * (gamma + 0.5) ** 2:g}")
     r["solver"] = {"t_end": t_end, "dt": dt,
                    "output_every": _int(sol, "output_every", "solver", default=1),
                    "beta": beta, "gamma": gamma,

@@ -58,6 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("reproduce", help="regenerate the seed paper's Figs. 3-12 and a Markdown report")
     rp.add_argument("--out", default="reproduce", help="output folder (default: ./reproduce)")
     rp.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
+    rp.add_argument("--t-end", type=_positive_float, default=None,
+                    help="shorten every run to this many seconds (quick look; the seed's claims need the full runs)")
     return p
 
 
@@ -81,7 +83,7 @@ def _cmd_run(args) -> int:
 def _cmd_reproduce(args) -> int:
     from .reproduce import reproduce
 
-    report = reproduce(args.out, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True))
+    report = reproduce(args.out, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True), t_end=args.t_end)
     print(f"wrote {report}")
     return 0
 
@@ -93,6 +95,9 @@ def main(argv: list[str] | None = None) -> int:
         return {"run": _cmd_run, "reproduce": _cmd_reproduce}[args.command](args)
     except FlexmechError as exc:
         print(f"flexmech: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # e.g. an output folder that cannot be created
+        print(f"flexmech: error: {exc.strerror or exc}: {exc.filename or ''} (choose another --out)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # pragma: no cover
         print("flexmech: interrupted", file=sys.stderr)

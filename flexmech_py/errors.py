@@ -11,7 +11,6 @@ __all__ = [
     "CaseError",
     "MechanismError",
     "SolverError",
-    "OutputError",
 ]
 
 
@@ -38,7 +37,3 @@ class SolverError(FlexmechError, RuntimeError):
         self.time = time
         self.code = code
         super().__init__(message)
-
-
-class OutputError(FlexmechError, ValueError):
-    """A requested output does not exist or cannot be computed for this case."""

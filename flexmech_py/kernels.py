@@ -60,4 +60,6 @@ def element_curvatures(dglob, phi, length: float, xi: float) -> np.ndarray:
     phi = np.ascontiguousarray(phi, dtype=float)
     if dglob.ndim != 2 or dglob.shape[0] != 6 or phi.shape != (dglob.shape[1],):
         raise FlexmechError("element_curvatures: dglob must be (6, n) and phi (n,)")
+    if not 0.0 <= xi <= 1.0 or not length > 0:
+        raise FlexmechError(f"element_curvatures: need 0 <= xi <= 1 and length > 0, got xi={xi!r}, length={length!r}")
     return api.element_curvatures(dglob, phi, float(length), float(xi))

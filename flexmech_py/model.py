@@ -231,6 +231,11 @@ class FEModel:
     def nel(self) -> int:
         return self.el_link.size
 
+    def free_translational(self) -> np.ndarray:
+        """All-DOF numbers (0-based) of the free translational DOFs."""
+        t = self.trans_dof.ravel()
+        return np.sort(t[self.free_of[t] > 0])
+
     def link_elements(self, li: int) -> np.ndarray:
         """0-based element indices of link ``li`` from its start to its end."""
         return np.flatnonzero(self.el_link == li + 1)

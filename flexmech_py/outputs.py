@@ -36,7 +36,7 @@ def _joint_rigid(fe, motion, name, attr):
     val = getattr(motion, attr)[:, j.outboard]
     if j.inboard is not None:
         val = val - getattr(motion, attr)[:, j.inboard]
-    return val
+    return np.unwrap(val) if attr == "phi" else val  # angles continuous in time (no 2 pi jumps)
 
 
 def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float) -> np.ndarray:
@@ -80,7 +80,7 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, q, qd, qdd, rig
             attr = {"joint_angle": "phi", "joint_speed": "omega", "joint_acceleration": "alpha"}[kind]
             out[name] = _joint_rigid(fe, motion, sp["joint"], attr)
         elif kind == "link_angle":
-            out[name] = motion.phi[:, fe.link_names.index(sp["link"])].copy()
+            out[name] = np.unwrap(motion.phi[:, fe.link_names.index(sp["link"])])
         elif kind in ("strain", "curvature"):
             li = fe.link_names.index(sp["link"])
             kap = link_curvature(fe, u_all, motion.phi[:, li], li, sp["at"])
@@ -103,8 +103,8 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, q, qd, qdd, rig
                 loads[model] = fe.loads(rig_frames, model)
             f = loads[model]
             comp = sp["component"]
-            if comp == "norm":
-                out[name] = np.linalg.norm(f[fe.free_of > 0], axis=0)
+            if comp == "norm":  # forces only: the translational free DOFs [N]
+                out[name] = np.linalg.norm(f[fe.free_translational()], axis=0)
             else:
                 li, node, _ = fe.node_ref(sp["at"], f"outputs.{name}.at")
                 dof = fe.rot_dof[(node, li)] if comp == "rotation" else fe.trans_dof[node, "xy".index(comp)]

@@ -44,6 +44,10 @@ def test_every_case_file_validates(cases_dir):
     (lambda r: r["drive"]["torques"][0].update(joint="elbow"), "drive.torques[0].joint", "one of"),
     (lambda r: r["initial"].update(angles=[0.0, 1.0]), "initial.angles", "list of 1"),
     (lambda r: r["mechanism"].update(type="slider"), "mechanism.type", "one of"),
+    (lambda r: r["drive"].update(speed=10.0), "drive.speed", "does not apply"),
+    (lambda r: r.update(drive={"type": "kinematic", "law": "constant_speed", "speed": 1.0}), "initial.speeds",
+     "does not apply"),
+    (lambda r: r["solver"].update(beta=0.2), "solver.beta", "conditionally stable"),
 ])
 def test_bad_input_names_field(raw, mutate, field, hint):
     bad = copy.deepcopy(raw)

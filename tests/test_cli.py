@@ -45,6 +45,14 @@ def test_bad_input_one_line_exit_2(cases_dir, tmp_path, capsys, args, needle):
     assert not out.exists()  # nothing half-written
 
 
+def test_unwritable_output_folder(cases_dir, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    rc = main(["run", str(cases_dir / "fourbar_hac.toml"), "--set", "solver.t_end=0.001", "--out", str(blocker / "sub")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.startswith("flexmech: error: ") and "--out" in err and err.count("\n") == 1
+
+
 def test_argparse_rejects_nonpositive_dt(cases_dir, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["run", str(cases_dir / "fourbar_hac.toml"), "--dt", "0"])
