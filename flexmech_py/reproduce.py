@@ -182,8 +182,8 @@ def _report(runs, figs, dvec, timings, models) -> str:
               f"(largest relative difference {_pct(max(diffs['hac'].values()))}).", "",
           "Seed claim: the inertia forces F_c0 = M0 x0'' and F_c = M x0'' differ by about 1 %.", "",
           "| measure | " + " | ".join(f"{m} vs classic" for m in dvec) + " |", "|---|" + "---|" * len(dvec)]
-    for key, lab in (("max_norm_diff_over_max_norm", "max |F_c - F| / max |F_c|"),
-                     ("rms_norm_diff_over_rms_norm", "rms |F_c - F| / rms |F_c|"),
+    for key, lab in (("max_norm_diff_over_max_norm", "max ‖F_c − F‖ / max ‖F_c‖"),
+                     ("rms_norm_diff_over_rms_norm", "rms ‖F_c − F‖ / rms ‖F_c‖"),
                      ("max_componentwise_diff_over_max_component", "max component difference / max component")):
         L.append(f"| {lab} | " + " | ".join(_pct(dvec[m][key]) for m in dvec) + " |")
     L += ["", "(Forces: norms over the free translational DOFs, along the whole run.)", ""]

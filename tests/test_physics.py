@@ -73,7 +73,7 @@ def test_frame_invariance_spinning_cantilever():
         got = np.vstack([res["tip_u"], res["tip_v"]])
         assert np.max(np.abs(ref[1])) > 1e-4  # a real deflection (m)
         errs.append(np.max(np.abs(got - ref)) / np.max(np.abs(ref)))
-    assert errs[0] < 2e-2
+    assert errs[0] < 5e-5  # measured 1.3e-5 at dt = 1e-3 s
     order = np.log2(errs[0] / errs[1])
     assert 1.8 < order < 2.3, (errs, order)
 

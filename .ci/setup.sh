@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # flexmech set-up on Debian/Ubuntu: system packages (gfortran, LAPACK, pkg-config),
 # a virtual environment in .venv, and the package built and installed into it.
-#   bash setup.sh            set up only
-#   bash setup.sh reproduce  set up, then run `flexmech reproduce --out reproduce`
-#   bash setup.sh test       set up, then run the test suite
+#   bash .ci/setup.sh            set up only
+#   bash .ci/setup.sh reproduce  set up, then run `flexmech reproduce --out reproduce`
+#   bash .ci/setup.sh test       set up, then run the test suite
 set -euo pipefail
-cd "$(dirname "$0")"
+cd "$(dirname "$0")/.."
 say() { printf 'flexmech setup: %s\n' "$*"; }
 die() { printf 'flexmech setup: ERROR: %s\n' "$*" >&2; exit 1; }
 
