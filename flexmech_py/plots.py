@@ -43,14 +43,17 @@ def line_figure(path, panels, *, title=None, xlabel="t [s]"):
     import matplotlib.pyplot as plt
 
     n = len(panels)
-    fig, axes = plt.subplots(n, 1, figsize=(8, 2.6 * n + 0.6), squeeze=False, sharex=False)
+    crowded = any(len(p["series"]) > 4 for p in panels)   # legends go beside the axes
+    fig, axes = plt.subplots(n, 1, figsize=(10.5 if crowded else 8, 2.6 * n + 0.6), squeeze=False, sharex=False)
     for ax, p in zip(axes[:, 0], panels):
         for label, y, style in p["series"]:
             ax.plot(p["x"], y, label=label, **(style or {}))
         ax.set_ylabel(p["ylabel"])
         ax.set_xlabel(p.get("xlabel", xlabel))
         ax.grid(True, alpha=0.3)
-        if len(p["series"]) > 1 or p["series"][0][0]:
+        if crowded and len(p["series"]) > 1:
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+        elif len(p["series"]) > 1 or p["series"][0][0]:
             ax.legend(fontsize=8, loc="best")
     if title:
         fig.suptitle(title, fontsize=11)
