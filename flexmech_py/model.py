@@ -58,6 +58,21 @@ def mechanism_joints(case: dict) -> list[Joint]:
     return joints
 
 
+class _UnionFind:
+    """Disjoint sets of hashable items (joint nodes, locked rotations)."""
+
+    def __init__(self):
+        self.parent = {}
+
+    def find(self, x):
+        while self.parent.get(x, x) != x:
+            x = self.parent[x]
+        return x
+
+    def union(self, keep, other):
+        self.parent[self.find(other)] = self.find(keep)
+
+
 @dataclass
 class FEModel:
     """The discretized mechanism; build it with :meth:`from_case`."""
@@ -93,47 +108,34 @@ class FEModel:
         n_el = [ln["elements"] for ln in links]
         joints = mechanism_joints(case)
         # global nodes: one per (link, k), merged at joints
-        parent = {}
-
-        def find(x):
-            while parent.get(x, x) != x:
-                x = parent[x]
-            return x
-
+        nodes = _UnionFind()
         for j in joints:
             if j.inboard is not None:
-                a = (j.inboard, 0 if j.inboard_end == "start" else n_el[j.inboard])
-                b = (j.outboard, 0 if j.outboard_end == "start" else n_el[j.outboard])
-                parent[find(b)] = find(a)
+                nodes.union((j.inboard, 0 if j.inboard_end == "start" else n_el[j.inboard]),
+                            (j.outboard, 0 if j.outboard_end == "start" else n_el[j.outboard]))
         ids, node_of = {}, []
         for li, n in enumerate(n_el):
             row = []
             for k in range(n + 1):
-                root = find((li, k))
+                root = nodes.find((li, k))
                 ids.setdefault(root, len(ids))
                 row.append(ids[root])
             node_of.append(row)
         nnodes = len(ids)
 
         # rotational DOF groups: (node, link) pairs, merged by locked joints
-        rparent = {}
-
-        def rfind(x):
-            while rparent.get(x, x) != x:
-                x = rparent[x]
-            return x
-
+        rots = _UnionFind()
         for j in joints:
             if j.inboard is not None and j.elastic == "locked":
                 na = node_of[j.inboard][0 if j.inboard_end == "start" else -1]
-                rparent[rfind((na, j.outboard))] = rfind((na, j.inboard))
+                rots.union((na, j.inboard), (na, j.outboard))
         # DOF numbering (before bandwidth reduction): node translations, then rotations
         trans = np.arange(2 * nnodes).reshape(nnodes, 2)
         rot, rot_groups = {}, {}
         dof_names = [f"node{n}.{c}" for n in range(nnodes) for c in ("x", "y")]
         for li, row in enumerate(node_of):
             for node in row:
-                g = rfind((node, li))
+                g = rots.find((node, li))
                 if g not in rot_groups:
                     rot_groups[g] = 2 * nnodes + len(rot_groups)
                     dof_names.append(f"node{node}.rot[{names[g[1]]}]")
