@@ -20,9 +20,10 @@ try:  # Python >= 3.11
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["load_case", "validate_case", "apply_overrides", "MODELS", "JOINTS_OF", "OUTPUT_KINDS"]
+__all__ = ["load_case", "validate_case", "apply_overrides", "MODELS", "SUPERPOSITION_MODELS", "JOINTS_OF", "OUTPUT_KINDS"]
 
-MODELS = ("hac", "classic", "classic-translational")
+SUPERPOSITION_MODELS = ("hac", "classic", "classic-translational")
+MODELS = SUPERPOSITION_MODELS + ("coupled",)
 MECHANISMS = ("fourbar", "serial")
 OUTPUT_KINDS = {
     # kind: (required keys, optional keys with defaults)
@@ -246,7 +247,7 @@ def _outputs(raw, joints, links: dict, mech_type: str) -> dict:
             else:
                 d["at"] = _node_ref(spec["at"], f"{w}.at", links)
         if kind == "inertia_load":
-            d["model"] = _str(spec, "model", w, default="run", choices=("run",) + MODELS)
+            d["model"] = _str(spec, "model", w, default="run", choices=("run",) + SUPERPOSITION_MODELS)
         out[name] = d
     return out
 
@@ -349,7 +350,7 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
     r["loads"] = {"gravity": _vec(loads, "gravity", "loads", 2, default=[0.0, 0.0])}
 
     sol = raw.get("solver", {})
-    _keys(sol, {"t_end", "dt", "output_every", "beta", "gamma", "rayleigh", "model", "rigid_rtol", "rigid_atol"}, "solver")
+    _keys(sol, {"t_end", "dt", "output_every", "beta", "gamma", "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit"}, "solver")
     t_end = _num(sol, "t_end", "solver", positive=True, required=True)
     dt = _num(sol, "dt", "solver", positive=True, required=True)
     if dt > t_end:
@@ -367,7 +368,9 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
                    "rayleigh": _vec(sol, "rayleigh", "solver", 2, default=[0.0, 0.0], nonneg=True),
                    "model": _str(sol, "model", "solver", default="hac", choices=MODELS),
                    "rigid_rtol": _num(sol, "rigid_rtol", "solver", default=1e-10, positive=True),
-                   "rigid_atol": _num(sol, "rigid_atol", "solver", default=1e-12, positive=True)}
+                   "rigid_atol": _num(sol, "rigid_atol", "solver", default=1e-12, positive=True),
+                   "newton_tol": _num(sol, "newton_tol", "solver", default=1e-8, positive=True),
+                   "newton_maxit": _int(sol, "newton_maxit", "solver", default=25)}
     if mtype == "serial" and "outputs" not in raw:
         raise CaseError("outputs", "is missing; a serial chain needs an [outputs] table naming what to record")
     r["outputs"] = _outputs(raw.get("outputs"), joints, lnames, mtype)

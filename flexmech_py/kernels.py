@@ -33,6 +33,8 @@ STATUS_MESSAGES = {
     2: "the solution became non-finite (NaN or Inf): the step is too large or the model is unstable here",
     3: "LAPACK rejected an argument (a flexmech bug: please report it with the case file)",
     4: "invalid input to a compiled routine (sizes, indices or coefficients)",
+    5: "Newton iterations did not converge (reduce solver.dt, raise solver.newton_maxit, or the motion "
+       "left the model's range of validity)",
 }
 
 

@@ -22,7 +22,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from . import kernels
-from .case import JOINTS_OF, MODELS
+from .case import JOINTS_OF, SUPERPOSITION_MODELS
 from .errors import CaseError
 
 __all__ = ["FEModel", "Joint", "LOAD_MODEL_CODE"]
@@ -279,8 +279,8 @@ class FEModel:
 
     def loads(self, rig: np.ndarray, model: str) -> np.ndarray:
         """Rigid-inertia loads F_rigid over all DOFs, (ndof, ns), at rigid samples rig (5, nlinks, ns)."""
-        if model not in MODELS:
-            raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
+        if model not in SUPERPOSITION_MODELS:
+            raise CaseError("model", f"must be one of {', '.join(SUPERPOSITION_MODELS)}, got {model!r}")
         f, status = kernels.api.ked_loads(*self._system_args(), LOAD_MODEL_CODE[model], np.asfortranarray(rig, float))
         kernels.check_status(status, "ked_loads")
         return f

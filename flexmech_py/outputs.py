@@ -65,12 +65,15 @@ def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float)
 
 
 def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, q, qd, qdd, rig_frames, run_model: str,
-                     load_cache: dict | None = None) -> dict[str, np.ndarray]:
+                     load_cache: dict | None = None, joint_motion=None, curvature=None) -> dict[str, np.ndarray]:
     """Evaluate every named output over the frames.
 
-    u_all (ndof, nf) elastic DOFs; motion the rigid LinkMotion at the frames;
+    u_all (ndof, nf) elastic DOFs (displacements from the rigid motion ``motion``);
     rig_frames (5, nlinks, nf) the kernel rigid samples (for inertia loads).
+    joint_motion: LinkMotion for joint and link angles (default ``motion``; the coupled model
+    passes its own rigid motion); curvature: callable(link, fraction) -> kappa (default: from u_all).
     """
+    joint_motion = motion if joint_motion is None else joint_motion
     out = {}
     loads = {} if load_cache is None else load_cache
     links = fe.case["links"]
@@ -78,12 +81,13 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, q, qd, qdd, rig
         kind = sp["kind"]
         if kind in ("joint_angle", "joint_speed", "joint_acceleration"):
             attr = {"joint_angle": "phi", "joint_speed": "omega", "joint_acceleration": "alpha"}[kind]
-            out[name] = _joint_rigid(fe, motion, sp["joint"], attr)
+            out[name] = _joint_rigid(fe, joint_motion, sp["joint"], attr)
         elif kind == "link_angle":
-            out[name] = np.unwrap(motion.phi[:, fe.link_names.index(sp["link"])])
+            out[name] = np.unwrap(joint_motion.phi[:, fe.link_names.index(sp["link"])])
         elif kind in ("strain", "curvature"):
             li = fe.link_names.index(sp["link"])
-            kap = link_curvature(fe, u_all, motion.phi[:, li], li, sp["at"])
+            kap = (link_curvature(fe, u_all, motion.phi[:, li], li, sp["at"]) if curvature is None
+                   else curvature(li, sp["at"]))
             out[name] = kap * links[li]["half_depth"] if kind == "strain" else kap
         elif kind in ("displacement", "position"):
             li, node, zeta = fe.node_ref(sp["at"], f"outputs.{name}.at")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .case import MODELS, load_case
+from .case import MODELS, SUPERPOSITION_MODELS, load_case
 from .errors import CaseError
 from .plots import line_figure
 from .simulate import simulate_models
@@ -23,9 +23,11 @@ from .simulate import simulate_models
 __all__ = ["reproduce", "seed_case_path", "model_differences"]
 
 STYLE = {"hac": {"color": "C0", "lw": 1.6}, "classic": {"color": "C3", "lw": 1.0, "ls": "--"},
-         "classic-translational": {"color": "C2", "lw": 1.0, "ls": ":"}}
+         "classic-translational": {"color": "C2", "lw": 1.0, "ls": ":"}, "coupled": {"color": "k", "lw": 1.2},
+         "rigid": {"color": "0.55", "lw": 1.0, "ls": "--"}}
 LABEL = {"hac": "case I (hac, Eq. 15)", "classic": "case II (classic, Eq. 14)",
-         "classic-translational": "Eq. 14, translational only"}
+         "classic-translational": "Eq. 14, translational only", "coupled": "coupled (one-pass, Sec. 3)",
+         "rigid": "rigid-body solution"}
 NEEDED = {"fourbar_hac": ("crank_angle", "crank_speed", "strain_coupler_mid", "strain_follower_mid",
                           "load_coupler_mid_x", "load_coupler_mid_y", "load_joint_b_x", "load_joint_b_y", "load_norm"),
           "fourbar_constant_speed": ("strain_coupler_mid", "strain_follower_mid"),
@@ -95,33 +97,35 @@ def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS,
             raise CaseError("outputs", f"{path} lacks the outputs {', '.join(missing)} that the reproduced figures "
                                        "need; use the bundled case file or add them")
         t0 = time.perf_counter()
-        runs[name] = simulate_models(case, models)
+        use = [m for m in models if m != "coupled" or case["drive"]["type"] == "torque"]
+        runs[name] = simulate_models(case, use)
         timings[name] = time.perf_counter() - t0
         for m, r in runs[name].items():
             r.write(out / "runs" / f"{name}-{m}")
-        say(f"{name}: {len(models)} models in {timings[name]:.2f} s")
+        say(f"{name}: {len(use)} models in {timings[name]:.2f} s")
 
     figs = {}
     fb = runs["fourbar_hac"]
+    sup = [m for m in models if m in SUPERPOSITION_MODELS]
     ang = np.degrees(fb["hac"].columns["crank_angle"])
     for fig, col, what in ((3, "strain_coupler_mid", "coupler"), (4, "strain_follower_mid", "follower")):
         figs[fig] = _fig(out, f"fig{fig}_{what}_strain.png",
                          [{"x": ang, "ylabel": f"{what} midspan strain [-]",
-                           "series": [(LABEL[m], fb[m].columns[col], STYLE[m]) for m in models]}],
+                           "series": [(LABEL[m], fb[m].columns[col], STYLE[m]) for m in sup]}],
                          f"Fig. {fig}: midspan bending strain of the {what} (torque-driven four-bar)",
                          "crank angle [deg]")
     for fig, col, what in ((5, "strain_coupler_mid", "coupler"), (6, "strain_follower_mid", "follower")):
         figs[fig] = _fig(out, f"fig{fig}_{what}_strain_difference.png",
                          [{"x": ang, "ylabel": "strain difference [-]",
                            "series": [(f"{LABEL[m]} minus case II", fb[m].columns[col] - fb["classic"].columns[col], STYLE[m])
-                                      for m in models if m != "classic"]}],
+                                      for m in sup if m != "classic"]}],
                          f"Fig. {fig}: difference in {what} midspan strain between the models", "crank angle [deg]")
     lc = [c for c in ("load_coupler_mid_x", "load_coupler_mid_y", "load_norm") if c in fb["hac"].columns]
     figs[7] = _fig(out, "fig7_inertia_force.png",
-                   [{"x": ang, "ylabel": f"{c} [N]", "series": [(LABEL[m], fb[m].columns[c], STYLE[m]) for m in models]}
+                   [{"x": ang, "ylabel": f"{c} [N]", "series": [(LABEL[m], fb[m].columns[c], STYLE[m]) for m in sup]}
                     for c in lc],
                    "Fig. 7: rigid-inertia force F_c0 = M0 x0'' (case I) and F_c = M x0'' (case II)", "crank angle [deg]")
-    dvec = {m: load_vector_difference(fb, m, "classic") for m in models if m != "classic"}
+    dvec = {m: load_vector_difference(fb, m, "classic") for m in sup if m != "classic"}
     # Fig. 8: the difference vectors.  At interior nodes of equal elements the element
     # differences cancel (theory.md, section 4), so the joint components are shown.
     jb = [("load_joint_b_x", "x"), ("load_joint_b_y", "y")]
@@ -138,18 +142,86 @@ def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS,
                                  (12, "manipulator_bricout_no_payload", ("tip_dy_elastic",))):
         rr = runs[case_name]
         figs[fig] = _fig(out, f"fig{fig}_{case_name}_{cols[0]}.png",
-                         [{"x": rr["hac"].t, "ylabel": f"{c} [m]", "series": [(LABEL[m], rr[m].columns[c], STYLE[m]) for m in models]}
+                         [{"x": rr["hac"].t, "ylabel": f"{c} [m]", "series": [(LABEL[m], rr[m].columns[c], STYLE[m]) for m in rr]}
                           for c in cols],
                          f"Fig. {fig}: elastic displacement of the manipulator tip ({case_name})", "t [s]")
     cs = runs["fourbar_constant_speed"]
     figs["cs"] = _fig(out, "fourbar_constant_speed_strains.png",
-                      [{"x": cs["hac"].t, "ylabel": f"{c} [-]", "series": [(LABEL[m], cs[m].columns[c], STYLE[m]) for m in models]}
+                      [{"x": cs["hac"].t, "ylabel": f"{c} [-]", "series": [(LABEL[m], cs[m].columns[c], STYLE[m]) for m in cs]}
                        for c in ("strain_coupler_mid", "strain_follower_mid")],
                       "Four-bar at constant crank speed: midspan strains", "t [s]")
+
+    if "coupled" in fb:
+        t = fb["hac"].t
+        figs["c1"] = _fig(out, "coupled_fourbar.png",
+                          [{"x": t, "ylabel": "crank angle [rad]",
+                            "series": [(LABEL["rigid"], fb["hac"].columns["crank_angle"], STYLE["rigid"]),
+                                       (LABEL["coupled"], fb["coupled"].columns["crank_angle"], STYLE["coupled"])]},
+                           {"x": t, "ylabel": "crank speed [rad/s]",
+                            "series": [(LABEL["rigid"], fb["hac"].columns["crank_speed"], STYLE["rigid"]),
+                                       (LABEL["coupled"], fb["coupled"].columns["crank_speed"], STYLE["coupled"])]}]
+                          + [{"x": t, "ylabel": f"{c} [-]", "series": [(LABEL[m], fb[m].columns[c], STYLE[m])
+                                                                      for m in ("hac", "classic", "coupled")]}
+                             for c in ("strain_coupler_mid", "strain_follower_mid")],
+                          "Four-bar: coupled (one-pass) model against the superposition models", "t [s]")
+        for key, name in (("c2", "manipulator_bricout"), ("c3", "manipulator_bricout_no_payload")):
+            rr = runs[name]
+            figs[key] = _fig(out, f"coupled_{name}.png",
+                             [{"x": rr["hac"].t, "ylabel": f"{c} [rad]",
+                               "series": [(LABEL["rigid"], rr["hac"].columns[c], STYLE["rigid"]),
+                                          (LABEL["coupled"], rr["coupled"].columns[c], STYLE["coupled"])]}
+                              for c in ("alpha", "beta")]
+                             + [{"x": rr["hac"].t, "ylabel": f"{c} [m]",
+                                 "series": [(LABEL[m], rr[m].columns[c], STYLE[m]) for m in ("hac", "classic", "coupled")]}
+                                for c in ("tip_dx_elastic", "tip_dy_elastic")],
+                             f"{name}: coupled (one-pass) model against the superposition models", "t [s]")
 
     report = out / "report.md"
     report.write_text(_report(runs, figs, dvec, timings, models), encoding="utf-8")
     return report
+
+
+def _coupled_section(runs, figs) -> list[str]:
+    """The one-pass coupled model against the superposition models and the rigid-body solution."""
+    cases = [n for n in SEED_CASES if "coupled" in runs[n]]
+    if not cases:
+        return []
+    L = ["", "## One-pass coupled model (seed Section 3)", "",
+         "The coupled model computes the rigid motion itself (theory.md §11).  Drift = its joint angles minus "
+         "the rigid-body solution's; energy drift = max |T + V - W - (T + V - W)(0)| / max(T, W).", "",
+         "| case | energy drift | Newton iterations per step (mean / max) | max link-length change | "
+         "joint: max / final drift [rad] | kernel time per step: coupled / hac [us] |",
+         "|---|---|---|---|---|---|"]
+    for n in cases:
+        r, h = runs[n]["coupled"], runs[n]["hac"]
+        c = r.extra["coupled"]
+        drift = "; ".join(f"{j}: {d['max_abs_rad']:.3g} / {d['final_rad']:.3g}"
+                          for j, d in c["rigid_drift_from_rigid_body_solution"].items())
+        L.append(f"| {n} | {c['energy_balance']['relative_drift']:.2g} | {c['newton']['mean_per_step']:.2f} / "
+                 f"{c['newton']['max_per_step']} | {c['link_length_drift']['max_relative']:.2g} | {drift} | "
+                 f"{1e6 * r.timing['kernel_s'] / r.nsteps:.1f} / {1e6 * h.timing['kernel_s'] / h.nsteps:.1f} |")
+    fb = runs["fourbar_hac"]
+    if "coupled" in fb:
+        L += ["", f"Four-bar at t = {fb['hac'].t[-1]:.3g} s: crank angle {fb['coupled'].columns['crank_angle'][-1]:.4g} rad "
+                  f"(rigid-body solution {fb['hac'].columns['crank_angle'][-1]:.4g} rad), crank speed "
+                  f"{fb['coupled'].columns['crank_speed'][-1]:.4g} rad/s (rigid {fb['hac'].columns['crank_speed'][-1]:.4g}); "
+                  f"peak coupler strain {np.max(np.abs(fb['coupled'].columns['strain_coupler_mid'])):.4g} "
+                  f"(hac {np.max(np.abs(fb['hac'].columns['strain_coupler_mid'])):.4g}), peak follower strain "
+                  f"{np.max(np.abs(fb['coupled'].columns['strain_follower_mid'])):.4g} "
+                  f"(hac {np.max(np.abs(fb['hac'].columns['strain_follower_mid'])):.4g}).", ""]
+    for n in cases:
+        if n.startswith("manipulator"):
+            rr = runs[n]
+            L.append(f"{n}: peak tip deviation from the rigid-body solution, X / Y [mm]: coupled "
+                     f"{1e3 * np.max(np.abs(rr['coupled'].columns['tip_dx_elastic'])):.4g} / "
+                     f"{1e3 * np.max(np.abs(rr['coupled'].columns['tip_dy_elastic'])):.4g}; hac "
+                     f"{1e3 * np.max(np.abs(rr['hac'].columns['tip_dx_elastic'])):.4g} / "
+                     f"{1e3 * np.max(np.abs(rr['hac'].columns['tip_dy_elastic'])):.4g}.")
+    L.append("")
+    for key in ("c1", "c2", "c3"):
+        if figs.get(key):
+            L.append(f"![coupled]({figs[key]})")
+    return L
 
 
 def _pct(x: float) -> str:
@@ -161,7 +233,8 @@ def _report(runs, figs, dvec, timings, models) -> str:
     L = ["# flexmech reproduce: the seed paper's examples", "",
          "Regenerate with `flexmech reproduce --out DIR`.  Models: `hac` = case I (Eq. 15, Hac's rigid-body shape "
          "function), `classic` = case II (Eq. 14 with the link angular acceleration at the rotational DOFs), "
-         "`classic-translational` = Eq. 14 without the rotational entries.  See docs/theory.md.", ""]
+         "`classic-translational` = Eq. 14 without the rotational entries; `coupled` = the one-pass model of "
+         "Section 3 (rigid motion computed, not prescribed).  See docs/theory.md.", ""]
     r0 = fb["hac"]
     L += ["## Runs", "", "| case | steps | dt [s] | free DOFs | wall time, all models [s] |", "|---|---|---|---|---|"]
     for name, rr in runs.items():
@@ -207,6 +280,7 @@ def _report(runs, figs, dvec, timings, models) -> str:
     for k in (10, 11, 12):
         if figs.get(k):
             L.append(f"![Fig. {k}]({figs[k]})")
+    L += _coupled_section(runs, figs)
     L += ["", "## Four-bar at constant crank speed", ""]
     d = model_differences(cs, ["strain_coupler_mid", "strain_follower_mid"])
     L.append("| quantity | " + " | ".join(f"{m} vs classic" for m in d) + " |")

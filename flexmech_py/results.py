@@ -55,6 +55,7 @@ class Result:
     nsteps: int
     dt: float
     timing: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)   # model-specific summary entries (e.g. the coupled model's)
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "t":
@@ -79,6 +80,7 @@ class Result:
             "dofs": {"all": fe.ndof, "free": fe.nfree, "half_bandwidth": fe.bandwidth, "elements": fe.nel},
             "wall_time_s": {k: round(v, 6) for k, v in self.timing.items()},
             "outputs": outs,
+            **self.extra,
             "versions": versions(),
             "input": self.case,
         }

@@ -12,7 +12,19 @@
 !>   load_model        1 hac (case I), 2 classic (case II), 3 classic-translational
 !>   rayleigh(2)       Rayleigh damping [a_M 1/s, a_K s]
 !> Rigid samples rig(5,nlinks,...) : [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] per link.
-!> Every routine returns `status` (codes in flexmech_lapack).
+!> Every routine returns `status` (codes in flexmech_lapack; 5 = Newton failure, flexmech_coupled).
+!>
+!> Coupled (one-pass) model, cpl_* routines (docs/theory.md, "Coupled model"):
+!>   free_of(ndof)          free-DOF number of each DOF, 0 = constrained or prescribed
+!>   n_el(nlinks)           elements per link
+!>   ld(maxld, nlinks)      all-DOF numbers of each link's local vector
+!>                          [xs ys xe ye th_0 (p_k v_k th_k, k = 1..n-1) th_n], length 3n+3
+!>   prop(4, nlinks)        [L m, rho*A kg/m, E*A N, E*I N m^2]
+!>   pm_link(npm), pm_prop(2, npm)            point masses: link, [mass kg, zeta m]
+!>   ri_link(nri), ri_node(nri), ri_j(nri)    rotary inertias: link, node k (0..n), J kg m^2
+!>   tq_link(2, ntq), tq_end(2, ntq)          torques: [on-link b, reaction link a (0 = ground)], ends (0 start, 1 end)
+!>   tq_coef(nh2, ntq)      tau = c0 + sum_h s_h sin(h theta) + c_h cos(h theta), theta = psi_b - psi_a
+!>   grav(2) [m/s^2], ray(2) Rayleigh [1/s, s] on the elastic DOFs
 module flexmech_api
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
@@ -21,9 +33,11 @@ module flexmech_api
   use flexmech_assembly, only: band_rows, band_to_dense
   use flexmech_ked, only: ked_system
   use flexmech_newmark, only: newmark_run, consistent_acceleration
+  use flexmech_coupled, only: coupled_system, coupled_build, coupled_run, coupled_dense
   implicit none
   private
   public :: element_matrices, element_curvatures, ked_run, ked_matrices, ked_loads, ked_bandwidth
+  public :: cpl_run, cpl_dense
 
 contains
 
@@ -203,5 +217,68 @@ contains
       call sys%rigid_load(rig(:, :, i), f(:, i))
     end do
   end subroutine ked_loads
+
+  !> Run the coupled model (Newmark-Newton).  q, v, a (ndof): on entry the initial state (constrained
+  !> entries hold their fixed values; the free accelerations are made consistent), on exit the last state.
+  subroutine cpl_run(ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes, &
+                     free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, tq_link, tq_end, tq_coef, &
+                     grav, ray, presc_dof, presc, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
+                     qf, vf, af, ef, status, fail_step, iters)
+    integer, intent(in) :: ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes
+    integer, intent(in) :: free_of(ndof), n_el(nlinks), ld(maxld, nlinks)
+    real(dp), intent(in) :: prop(4, nlinks)
+    integer, intent(in) :: pm_link(npm)
+    real(dp), intent(in) :: pm_prop(2, npm)
+    integer, intent(in) :: ri_link(nri), ri_node(nri)
+    real(dp), intent(in) :: ri_j(nri)
+    integer, intent(in) :: tq_link(2, ntq), tq_end(2, ntq)
+    real(dp), intent(in) :: tq_coef(nh2, ntq), grav(2), ray(2)
+    integer, intent(in) :: presc_dof(np)
+    real(dp), intent(in) :: presc(3, np, nsteps + 1)
+    real(dp), intent(in) :: dt, beta, gamma, tol
+    integer, intent(in) :: out_every, maxit
+    real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof)
+    real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
+    integer, intent(out) :: status, fail_step, iters
+    type(coupled_system) :: sys
+    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; fail_step = 0; iters = 0
+    call coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
+                       tq_link, tq_end, tq_coef, grav, ray, status)
+    if (status /= STATUS_OK) return
+    if (any(presc_dof < 1) .or. any(presc_dof > ndof)) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    call coupled_run(sys, presc_dof, presc, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
+                     qf, vf, af, ef, status, fail_step, iters)
+  end subroutine cpl_run
+
+  !> Residual (all DOFs), M, C_v, K_t (dense, free DOFs) and [kinetic, potential] energy at one state.
+  subroutine cpl_dense(ndof, nlinks, maxld, npm, nri, ntq, nh2, nfree, &
+                       free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, tq_link, tq_end, tq_coef, &
+                       grav, ray, q, v, a, res, mm, cm, km, energy, status)
+    integer, intent(in) :: ndof, nlinks, maxld, npm, nri, ntq, nh2, nfree
+    integer, intent(in) :: free_of(ndof), n_el(nlinks), ld(maxld, nlinks)
+    real(dp), intent(in) :: prop(4, nlinks)
+    integer, intent(in) :: pm_link(npm)
+    real(dp), intent(in) :: pm_prop(2, npm)
+    integer, intent(in) :: ri_link(nri), ri_node(nri)
+    real(dp), intent(in) :: ri_j(nri)
+    integer, intent(in) :: tq_link(2, ntq), tq_end(2, ntq)
+    real(dp), intent(in) :: tq_coef(nh2, ntq), grav(2), ray(2)
+    real(dp), intent(in) :: q(ndof), v(ndof), a(ndof)
+    real(dp), intent(out) :: res(ndof), mm(nfree, nfree), cm(nfree, nfree), km(nfree, nfree), energy(2)
+    integer, intent(out) :: status
+    type(coupled_system) :: sys
+    res = 0.0_dp; mm = 0.0_dp; cm = 0.0_dp; km = 0.0_dp; energy = 0.0_dp
+    call coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
+                       tq_link, tq_end, tq_coef, grav, ray, status)
+    if (status /= STATUS_OK) return
+    if (sys%nfree /= nfree) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    call coupled_dense(sys, q, v, a, res, mm, cm, km, energy)
+  end subroutine cpl_dense
 
 end module flexmech_api

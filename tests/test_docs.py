@@ -99,7 +99,7 @@ def test_cases_md_documents_every_kind_model_and_key():
             "ground_length", "assembly", "base", "half_depth", "second_moment", "youngs_modulus",
             "elements_per_link", "crank_pivot", "crank_coupler", "coupler_follower", "follower_pivot",
             "joint_k", "constant_speed", "spinup", "final_speed", "spinup_time", "turns_with", "gravity",
-            "output_every", "rayleigh", "rigid_rtol", "rigid_atol", "beta", "gamma"]:
+            "output_every", "rayleigh", "rigid_rtol", "rigid_atol", "beta", "gamma", "newton_tol", "newton_maxit"]:
         assert f"`{word}`" in text, word
 
 

@@ -15,7 +15,7 @@ def _prep(cases_dir, name, t_end, dt, extra=()):
 
 
 @pytest.mark.parametrize("name", ["fourbar_hac", "manipulator_bricout"])
-@pytest.mark.parametrize("model", fm.MODELS)
+@pytest.mark.parametrize("model", fm.SUPERPOSITION_MODELS)
 def test_ked_run_matches_numpy(cases_dir, name, model):
     p = _prep(cases_dir, name, 0.004, 2e-5)
     uf, _, _ = p.fe.run(p.rig, model, p.dt)
@@ -40,7 +40,7 @@ def test_ked_run_with_damping_and_applied_loads(cases_dir):
     assert np.max(np.abs(uf - ref)) < 1e-9 * np.max(np.abs(ref))
 
 
-@pytest.mark.parametrize("model", fm.MODELS)
+@pytest.mark.parametrize("model", fm.SUPERPOSITION_MODELS)
 def test_ked_matrices_and_loads_match_numpy(cases_dir, model):
     p = _prep(cases_dir, "manipulator_bricout", 0.01, 1e-3)
     rig = p.rig[:, :, 5]

@@ -1,0 +1,271 @@
+"""The one-pass coupled model (seed Section 3): rigid and elastic coordinates in one system.
+
+Coordinates (docs/theory.md, "Coupled model"): the absolute positions of the link ends
+("rigid" DOFs, shared by the links that meet at a joint, fixed at ground pivots) and, per
+link, elastic DOFs in the frame of the link's chord: the rotation of every node relative to
+the chord and the axial/transverse displacement of the interior nodes.  The rigid motion is
+an output; input torques are generalized forces on the tangent angles at the joints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+from . import kernels, rigid
+from .errors import CaseError
+from .model import FEModel, _UnionFind
+
+__all__ = ["CoupledModel", "chord_motion"]
+
+
+@dataclass
+class CoupledModel:
+    """DOF layout and kernel arguments of the coupled model of a case; build with :meth:`from_case`."""
+
+    case: dict
+    fe: FEModel
+    n_el: np.ndarray
+    ld: np.ndarray           # (maxld, nlinks) 1-based all-DOF numbers of each link's local vector
+    ndof: int
+    free_of: np.ndarray      # (ndof,) 1-based free numbers, 0 = fixed or prescribed
+    q_fixed: np.ndarray      # (ndof,) values of fixed DOFs (ground positions, clamped rotations)
+    prop: np.ndarray
+    pm: tuple
+    ri: tuple
+    tq: tuple
+    presc_dof: np.ndarray    # 0-based prescribed DOFs (kinematic drive)
+    driven: tuple | None     # (link, ground point) of a kinematic drive
+
+    @classmethod
+    def from_case(cls, case: dict, fe: FEModel | None = None) -> "CoupledModel":
+        fe = FEModel.from_case(case) if fe is None else fe
+        links = case["links"]
+        nl = len(links)
+        n_el = np.array([ln["elements"] for ln in links], np.int32)
+        ground = _ground_points(case)
+        # rigid nodes: link ends merged at joints
+        ends = _UnionFind()
+        for j in fe.joints:
+            if j.inboard is not None:
+                ends.union((j.inboard, j.inboard_end), (j.outboard, j.outboard_end))
+        # End rotations relative to the chord are free DOFs at every joint: the physical angle of a
+        # link end is the tangent angle psi = phi_chord + th_end.  A torque-driven joint is a hub whose
+        # rotation is now free: its torque acts on the tangent angles (the seed's "clamped"/"locked"
+        # elastic condition of a driven joint means the link is clamped to its hub).  A joint that
+        # keeps two tangents welded (a non-driven clamp or locked joint) or prescribes a tangent
+        # angle (a kinematic drive) needs a rotation constraint, which this model does not have yet.
+        driven = {t["joint"] for t in case["drive"].get("torques", [])}
+        if case["drive"]["type"] == "kinematic":
+            raise CaseError("drive.type", "the coupled model computes the rigid motion from input torques; a "
+                                          "kinematic drive would need a prescribed hub-angle constraint, not "
+                                          "implemented yet: use a torque drive or a superposition model")
+        for j in fe.joints:
+            if j.name not in driven and j.elastic in ("clamp", "locked"):
+                raise CaseError(f"joints.{j.name}", f"'{j.elastic}' on a joint without an input torque needs a "
+                                "rotation constraint the coupled model does not implement yet; use 'pin' or drive "
+                                "the joint with a torque (superposition models support it)")
+        rots = _UnionFind()
+        dof, fixed_val, fixed = {}, {}, set()
+
+        def new(key):
+            dof[key] = len(dof)
+            return dof[key]
+
+        for li in range(nl):
+            for end in ("start", "end"):
+                r = ends.find((li, end))
+                if ("r", r) not in dof:
+                    new(("r", r)); dof[("r", r, 1)] = len(dof)
+                t = rots.find((li, end))
+                if ("t", t) not in dof:
+                    new(("t", t))
+        for j in fe.joints:  # ground joints: fixed positions, clamp fixes the end rotation
+            if j.inboard is None:
+                r = ends.find((j.outboard, j.outboard_end))
+                for k, key in enumerate((("r", r), ("r", r, 1))):
+                    fixed.add(dof[key]); fixed_val[dof[key]] = ground[j.name][k]
+        maxld = int(3 * n_el.max() + 3)
+        ld = np.zeros((maxld, nl), np.int32)
+        for li in range(nl):
+            n = int(n_el[li])
+            rs, re_ = ends.find((li, "start")), ends.find((li, "end"))
+            col = [dof[("r", rs)], dof[("r", rs, 1)], dof[("r", re_)], dof[("r", re_, 1)],
+                   dof[("t", rots.find((li, "start")))]]
+            for k in range(1, n):
+                col += [new(("e", li, k, "p")), new(("e", li, k, "v")), new(("e", li, k, "t"))]
+            col.append(dof[("t", rots.find((li, "end")))])
+            ld[: len(col), li] = np.array(col) + 1
+            ld[len(col):, li] = ld[0, li]   # padding (never read: the kernel uses 3n+3 entries)
+        ndof = len({v for v in dof.values()})
+        q_fixed = np.zeros(ndof)
+        for d, val in fixed_val.items():
+            q_fixed[d] = val
+        # kinematic drive: the driven link's far end is prescribed (chord on the drive law)
+        presc, driven = [], None
+        if case["drive"]["type"] == "kinematic":
+            j = fe.joints[0]  # crank_pivot / base: the only driven joint of a 1-DOF mechanism
+            r = ends.find((j.outboard, "end" if j.outboard_end == "start" else "start"))
+            presc = [dof[("r", r)], dof[("r", r, 1)]]
+            driven = (j.outboard, ground[j.name])
+        mask = np.ones(ndof, bool)
+        mask[list(fixed)] = False
+        mask[presc] = False
+        free_of = _rcm_numbering(ld, n_el, mask)
+        prop = np.array([[ln["length"], ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"],
+                          ln["youngs_modulus"] * ln["second_moment"]] for ln in links]).T
+        pm = [(fe.node_ref(p["at"], f"point_masses[{i}].at")[0] + 1, p["mass"],
+               fe.node_ref(p["at"], f"point_masses[{i}].at")[2]) for i, p in enumerate(case["point_masses"])]
+        ri = []
+        for i, r in enumerate(case["rotary_inertias"]):
+            _, node, _ = fe.node_ref(r["at"], f"rotary_inertias[{i}].at")
+            lw = fe.link_names.index(r["turns_with"])
+            ri.append((lw + 1, fe.node_of[lw].index(node), r["inertia"]))
+        tq = []
+        if case["drive"]["type"] == "torque":
+            nh = max(max(len(t["sin"]), len(t["cos"])) for t in case["drive"]["torques"])
+            for t in case["drive"]["torques"]:
+                j = next(jj for jj in fe.joints if jj.name == t["joint"])
+                coef = [t["constant"]] + (t["sin"] + [0.0] * nh)[:nh] + (t["cos"] + [0.0] * nh)[:nh]
+                tq.append(([j.outboard + 1, 0 if j.inboard is None else j.inboard + 1],
+                           [0 if j.outboard_end == "start" else 1, 0 if j.inboard_end in (None, "start") else 1], coef))
+        return cls(case=case, fe=fe, n_el=n_el, ld=np.asfortranarray(ld), ndof=ndof, free_of=free_of,
+                   q_fixed=q_fixed, prop=np.asfortranarray(prop), pm=_pack_pm(pm), ri=_pack_ri(ri), tq=_pack_tq(tq),
+                   presc_dof=np.array(presc, np.int32), driven=driven)
+
+    # ------------------------------------------------------------------ helpers
+    def link_slice(self, li: int) -> np.ndarray:
+        """0-based all-DOF numbers of link li's local vector (length 3n+3)."""
+        return self.ld[: 3 * self.n_el[li] + 3, li] - 1
+
+    def _args(self):
+        return (self.free_of, self.n_el, self.ld, self.prop) + self.pm + self.ri + self.tq
+
+    def initial_state(self, q_rigid: np.ndarray, qd_rigid: np.ndarray, mech) -> tuple[np.ndarray, np.ndarray]:
+        """All-DOF (q, v) at rest elastically, with the link ends on the rigid configuration."""
+        km = mech.kinematics(q_rigid[None], qd_rigid[None], None)
+        q, v = self.q_fixed.copy(), np.zeros(self.ndof)
+        for li in range(len(self.n_el)):
+            L = self.prop[0, li]
+            c, s = np.cos(km.phi[0, li]), np.sin(km.phi[0, li])
+            w = km.omega[0, li]
+            dofs = self.link_slice(li)
+            pos = [km.ox[0, li], km.oy[0, li], km.ox[0, li] + L * c, km.oy[0, li] + L * s]
+            vel = [km.vx[0, li], km.vy[0, li], km.vx[0, li] - w * L * s, km.vy[0, li] + w * L * c]
+            for k in range(4):
+                if self.free_of[dofs[k]] > 0 or dofs[k] in self.presc_dof:
+                    q[dofs[k]], v[dofs[k]] = pos[k], vel[k]
+        return q, v
+
+    def prescribed(self, t, q, qd, qdd) -> np.ndarray:
+        """(3, np, nt) [q, v, a] of the prescribed DOFs for a kinematic drive on the grid."""
+        if self.driven is None:
+            return np.zeros((3, 1, t.size), order="F")
+        li, (gx, gy) = self.driven
+        L = self.prop[0, li]
+        th, w, al = q[:, 0], qd[:, 0], qdd[:, 0]
+        c, s = np.cos(th), np.sin(th)
+        out = np.empty((3, 2, t.size))
+        out[:, 0] = [gx + L * c, -L * s * w, -L * (s * al + c * w * w)]
+        out[:, 1] = [gy + L * s, L * c * w, L * (c * al - s * w * w)]
+        return np.asfortranarray(out)
+
+    def run(self, q0, v0, t, presc, dt, *, beta=0.25, gamma=0.5, out_every=1, tol=1e-8, maxit=25,
+            gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)):
+        """Newmark-Newton run; returns (qf, vf, af, ef, iterations)."""
+        nsteps = t.size - 1
+        nframes = nsteps // out_every + 1
+        presc_dof = self.presc_dof + 1 if self.presc_dof.size else np.ones(1, np.int32)
+        if not self.presc_dof.size:  # f2py cannot pass empty arrays: prescribe a fixed DOF to its own value
+            fixed = int(np.flatnonzero(self.free_of == 0)[0])
+            presc = np.zeros((3, 1, t.size), order="F")
+            presc[0, 0, :] = self.q_fixed[fixed]
+            presc_dof = np.array([fixed + 1], np.int32)
+        q, v, a = np.array(q0, float), np.array(v0, float), np.zeros(self.ndof)
+        qf, vf, af, ef, status, fail, iters = kernels.api.cpl_run(
+            nframes, *self._args(), np.asarray(gravity, float), np.asarray(rayleigh, float),
+            presc_dof.astype(np.int32), presc, dt, beta, gamma, out_every, tol, maxit, q, v, a)
+        kernels.check_status(status, "coupled Newmark-Newton integration", time=fail * dt if fail else 0.0)
+        return qf, vf, af, ef, iters
+
+    def dense(self, q, v, a, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)):
+        """Residual (all DOFs), M, C_v, K_t (dense, free DOFs), [kinetic, potential] energy at one state."""
+        res, mm, cm, km, energy, status = kernels.api.cpl_dense(
+            int(self.free_of.max()), *self._args(), np.asarray(gravity, float), np.asarray(rayleigh, float),
+            np.asarray(q, float), np.asarray(v, float), np.asarray(a, float))
+        kernels.check_status(status, "cpl_dense")
+        return res, mm, cm, km, energy
+
+
+def _ground_points(case: dict) -> dict:
+    if case["mechanism"]["type"] == "fourbar":
+        return {"crank_pivot": (0.0, 0.0), "follower_pivot": (case["mechanism"]["ground_length"], 0.0)}
+    return {"base": tuple(case["mechanism"]["base"])}
+
+
+def _rcm_numbering(ld, n_el, mask) -> np.ndarray:
+    """Free-DOF numbers (1-based, 0 = not free) by reverse Cuthill-McKee over the link cliques."""
+    free = np.flatnonzero(mask)
+    if free.size == 0:
+        raise CaseError("joints", "the coupled model has no free DOF")
+    pos = -np.ones(mask.size, int)
+    pos[free] = np.arange(free.size)
+    rows, cols = [], []
+    for li in range(ld.shape[1]):
+        f = pos[ld[: 3 * n_el[li] + 3, li] - 1]
+        f = f[f >= 0]
+        rows.extend(np.repeat(f, f.size))
+        cols.extend(np.tile(f, f.size))
+    g = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(free.size, free.size)).tocsr()
+    perm = reverse_cuthill_mckee(g, symmetric_mode=True)
+    order = np.empty(free.size, int)
+    order[perm] = np.arange(free.size)
+    out = np.zeros(mask.size, np.int32)
+    out[free] = order + 1
+    return out
+
+
+def _pack_pm(pm):
+    if not pm:  # f2py cannot pass empty arrays: one massless point
+        return np.ones(1, np.int32), np.zeros((2, 1), order="F")
+    return (np.array([p[0] for p in pm], np.int32), np.asfortranarray(np.array([[p[1], p[2]] for p in pm]).T))
+
+
+def _pack_ri(ri):
+    if not ri:
+        return np.ones(1, np.int32), np.zeros(1, np.int32), np.zeros(1)
+    return (np.array([r[0] for r in ri], np.int32), np.array([r[1] for r in ri], np.int32),
+            np.array([r[2] for r in ri], float))
+
+
+def _pack_tq(tq):
+    if not tq:  # one zero torque on link 1 from the ground
+        return np.array([[1], [0]], np.int32, order="F"), np.zeros((2, 1), np.int32, order="F"), np.zeros((1, 1), order="F")
+    return (np.asfortranarray(np.array([t[0] for t in tq], np.int32).T),
+            np.asfortranarray(np.array([t[1] for t in tq], np.int32).T),
+            np.asfortranarray(np.array([t[2] for t in tq], float).T))
+
+
+def chord_motion(cm: CoupledModel, qf, vf, af) -> rigid.LinkMotion:
+    """Rigid motion of every link's chord over the frames (the coupled model's rigid motion)."""
+    nl = len(cm.n_el)
+    out = {k: np.empty((qf.shape[1], nl)) for k in rigid.LinkMotion.__dataclass_fields__}
+    for li in range(nl):
+        d = cm.link_slice(li)[:4]
+        rs, re_ = qf[d[:2]], qf[d[2:]]
+        vs, ve = vf[d[:2]], vf[d[2:]]
+        as_, ae = af[d[:2]], af[d[2:]]
+        c, cd, cdd = re_ - rs, ve - vs, ae - as_
+        l2 = (c ** 2).sum(0)
+        g = np.array([-c[1], c[0]]) / l2
+        om = (g * cd).sum(0)
+        out["phi"][:, li] = np.unwrap(np.arctan2(c[1], c[0]))
+        out["omega"][:, li] = om
+        out["alpha"][:, li] = (g * cdd).sum(0) - 2 * (c * cd).sum(0) * om / l2
+        out["ox"][:, li], out["oy"][:, li] = rs
+        out["vx"][:, li], out["vy"][:, li] = vs
+        out["ax"][:, li], out["ay"][:, li] = as_
+    return rigid.LinkMotion(**out)

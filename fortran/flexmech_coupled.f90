@@ -1,0 +1,540 @@
+!> One-pass model with mutual rigid-elastic coupling (seed Section 3, Gibbs-Appell),
+!> in the chord-frame form derived in docs/theory.md (section "Coupled model").
+!>
+!> Generalized coordinates of a link l of length L with n elements (local vector, nld = 3n+3):
+!>   [xs, ys, xe, ye, th_0, p_1, v_1, th_1, ..., p_{n-1}, v_{n-1}, th_{n-1}, th_n]
+!>   xs..ye   absolute positions [m] of the link's start and end ("rigid" DOFs; shared at joints)
+!>   p_k, v_k elastic axial / transverse displacement [m] of interior node k in the chord frame
+!>   th_k     elastic rotation [rad] of node k relative to the chord
+!> The chord c = r_e - r_s defines the link frame: phi = atan2(c), omega = g.c', g = Omega c/|c|^2.
+!> A material point at zeta (0..L along the link, w = zeta/L) is at
+!>   r = (1-w) r_s + w r_e + R(phi) N(xi) delta_e ,
+!> with delta_e the element's local elastic DOFs (end-node translations are zero by definition).
+!> Gibbs-Appell: dG/da + dU/dq = Q with G = 1/2 int |r''|^2 dm, i.e. int J^T r'' dm + dU/dq = Q,
+!> J = dr'/dq' = dr''/dq''.  Strain energy: 1/2 (EA/L)(|c| - L)^2 + 1/2 delta^T k delta.
+!> Integration: Newmark (beta, gamma) in acceleration form with Newton iterations; the
+!> iteration matrix S = M + gamma dt C_v + beta dt^2 K_t is built once per step (modified Newton):
+!> M and C_v exact, K_t = elastic + chord + elastic inertial terms (the configuration
+!> dependence of the inertia through the chord is left out of S; it is in the residual).
+module flexmech_coupled
+  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
+  use flexmech_kinds, only: dp
+  use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE, STATUS_BAD_INPUT
+  use flexmech_beam, only: beam_mass, beam_stiffness
+  use flexmech_assembly, only: band_rows, band_add_element, band_to_dense
+  implicit none
+  private
+  public :: coupled_system, coupled_build, coupled_run, coupled_dense, STATUS_NEWTON
+
+  integer, parameter :: STATUS_NEWTON = 5   !< Newton iterations did not converge
+
+  real(dp), parameter :: gx(4) = [ &
+    0.5_dp - 0.5_dp*0.8611363115940526_dp, 0.5_dp - 0.5_dp*0.3399810435848563_dp, &
+    0.5_dp + 0.5_dp*0.3399810435848563_dp, 0.5_dp + 0.5_dp*0.8611363115940526_dp]
+  real(dp), parameter :: gw(4) = 0.5_dp*[0.3478548451374538_dp, 0.6521451548625461_dp, &
+                                          0.6521451548625461_dp, 0.3478548451374538_dp]
+
+  type :: coupled_system
+    integer :: nlinks = 0, ndof = 0, nfree = 0, maxld = 0, kl = 0, ku = 0, npm = 0, nri = 0, ntq = 0, nh = 0
+    integer, allocatable :: n_el(:), ld(:, :), free_of(:)
+    real(dp), allocatable :: prop(:, :)          !< (4, nlinks) [L, rho*A, E*A, E*I]
+    real(dp), allocatable :: me(:, :, :), ke(:, :, :)  !< (6, 6, nlinks) local element mass, stiffness
+    integer, allocatable :: pm_link(:), ri_link(:), ri_node(:)
+    real(dp), allocatable :: pm_prop(:, :), ri_j(:)
+    integer, allocatable :: tq_link(:, :), tq_end(:, :)   !< (2, ntq): [b, a] links (a = 0: ground), ends 0/1
+    real(dp), allocatable :: tq_coef(:, :)                !< (1 + 2 nh, ntq)
+    real(dp) :: grav(2) = 0.0_dp, ray(2) = 0.0_dp
+  end type coupled_system
+
+contains
+
+  !> Build the system from flat arrays (see flexmech_api); status STATUS_BAD_INPUT on bad indices.
+  subroutine coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
+                           tq_link, tq_end, tq_coef, grav, ray, status)
+    type(coupled_system), intent(out) :: sys
+    integer, intent(in) :: free_of(:), n_el(:), ld(:, :), pm_link(:), ri_link(:), ri_node(:), tq_link(:, :), tq_end(:, :)
+    real(dp), intent(in) :: prop(:, :), pm_prop(:, :), ri_j(:), tq_coef(:, :), grav(2), ray(2)
+    integer, intent(out) :: status
+    integer :: l, nl, lo, hi, i, f
+    status = STATUS_BAD_INPUT
+    sys%nlinks = size(n_el); sys%ndof = size(free_of); sys%maxld = size(ld, 1)
+    sys%nfree = maxval([0, free_of])
+    if (sys%nfree < 1 .or. any(n_el < 1) .or. any(3*n_el + 3 > sys%maxld)) return
+    if (any(prop(1:4, :) <= 0.0_dp)) return
+    do l = 1, sys%nlinks
+      nl = 3*n_el(l) + 3
+      if (any(ld(1:nl, l) < 1) .or. any(ld(1:nl, l) > sys%ndof)) return
+    end do
+    if (any(pm_link < 1) .or. any(pm_link > sys%nlinks) .or. any(ri_link < 1) .or. any(ri_link > sys%nlinks)) return
+    if (any(tq_link < 0) .or. any(tq_link > sys%nlinks) .or. any(tq_link(1, :) < 1)) return
+    if (mod(size(tq_coef, 1), 2) /= 1) return
+    sys%n_el = n_el; sys%ld = ld; sys%prop = prop; sys%free_of = free_of
+    sys%npm = size(pm_link); sys%pm_link = pm_link; sys%pm_prop = pm_prop
+    sys%nri = size(ri_link); sys%ri_link = ri_link; sys%ri_node = ri_node; sys%ri_j = ri_j
+    sys%ntq = size(tq_link, 2); sys%tq_link = tq_link; sys%tq_end = tq_end; sys%tq_coef = tq_coef
+    sys%nh = (size(tq_coef, 1) - 1)/2
+    sys%grav = grav; sys%ray = ray
+    allocate (sys%me(6, 6, sys%nlinks), sys%ke(6, 6, sys%nlinks))
+    do l = 1, sys%nlinks
+      sys%me(:, :, l) = beam_mass(prop(2, l), prop(1, l)/n_el(l))
+      sys%ke(:, :, l) = beam_stiffness(prop(3, l), prop(4, l), prop(1, l)/n_el(l))
+    end do
+    sys%kl = 0
+    do l = 1, sys%nlinks
+      nl = 3*n_el(l) + 3
+      lo = huge(1); hi = 0
+      do i = 1, nl
+        f = free_of(ld(i, l))
+        if (f > 0) then
+          lo = min(lo, f); hi = max(hi, f)
+        end if
+      end do
+      if (hi > 0) sys%kl = max(sys%kl, hi - lo)
+    end do
+    sys%ku = sys%kl
+    status = STATUS_OK
+  end subroutine coupled_build
+
+  !> Dense residual (all DOFs), iteration-matrix parts over the free DOFs and energies at one state
+  !> (for tests and analysis): mm = M, cm = C_v, km = K_t, energy = [kinetic, potential].
+  subroutine coupled_dense(sys, q, v, a, res, mm, cm, km, energy)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(out) :: res(:), mm(:, :), cm(:, :), km(:, :), energy(2)
+    real(dp), allocatable :: ab(:, :)
+    allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree))
+    call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, ab, energy)
+    mm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree)
+    call assemble(sys, q, v, a, .true., 1.0_dp, 0.0_dp, res, ab, energy)
+    cm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+    call assemble(sys, q, v, a, .true., 0.0_dp, 1.0_dp, res, ab, energy)
+    km = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+  end subroutine coupled_dense
+
+  !> Position in the link vector of the elastic DOFs of element e (1..n): [p, v, th, p, v, th], 0 = none.
+  pure function elem_index(n, e) result(idx)
+    integer, intent(in) :: n, e
+    integer :: idx(6), k
+    k = e - 1
+    idx = 0
+    idx(3) = 3*k + 5
+    if (k > 0) then
+      idx(1) = 3*k + 3; idx(2) = 3*k + 4
+    end if
+    if (k + 1 < n) then
+      idx(4) = 3*(k + 1) + 3; idx(5) = 3*(k + 1) + 4; idx(6) = 3*(k + 1) + 5
+    else
+      idx(6) = 3*n + 3
+    end if
+  end function elem_index
+
+  !> Hermite/linear shape functions N (2 x 6) at xi for element length le.
+  pure function shape_fn(xi, le) result(n)
+    real(dp), intent(in) :: xi, le
+    real(dp) :: n(2, 6)
+    n = 0.0_dp
+    n(1, 1) = 1.0_dp - xi; n(1, 4) = xi
+    n(2, 2) = 1.0_dp - 3.0_dp*xi**2 + 2.0_dp*xi**3
+    n(2, 3) = le*(xi - 2.0_dp*xi**2 + xi**3)
+    n(2, 5) = 3.0_dp*xi**2 - 2.0_dp*xi**3
+    n(2, 6) = le*(-xi**2 + xi**3)
+  end function shape_fn
+
+  !> Chord quantities of a link from its local q, v, a.
+  pure subroutine chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(out) :: cs, sn, ell, g(2), om, al0, al
+    real(dp) :: c(2), cd(2), cdd(2), l2
+    c = q(3:4) - q(1:2); cd = v(3:4) - v(1:2); cdd = a(3:4) - a(1:2)
+    l2 = c(1)**2 + c(2)**2
+    ell = sqrt(l2)
+    cs = c(1)/ell; sn = c(2)/ell
+    g = [-c(2), c(1)]/l2
+    om = g(1)*cd(1) + g(2)*cd(2)
+    al0 = -2.0_dp*(c(1)*cd(1) + c(2)*cd(2))*om/l2   ! part of alpha independent of the accelerations
+    al = al0 + g(1)*cdd(1) + g(2)*cdd(2)
+  end subroutine chord
+
+  !> Contribution of one mass point (weight dm at link fraction w, element e at xi) to the link
+  !> residual and matrices.  Adds dm * J^T (r'' - grav) to r, dm J^T J to m, dm J^T dr''/dv to cv,
+  !> dm J^T dr''/d(elastic q) to kt; returns the kinetic energy 1/2 dm |r'|^2.
+  subroutine mass_point(sys, l, q, v, a, e, xi, w, dm, want, r, m, cv, kt, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l, e
+    real(dp), intent(in) :: q(:), v(:), a(:), xi, w, dm
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), m(:, :), cv(:, :), kt(:, :), ekin, epot
+    integer :: n, idx(6), i, j, nl
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, le, nm(2, 6), de(6), dv(6), da(6)
+    real(dp) :: ul(2), uld(2), uldd(2), rot(2, 2), ru(2), rou(2), roud(2), rd(2), rdd(2)
+    real(dp) :: jac(2, sys%maxld), bv(2, sys%maxld), bq(2, sys%maxld), ac(2, 2), w0(2), cdot(2), c(2), rn(2)
+    n = sys%n_el(l); nl = 3*n + 3
+    le = sys%prop(1, l)/n
+    idx = elem_index(n, e)
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    nm = shape_fn(xi, le)
+    do i = 1, 6
+      if (idx(i) > 0) then
+        de(i) = q(idx(i)); dv(i) = v(idx(i)); da(i) = a(idx(i))
+      else
+        de(i) = 0.0_dp; dv(i) = 0.0_dp; da(i) = 0.0_dp
+      end if
+    end do
+    ul = matmul(nm, de); uld = matmul(nm, dv); uldd = matmul(nm, da)
+    rot = reshape([cs, sn, -sn, cs], [2, 2])
+    ru = matmul(rot, ul)                     ! R u
+    rou = [-ru(2), ru(1)]                    ! R Omega u = Omega R u
+    roud = matmul(rot, [-uld(2), uld(1)])    ! R Omega u'
+    rd = (1.0_dp - w)*v(1:2) + w*v(3:4) + om*rou + matmul(rot, uld)
+    rdd = (1.0_dp - w)*a(1:2) + w*a(3:4) + al*rou - om*om*ru + 2.0_dp*om*roud + matmul(rot, uldd)
+    ekin = ekin + 0.5_dp*dm*(rd(1)**2 + rd(2)**2)
+    epot = epot - dm*dot_product(sys%grav, (1.0_dp - w)*q(1:2) + w*q(3:4) + ru)
+    ! J = dr'/dq'
+    jac(:, 1:nl) = 0.0_dp
+    jac(1, 1) = 1.0_dp - w; jac(2, 2) = 1.0_dp - w; jac(1, 3) = w; jac(2, 4) = w
+    do j = 1, 2
+      jac(:, j) = jac(:, j) - rou*g(j)
+      jac(:, 2 + j) = jac(:, 2 + j) + rou*g(j)
+    end do
+    do i = 1, 6
+      if (idx(i) > 0) jac(:, idx(i)) = jac(:, idx(i)) + matmul(rot, nm(:, i))
+    end do
+    rdd = rdd - sys%grav
+    r(1:nl) = r(1:nl) + dm*matmul(rdd, jac(:, 1:nl))
+    if (.not. want) return
+    do j = 1, nl
+      m(1:nl, j) = m(1:nl, j) + dm*matmul(jac(:, j), jac(:, 1:nl))
+    end do
+    ! dr''/dv: chord velocity through omega and alpha0, elastic velocities through 2 omega R Omega N
+    c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
+    w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*cdot(1) + c(2)*cdot(2))*g)
+    do j = 1, 2
+      ac(:, j) = rou*w0(j) + (-2.0_dp*om*ru + 2.0_dp*roud)*g(j)
+    end do
+    bv(:, 1:nl) = 0.0_dp
+    bv(:, 1:2) = -ac; bv(:, 3:4) = ac
+    bq(:, 1:nl) = 0.0_dp
+    do i = 1, 6
+      if (idx(i) > 0) then
+        rn = matmul(rot, nm(:, i))                  ! R N_i
+        bv(:, idx(i)) = bv(:, idx(i)) + 2.0_dp*om*[-rn(2), rn(1)]      ! 2 omega R Omega N_i
+        bq(:, idx(i)) = al*[-rn(2), rn(1)] - om*om*rn                   ! at fixed chord
+      end if
+    end do
+    do j = 1, nl
+      cv(1:nl, j) = cv(1:nl, j) + dm*matmul(bv(:, j), jac(:, 1:nl))
+      kt(1:nl, j) = kt(1:nl, j) + dm*matmul(bq(:, j), jac(:, 1:nl))
+    end do
+  end subroutine mass_point
+
+  !> Residual, matrices and energies of link l (local vectors of length nld).
+  subroutine link_eval(sys, l, q, v, a, want, r, m, cv, kt, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    logical, intent(in) :: want
+    real(dp), intent(out) :: r(:), m(:, :), cv(:, :), kt(:, :), ekin, epot
+    integer :: n, nl, e, k, i, j, idx(6)
+    real(dp) :: len, le, rho_a, ea, c(2), ell, f, cc(2, 2), de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
+    real(dp) :: cs, sn, g(2), om, al0, al, dpsi(sys%maxld), w0(2)
+    n = sys%n_el(l); nl = 3*n + 3
+    len = sys%prop(1, l); rho_a = sys%prop(2, l); ea = sys%prop(3, l); le = len/n
+    r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
+    if (want) then
+      m(1:nl, 1:nl) = 0.0_dp; cv(1:nl, 1:nl) = 0.0_dp; kt(1:nl, 1:nl) = 0.0_dp
+    end if
+    do e = 1, n          ! distributed mass
+      do k = 1, 4
+        call mass_point(sys, l, q, v, a, e, gx(k), ((e - 1) + gx(k))/n, gw(k)*rho_a*le, want, r, m, cv, kt, &
+                        ekin, epot)
+      end do
+    end do
+    do i = 1, sys%npm    ! point masses on this link
+      if (sys%pm_link(i) /= l) cycle
+      xi = sys%pm_prop(2, i)/le
+      e = min(n, max(1, int(xi) + 1))
+      call mass_point(sys, l, q, v, a, e, xi - (e - 1), sys%pm_prop(2, i)/len, sys%pm_prop(1, i), want, &
+                      r, m, cv, kt, ekin, epot)
+    end do
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    do i = 1, sys%nri    ! rotary inertias turning with this link: psi = phi + th_k
+      if (sys%ri_link(i) /= l) cycle
+      k = th_index(n, sys%ri_node(i))
+      dpsi(1:nl) = 0.0_dp
+      dpsi(1:2) = -g; dpsi(3:4) = g; dpsi(k) = 1.0_dp
+      psi_dd = al + a(k)
+      r(1:nl) = r(1:nl) + sys%ri_j(i)*psi_dd*dpsi(1:nl)
+      ekin = ekin + 0.5_dp*sys%ri_j(i)*(om + v(k))**2
+      if (want) then
+        do j = 1, nl
+          m(1:nl, j) = m(1:nl, j) + sys%ri_j(i)*dpsi(j)*dpsi(1:nl)
+        end do
+        ! velocity dependence of psi'' through alpha0: d alpha0 / d c' = w0
+        c = q(3:4) - q(1:2)
+        w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*(v(3) - v(1)) + c(2)*(v(4) - v(2)))*g)
+        do j = 1, 2
+          cv(1:nl, j) = cv(1:nl, j) - sys%ri_j(i)*w0(j)*dpsi(1:nl)
+          cv(1:nl, 2 + j) = cv(1:nl, 2 + j) + sys%ri_j(i)*w0(j)*dpsi(1:nl)
+        end do
+      end if
+    end do
+    ! chord stretch: U = 1/2 EA/L (|c| - L)^2
+    c = q(3:4) - q(1:2)
+    f = ea/len*(ell - len)
+    r(1:2) = r(1:2) - f*c/ell
+    r(3:4) = r(3:4) + f*c/ell
+    epot = epot + 0.5_dp*ea/len*(ell - len)**2
+    if (want) then
+      cc(:, 1) = c*c(1)/ell**2; cc(:, 2) = c*c(2)/ell**2
+      cc = ea/len*cc + f/ell*(reshape([1.0_dp, 0.0_dp, 0.0_dp, 1.0_dp], [2, 2]) - cc)
+      kt(1:2, 1:2) = kt(1:2, 1:2) + cc; kt(3:4, 3:4) = kt(3:4, 3:4) + cc
+      kt(1:2, 3:4) = kt(1:2, 3:4) - cc; kt(3:4, 1:2) = kt(3:4, 1:2) - cc
+    end if
+    ! elastic strain energy and Rayleigh damping, element by element (local DOFs)
+    do e = 1, n
+      idx = elem_index(n, e)
+      do i = 1, 6
+        if (idx(i) > 0) then
+          de(i) = q(idx(i)); dv(i) = v(idx(i))
+        else
+          de(i) = 0.0_dp; dv(i) = 0.0_dp
+        end if
+      end do
+      fe = matmul(sys%ke(:, :, l), de)
+      epot = epot + 0.5_dp*dot_product(de, fe)
+      ce = sys%ray(1)*sys%me(:, :, l) + sys%ray(2)*sys%ke(:, :, l)
+      if (sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp) fe = fe + matmul(ce, dv)
+      do i = 1, 6
+        if (idx(i) > 0) r(idx(i)) = r(idx(i)) + fe(i)
+      end do
+      if (want) then
+        do j = 1, 6
+          if (idx(j) == 0) cycle
+          do i = 1, 6
+            if (idx(i) == 0) cycle
+            kt(idx(i), idx(j)) = kt(idx(i), idx(j)) + sys%ke(i, j, l)
+            cv(idx(i), idx(j)) = cv(idx(i), idx(j)) + ce(i, j)
+          end do
+        end do
+      end if
+    end do
+  end subroutine link_eval
+
+  !> Position of th_k (node k = 0..n) in the link vector.
+  pure integer function th_index(n, k)
+    integer, intent(in) :: n, k
+    if (k >= n) then
+      th_index = 3*n + 3
+    else
+      th_index = 3*k + 5
+    end if
+  end function th_index
+
+  !> Tangent angle psi = phi + th(end) of link l at end (0 start, 1 end), and d psi / d q_local.
+  subroutine tangent_angle(sys, l, iend, q, psi, dpsi)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l, iend
+    real(dp), intent(in) :: q(:)
+    real(dp), intent(out) :: psi, dpsi(:)
+    real(dp) :: c(2), l2
+    integer :: k
+    c = q(3:4) - q(1:2); l2 = c(1)**2 + c(2)**2
+    k = th_index(sys%n_el(l), iend*sys%n_el(l))
+    psi = atan2(c(2), c(1)) + q(k)
+    dpsi = 0.0_dp
+    dpsi(1:2) = -[-c(2), c(1)]/l2; dpsi(3:4) = [-c(2), c(1)]/l2; dpsi(k) = 1.0_dp
+  end subroutine tangent_angle
+
+  !> Torque of law i at joint angle theta [N m].
+  pure real(dp) function torque(sys, i, theta)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: i
+    real(dp), intent(in) :: theta
+    integer :: h
+    torque = sys%tq_coef(1, i)
+    do h = 1, sys%nh
+      torque = torque + sys%tq_coef(1 + h, i)*sin(h*theta) + sys%tq_coef(1 + sys%nh + h, i)*cos(h*theta)
+    end do
+  end function torque
+
+  !> Joint angles of every torque joint (psi_b - psi_a) for the global state q.
+  subroutine joint_angles(sys, q, theta)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:)
+    real(dp), intent(out) :: theta(:)
+    integer :: i, s, l
+    real(dp) :: psi, dpsi(sys%maxld)
+    do i = 1, sys%ntq
+      theta(i) = 0.0_dp
+      do s = 1, 2
+        l = sys%tq_link(s, i)
+        if (l == 0) cycle
+        call tangent_angle(sys, l, sys%tq_end(s, i), q(sys%ld(1:3*sys%n_el(l) + 3, l)), psi, dpsi)
+        theta(i) = theta(i) + merge(1.0_dp, -1.0_dp, s == 1)*psi
+      end do
+    end do
+  end subroutine joint_angles
+
+  !> Assemble the global residual R (all DOFs) and, if want, the band iteration matrix
+  !> S = M + cc*C_v + ck*K_t over the free DOFs.  Returns energies [kinetic, strain].
+  subroutine assemble(sys, q, v, a, want, cc, ck, res, ab, energy)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), a(:), cc, ck
+    logical, intent(in) :: want
+    real(dp), intent(out) :: res(:), energy(2)
+    real(dp), intent(inout) :: ab(:, :)
+    integer :: l, nl, i, s, idx(sys%maxld), fidx(sys%maxld)
+    real(dp) :: rl(sys%maxld), ml(sys%maxld, sys%maxld), cl(sys%maxld, sys%maxld), kl(sys%maxld, sys%maxld)
+    real(dp) :: ek, ep, psi, dpsi(sys%maxld), theta(max(1, sys%ntq)), tau
+    res = 0.0_dp
+    energy = 0.0_dp
+    if (want) ab = 0.0_dp
+    do l = 1, sys%nlinks
+      nl = 3*sys%n_el(l) + 3
+      idx(1:nl) = sys%ld(1:nl, l)
+      call link_eval(sys, l, q(idx(1:nl)), v(idx(1:nl)), a(idx(1:nl)), want, rl, ml, cl, kl, ek, ep)
+      res(idx(1:nl)) = res(idx(1:nl)) + rl(1:nl)
+      energy = energy + [ek, ep]
+      if (want) then
+        fidx(1:nl) = sys%free_of(idx(1:nl))
+        call band_add_element(ab, sys%kl, sys%ku, fidx(1:nl), ml(1:nl, 1:nl) + cc*cl(1:nl, 1:nl) + ck*kl(1:nl, 1:nl))
+      end if
+    end do
+    call joint_angles(sys, q, theta)
+    do i = 1, sys%ntq      ! applied torques: generalized forces tau (d psi_b - d psi_a)
+      tau = torque(sys, i, theta(i))
+      do s = 1, 2
+        l = sys%tq_link(s, i)
+        if (l == 0) cycle
+        nl = 3*sys%n_el(l) + 3
+        call tangent_angle(sys, l, sys%tq_end(s, i), q(sys%ld(1:nl, l)), psi, dpsi(1:nl))
+        res(sys%ld(1:nl, l)) = res(sys%ld(1:nl, l)) - merge(1.0_dp, -1.0_dp, s == 1)*tau*dpsi(1:nl)
+      end do
+    end do
+  end subroutine assemble
+
+  !> Newmark-Newton integration of the coupled model.
+  !> q, v, a: (ndof) all-DOF state, constrained entries hold their values (prescribed ones are
+  !> overwritten from presc each step).  Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes),
+  !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the torques, max Newton
+!> iterations since the last frame].
+  subroutine coupled_run(sys, presc_dof, presc, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
+                         qf, vf, af, ef, status, fail_step, iters)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: presc_dof(:)          !< (np) prescribed DOFs (all-DOF numbers)
+    real(dp), intent(in) :: presc(:, :, :)       !< (3, np, nsteps+1) [q, v, a] of prescribed DOFs
+    real(dp), intent(in) :: dt, beta, gamma, tol
+    integer, intent(in) :: out_every, maxit
+    real(dp), intent(inout) :: q(:), v(:), a(:)
+    real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), ef(:, :)
+    integer, intent(out) :: status, fail_step, iters
+    real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), theta0(:), theta1(:)
+    integer, allocatable :: ipiv(:), freeidx(:)
+    integer :: nsteps, n, it, i, frame, info, itmax_frame, nf
+    real(dp) :: energy(2), work, da_norm, a_norm, da_prev
+    logical :: converged
+    status = STATUS_OK; fail_step = 0; iters = 0
+    nsteps = size(presc, 3) - 1
+    nf = sys%nfree
+    if (out_every < 1 .or. dt <= 0.0_dp .or. size(qf, 2) /= nsteps/out_every + 1) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    allocate (ab(band_rows(sys%kl, sys%ku), nf), res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf))
+    allocate (theta0(max(1, sys%ntq)), theta1(max(1, sys%ntq)), freeidx(nf))
+    do i = 1, sys%ndof
+      if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
+    end do
+    call set_prescribed(1)
+    ! consistent initial acceleration: M a0 = -R(q0, v0, 0)
+    do i = 1, nf
+      a(freeidx(i)) = 0.0_dp
+    end do
+    call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, ab, energy)
+    rf = -res(freeidx)
+    call solve(rf)
+    if (status /= STATUS_OK) return
+    a(freeidx) = rf
+    work = 0.0_dp
+    call joint_angles(sys, q, theta0)
+    frame = 1
+    qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; ef(:, 1) = [energy(1), energy(2), 0.0_dp, 0.0_dp]
+    itmax_frame = 0
+    do n = 1, nsteps
+      qs = q + dt*v + (dt*dt*(0.5_dp - beta))*a
+      vs = v + (dt*(1.0_dp - gamma))*a
+      call set_prescribed(n + 1)
+      converged = .false.
+      da_prev = huge(1.0_dp)
+      do it = 1, maxit
+        q(freeidx) = qs(freeidx) + (beta*dt*dt)*a(freeidx)
+        v(freeidx) = vs(freeidx) + (gamma*dt)*a(freeidx)
+        call assemble(sys, q, v, a, it == 1, gamma*dt, beta*dt*dt, res, ab, energy)
+        rf = -res(freeidx)
+        if (it == 1) then
+          call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
+          status = lapack_status(info)
+          if (status /= STATUS_OK) exit
+        end if
+        call dgbtrs('N', nf, sys%kl, sys%ku, 1, ab, size(ab, 1), ipiv, rf, nf, info)
+        if (.not. ieee_is_finite(sum(abs(rf)))) then
+          status = STATUS_NONFINITE
+          exit
+        end if
+        a(freeidx) = a(freeidx) + rf
+        da_norm = sqrt(sum(rf**2)); a_norm = sqrt(sum(a(freeidx)**2))
+        iters = iters + 1
+        ! converged, or stagnated at the round-off level of the residual (no further contraction
+        ! while already within sqrt(tol): the stiff chord terms limit the attainable precision)
+        if (da_norm <= tol*(a_norm + 1.0e-30) .or. &
+            (it > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))) then
+          converged = .true.
+          exit
+        end if
+        da_prev = da_norm
+      end do
+      if (status == STATUS_OK .and. .not. converged) status = STATUS_NEWTON
+      if (status /= STATUS_OK) then
+        fail_step = n
+        return
+      end if
+      q(freeidx) = qs(freeidx) + (beta*dt*dt)*a(freeidx)
+      v(freeidx) = vs(freeidx) + (gamma*dt)*a(freeidx)
+      itmax_frame = max(itmax_frame, it)
+      call joint_angles(sys, q, theta1)
+      do i = 1, sys%ntq    ! work of the torques, trapezoidal in the joint angle
+        work = work + 0.5_dp*(torque(sys, i, theta0(i)) + torque(sys, i, theta1(i))) &
+               *atan2(sin(theta1(i) - theta0(i)), cos(theta1(i) - theta0(i)))
+      end do
+      theta0 = theta1
+      if (mod(n, out_every) == 0) then
+        call assemble(sys, q, v, a, .false., 0.0_dp, 0.0_dp, res, ab, energy)
+        frame = frame + 1
+        qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a
+        ef(:, frame) = [energy(1), energy(2), work, real(itmax_frame, dp)]
+        itmax_frame = 0
+      end if
+    end do
+
+  contains
+
+    subroutine set_prescribed(k)
+      integer, intent(in) :: k
+      integer :: j
+      do j = 1, size(presc_dof)
+        q(presc_dof(j)) = presc(1, j, k); v(presc_dof(j)) = presc(2, j, k); a(presc_dof(j)) = presc(3, j, k)
+      end do
+    end subroutine set_prescribed
+
+    subroutine solve(x)
+      real(dp), intent(inout) :: x(:)
+      call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
+      status = lapack_status(info)
+      if (status /= STATUS_OK) return
+      call dgbtrs('N', nf, sys%kl, sys%ku, 1, ab, size(ab, 1), ipiv, x, nf, info)
+      if (.not. ieee_is_finite(sum(abs(x)))) status = STATUS_NONFINITE
+    end subroutine solve
+
+  end subroutine coupled_run
+
+end module flexmech_coupled
