@@ -12,12 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from . import kernels, rigid
 from .errors import CaseError
-from .model import FEModel, _UnionFind
+from .model import FEModel, _UnionFind, rcm_free_numbering
 
 __all__ = ["CoupledModel", "chord_motion"]
 
@@ -114,7 +112,9 @@ class CoupledModel:
         mask = np.ones(ndof, bool)
         mask[list(fixed)] = False
         mask[presc] = False
-        free_of = _rcm_numbering(ld, n_el, mask)
+        if not mask.any():
+            raise CaseError("joints", "the coupled model has no free DOF")
+        free_of = rcm_free_numbering([ld[: 3 * n_el[li] + 3, li] - 1 for li in range(nl)], mask)
         prop = np.array([[ln["length"], ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"],
                           ln["youngs_modulus"] * ln["second_moment"]] for ln in links]).T
         pm = [(fe.node_ref(p["at"], f"point_masses[{i}].at")[0] + 1, p["mass"],
@@ -204,28 +204,6 @@ def _ground_points(case: dict) -> dict:
     if case["mechanism"]["type"] == "fourbar":
         return {"crank_pivot": (0.0, 0.0), "follower_pivot": (case["mechanism"]["ground_length"], 0.0)}
     return {"base": tuple(case["mechanism"]["base"])}
-
-
-def _rcm_numbering(ld, n_el, mask) -> np.ndarray:
-    """Free-DOF numbers (1-based, 0 = not free) by reverse Cuthill-McKee over the link cliques."""
-    free = np.flatnonzero(mask)
-    if free.size == 0:
-        raise CaseError("joints", "the coupled model has no free DOF")
-    pos = -np.ones(mask.size, int)
-    pos[free] = np.arange(free.size)
-    rows, cols = [], []
-    for li in range(ld.shape[1]):
-        f = pos[ld[: 3 * n_el[li] + 3, li] - 1]
-        f = f[f >= 0]
-        rows.extend(np.repeat(f, f.size))
-        cols.extend(np.tile(f, f.size))
-    g = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(free.size, free.size)).tocsr()
-    perm = reverse_cuthill_mckee(g, symmetric_mode=True)
-    order = np.empty(free.size, int)
-    order[perm] = np.arange(free.size)
-    out = np.zeros(mask.size, np.int32)
-    out[free] = order + 1
-    return out
 
 
 def _pack_pm(pm):

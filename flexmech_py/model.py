@@ -58,6 +58,30 @@ def mechanism_joints(case: dict) -> list[Joint]:
     return joints
 
 
+def rcm_free_numbering(cliques, free_mask: np.ndarray) -> np.ndarray:
+    """Free-DOF numbers (1-based; 0 = not free) by reverse Cuthill-McKee.
+
+    cliques: 0-based DOF index arrays whose DOFs are all coupled (an element, a link);
+    free_mask (ndof,) marks the DOFs to number.
+    """
+    free = np.flatnonzero(free_mask)
+    pos = -np.ones(free_mask.size, int)
+    pos[free] = np.arange(free.size)
+    rows, cols = [], []
+    for dofs in cliques:
+        f = pos[np.asarray(dofs)]
+        f = f[f >= 0]
+        rows.extend(np.repeat(f, f.size))
+        cols.extend(np.tile(f, f.size))
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(free.size, free.size)).tocsr()
+    perm = reverse_cuthill_mckee(graph, symmetric_mode=True)
+    order = np.empty(free.size, int)
+    order[perm] = np.arange(free.size)
+    out = np.zeros(free_mask.size, np.int32)
+    out[free] = order + 1
+    return out
+
+
 class _UnionFind:
     """Disjoint sets of hashable items (joint nodes, locked rotations)."""
 
@@ -172,23 +196,9 @@ class FEModel:
         return model
 
     def _number_free_dofs(self, el_dof0: np.ndarray) -> None:
-        free = np.flatnonzero(~self.fixed)
-        if free.size == 0:
+        if not np.any(~self.fixed):
             raise CaseError("joints", "every elastic DOF is constrained: nothing to solve")
-        pos = -np.ones(self.ndof, int)
-        pos[free] = np.arange(free.size)
-        rows, cols = [], []
-        for e in range(el_dof0.shape[1]):
-            f = pos[el_dof0[:, e]]
-            f = f[f >= 0]
-            rows.extend(np.repeat(f, f.size))
-            cols.extend(np.tile(f, f.size))
-        graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(free.size, free.size)).tocsr()
-        perm = reverse_cuthill_mckee(graph, symmetric_mode=True)
-        order = np.empty(free.size, int)
-        order[perm] = np.arange(free.size)
-        self.free_of = np.zeros(self.ndof, np.int32)
-        self.free_of[free] = order + 1
+        self.free_of = rcm_free_numbering([el_dof0[:, e] for e in range(el_dof0.shape[1])], ~self.fixed)
         self.bandwidth = int(kernels.api.ked_bandwidth(self.free_of, self.el_dof))
 
     def node_ref(self, ref: str, where: str) -> tuple[int, int, float]:
