@@ -35,8 +35,8 @@ class CoupledModel:
     pm: tuple
     ri: tuple
     tq: tuple
-    presc_dof: np.ndarray    # 0-based prescribed DOFs (kinematic drive)
-    driven: tuple | None     # (link, ground point) of a kinematic drive
+    presc_dof: np.ndarray    # 0-based prescribed DOFs
+    constraints: list        # rotation constraints: ([link b, link a], [end b, end a], "drive" | "weld", Joint)
 
     @classmethod
     def from_case(cls, case: dict, fe: FEModel | None = None) -> "CoupledModel":
@@ -53,19 +53,19 @@ class CoupledModel:
         # End rotations relative to the chord are free DOFs at every joint: the physical angle of a
         # link end is the tangent angle psi = phi_chord + th_end.  A torque-driven joint is a hub whose
         # rotation is now free: its torque acts on the tangent angles (the seed's "clamped"/"locked"
-        # elastic condition of a driven joint means the link is clamped to its hub).  A joint that
-        # keeps two tangents welded (a non-driven clamp or locked joint) or prescribes a tangent
-        # angle (a kinematic drive) needs a rotation constraint, which this model does not have yet.
+        # elastic condition of a driven joint means the link is clamped to its hub).  A kinematic drive
+        # prescribes the tangent angle at its joint, and a non-driven clamp or locked joint welds the
+        # tangents: both are rotation constraints (Lagrange multipliers, theory.md section 11).
         driven = {t["joint"] for t in case["drive"].get("torques", [])}
-        if case["drive"]["type"] == "kinematic":
-            raise CaseError("drive.type", "the coupled model computes the rigid motion from input torques; a "
-                                          "kinematic drive would need a prescribed hub-angle constraint, not "
-                                          "implemented yet: use a torque drive or a superposition model")
+        kin = fe.joints[0].name if case["drive"]["type"] == "kinematic" else None
+        cons = []   # (links [b, a], ends [b, a], kind) with kind "drive" or "weld"
         for j in fe.joints:
-            if j.name not in driven and j.elastic in ("clamp", "locked"):
-                raise CaseError(f"joints.{j.name}", f"'{j.elastic}' on a joint without an input torque needs a "
-                                "rotation constraint the coupled model does not implement yet; use 'pin' or drive "
-                                "the joint with a torque (superposition models support it)")
+            ends_ = [0 if j.outboard_end == "start" else 1, 0 if j.inboard_end in (None, "start") else 1]
+            links_ = [j.outboard + 1, 0 if j.inboard is None else j.inboard + 1]
+            if j.name == kin:
+                cons.append((links_, ends_, "drive", j))
+            elif j.name not in driven and j.elastic in ("clamp", "locked"):
+                cons.append((links_, ends_, "weld", j))
         rots = _UnionFind()
         dof, fixed_val, fixed = {}, {}, set()
 
@@ -102,13 +102,7 @@ class CoupledModel:
         q_fixed = np.zeros(ndof)
         for d, val in fixed_val.items():
             q_fixed[d] = val
-        # kinematic drive: the driven link's far end is prescribed (chord on the drive law)
-        presc, driven = [], None
-        if case["drive"]["type"] == "kinematic":
-            j = fe.joints[0]  # crank_pivot / base: the only driven joint of a 1-DOF mechanism
-            r = ends.find((j.outboard, "end" if j.outboard_end == "start" else "start"))
-            presc = [dof[("r", r)], dof[("r", r, 1)]]
-            driven = (j.outboard, ground[j.name])
+        presc = []   # prescribed DOFs: none for now (the kernel supports them)
         mask = np.ones(ndof, bool)
         mask[list(fixed)] = False
         mask[presc] = False
@@ -134,7 +128,7 @@ class CoupledModel:
                            [0 if j.outboard_end == "start" else 1, 0 if j.inboard_end in (None, "start") else 1], coef))
         return cls(case=case, fe=fe, n_el=n_el, ld=np.asfortranarray(ld), ndof=ndof, free_of=free_of,
                    q_fixed=q_fixed, prop=np.asfortranarray(prop), pm=_pack_pm(pm), ri=_pack_ri(ri), tq=_pack_tq(tq),
-                   presc_dof=np.array(presc, np.int32), driven=driven)
+                   presc_dof=np.array(presc, np.int32), constraints=cons)
 
     # ------------------------------------------------------------------ helpers
     def link_slice(self, li: int) -> np.ndarray:
@@ -156,40 +150,43 @@ class CoupledModel:
             pos = [km.ox[0, li], km.oy[0, li], km.ox[0, li] + L * c, km.oy[0, li] + L * s]
             vel = [km.vx[0, li], km.vy[0, li], km.vx[0, li] - w * L * s, km.vy[0, li] + w * L * c]
             for k in range(4):
-                if self.free_of[dofs[k]] > 0 or dofs[k] in self.presc_dof:
+                if self.free_of[dofs[k]] > 0:
                     q[dofs[k]], v[dofs[k]] = pos[k], vel[k]
         return q, v
 
-    def prescribed(self, t, q, qd, qdd) -> np.ndarray:
-        """(3, np, nt) [q, v, a] of the prescribed DOFs for a kinematic drive on the grid."""
-        if self.driven is None:
-            return np.zeros((3, 1, t.size), order="F")
-        li, (gx, gy) = self.driven
-        L = self.prop[0, li]
-        th, w, al = q[:, 0], qd[:, 0], qdd[:, 0]
-        c, s = np.cos(th), np.sin(th)
-        out = np.empty((3, 2, t.size))
-        out[:, 0] = [gx + L * c, -L * s * w, -L * (s * al + c * w * w)]
-        out[:, 1] = [gy + L * s, L * c * w, L * (c * al - s * w * w)]
+    def constraint_values(self, t, q_rigid, qd_rigid, qdd_rigid, mech) -> np.ndarray:
+        """(3, nc, nt) [angle, rate, acceleration] of the rotation constraints on the grid: the drive law
+        (the rigid joint motion) for a kinematic drive, the initial relative angle for a weld."""
+        nc = max(1, len(self.constraints))
+        out = np.zeros((3, nc, t.size))
+        km0 = mech.kinematics(q_rigid[:1], qd_rigid[:1], None)
+        for i, (_, _, kind, j) in enumerate(self.constraints):
+            if kind == "drive":
+                out[:, i] = [q_rigid[:, 0], qd_rigid[:, 0], qdd_rigid[:, 0]]
+            else:
+                out[0, i] = km0.phi[0, j.outboard] - (km0.phi[0, j.inboard] if j.inboard is not None else 0.0)
         return np.asfortranarray(out)
 
-    def run(self, q0, v0, t, presc, dt, *, beta=0.25, gamma=0.5, out_every=1, tol=1e-8, maxit=25,
+    def run(self, q0, v0, t, cval, dt, *, beta=0.25, gamma=0.5, out_every=1, tol=1e-8, maxit=25,
             gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)):
-        """Newmark-Newton run; returns (qf, vf, af, ef, iterations)."""
+        """Newmark-Newton run; returns (qf, vf, af, lf, ef, iterations).  cval: constraint_values()."""
         nsteps = t.size - 1
         nframes = nsteps // out_every + 1
-        presc_dof = self.presc_dof + 1 if self.presc_dof.size else np.ones(1, np.int32)
-        if not self.presc_dof.size:  # f2py cannot pass empty arrays: prescribe a fixed DOF to its own value
-            fixed = int(np.flatnonzero(self.free_of == 0)[0])
-            presc = np.zeros((3, 1, t.size), order="F")
-            presc[0, 0, :] = self.q_fixed[fixed]
-            presc_dof = np.array([fixed + 1], np.int32)
+        # f2py cannot pass empty arrays: with no prescribed DOF, a fixed DOF is prescribed to its own value
+        fixed = int(np.flatnonzero(self.free_of == 0)[0])
+        presc = np.zeros((3, 1, t.size), order="F")
+        presc[0, 0, :] = self.q_fixed[fixed]
+        presc_dof = np.array([fixed + 1], np.int32)
+        nc = len(self.constraints)
+        con_link = np.array([c[0] for c in self.constraints] or [[1, 0]], np.int32).T
+        con_end = np.array([c[1] for c in self.constraints] or [[0, 0]], np.int32).T
         q, v, a = np.array(q0, float), np.array(v0, float), np.zeros(self.ndof)
-        qf, vf, af, ef, status, fail, iters = kernels.api.cpl_run(
-            nframes, *self._args(), np.asarray(gravity, float), np.asarray(rayleigh, float),
-            presc_dof.astype(np.int32), presc, dt, beta, gamma, out_every, tol, maxit, q, v, a)
+        qf, vf, af, lf, ef, status, fail, iters = kernels.api.cpl_run(
+            nframes, nc, *self._args(), np.asfortranarray(con_link), np.asfortranarray(con_end), cval,
+            np.asarray(gravity, float), np.asarray(rayleigh, float), presc_dof, presc, dt, beta, gamma, out_every,
+            tol, maxit, q, v, a)
         kernels.check_status(status, "coupled Newmark-Newton integration", time=fail * dt if fail else 0.0)
-        return qf, vf, af, ef, iters
+        return qf, vf, af, lf[:nc], ef, iters
 
     def dense(self, q, v, a, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)):
         """Residual (all DOFs), M, C_v, K_t (dense, free DOFs), [kinetic, potential] energy at one state."""

@@ -97,7 +97,7 @@ def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS,
             raise CaseError("outputs", f"{path} lacks the outputs {', '.join(missing)} that the reproduced figures "
                                        "need; use the bundled case file or add them")
         t0 = time.perf_counter()
-        use = [m for m in models if m != "coupled" or case["drive"]["type"] == "torque"]
+        use = list(models)
         runs[name] = simulate_models(case, use)
         timings[name] = time.perf_counter() - t0
         for m, r in runs[name].items():

@@ -219,9 +219,9 @@ class Prepared:
             self.coupled = CoupledModel.from_case(case, fe)
         cm = self.coupled
         q0, v0 = cm.initial_state(self.rm.q[0], self.rm.qd[0], self.mech)
-        presc = cm.prescribed(self.t, self.rm.q, self.rm.qd, self.rm.qdd)
+        cval = cm.constraint_values(self.t, self.rm.q, self.rm.qd, self.rm.qdd, self.mech)
         t0 = time.perf_counter()
-        qf, vf, af, ef, iters = cm.run(q0, v0, self.t, presc, self.dt, beta=sol["beta"], gamma=sol["gamma"],
+        qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, beta=sol["beta"], gamma=sol["gamma"],
                                        out_every=self.out_every, tol=sol["newton_tol"], maxit=sol["newton_maxit"],
                                        gravity=self.gravity, rayleigh=sol["rayleigh"])
         t_kernel = time.perf_counter() - t0
@@ -240,6 +240,9 @@ class Prepared:
         for k, y in energy.items():
             columns[k], units[k] = y, "J"
         columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
+        for (_, _, kind, j), lam in zip(cm.constraints, lf):
+            if kind == "drive":   # the torque the kinematic drive applies (the constraint torque is -lambda)
+                columns["drive_torque"], units["drive_torque"] = -lam, "N m"
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
         extra = {"coupled": coupled_diagnostics(cm, qf, ef, joints, chord, ref, fe, iters, self.nsteps)}

@@ -24,6 +24,8 @@
 !>   ri_link(nri), ri_node(nri), ri_j(nri)    rotary inertias: link, node k (0..n), J kg m^2
 !>   tq_link(2, ntq), tq_end(2, ntq)          torques: [on-link b, reaction link a (0 = ground)], ends (0 start, 1 end)
 !>   tq_coef(nh2, ntq)      tau = c0 + sum_h s_h sin(h theta) + c_h cos(h theta), theta = psi_b - psi_a
+!>   con_link(2, nc), con_end(2, nc)          rotation constraints (first ncon): sum of signed tangent angles
+!>                          psi_b - psi_a = cval(1, i, step) [rad], with cval(2:3) its rate and acceleration
 !>   grav(2) [m/s^2], ray(2) Rayleigh [1/s, s] on the elastic DOFs
 module flexmech_api
   use flexmech_kinds, only: dp
@@ -220,11 +222,15 @@ contains
 
   !> Run the coupled model (Newmark-Newton).  q, v, a (ndof): on entry the initial state (constrained
   !> entries hold their fixed values; the free accelerations are made consistent), on exit the last state.
-  subroutine cpl_run(ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes, &
+  subroutine cpl_run(ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes, nc, ncon, &
                      free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, tq_link, tq_end, tq_coef, &
-                     grav, ray, presc_dof, presc, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
-                     qf, vf, af, ef, status, fail_step, iters)
+                     con_link, con_end, cval, grav, ray, presc_dof, presc, dt, beta, gamma, out_every, tol, maxit, &
+                     q, v, a, qf, vf, af, lf, ef, status, fail_step, iters)
     integer, intent(in) :: ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes
+    integer, intent(in) :: nc      !< size of the constraint arrays (>= 1; f2py cannot pass empty arrays)
+    integer, intent(in) :: ncon    !< number of active rotation constraints (0..nc)
+    integer, intent(in) :: con_link(2, nc), con_end(2, nc)
+    real(dp), intent(in) :: cval(3, nc, nsteps + 1)
     integer, intent(in) :: free_of(ndof), n_el(nlinks), ld(maxld, nlinks)
     real(dp), intent(in) :: prop(4, nlinks)
     integer, intent(in) :: pm_link(npm)
@@ -239,18 +245,19 @@ contains
     integer, intent(in) :: out_every, maxit
     real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof)
     real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
+    real(dp), intent(out) :: lf(nc, nframes)   !< constraint multipliers (the constraint torque is -lf) [N m]
     integer, intent(out) :: status, fail_step, iters
     type(coupled_system) :: sys
-    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; fail_step = 0; iters = 0
+    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; fail_step = 0; iters = 0
     call coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
-                       tq_link, tq_end, tq_coef, grav, ray, status)
+                       tq_link, tq_end, tq_coef, ncon, con_link, con_end, grav, ray, status)
     if (status /= STATUS_OK) return
     if (any(presc_dof < 1) .or. any(presc_dof > ndof)) then
       status = STATUS_BAD_INPUT
       return
     end if
-    call coupled_run(sys, presc_dof, presc, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
-                     qf, vf, af, ef, status, fail_step, iters)
+    call coupled_run(sys, presc_dof, presc, cval, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
+                     qf, vf, af, lf, ef, status, fail_step, iters)
   end subroutine cpl_run
 
   !> Residual (all DOFs), M, C_v, K_t (dense, free DOFs) and [kinetic, potential] energy at one state.
@@ -272,7 +279,7 @@ contains
     type(coupled_system) :: sys
     res = 0.0_dp; mm = 0.0_dp; cm = 0.0_dp; km = 0.0_dp; energy = 0.0_dp
     call coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
-                       tq_link, tq_end, tq_coef, grav, ray, status)
+                       tq_link, tq_end, tq_coef, 0, reshape([1, 0], [2, 1]), reshape([0, 0], [2, 1]), grav, ray, status)
     if (status /= STATUS_OK) return
     if (sys%nfree /= nfree) then
       status = STATUS_BAD_INPUT

@@ -19,7 +19,7 @@
 module flexmech_coupled
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE, STATUS_BAD_INPUT
+  use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, STATUS_BAD_INPUT
   use flexmech_beam, only: beam_mass, beam_stiffness
   use flexmech_assembly, only: band_rows, band_add_element, band_to_dense
   implicit none
@@ -43,6 +43,8 @@ module flexmech_coupled
     real(dp), allocatable :: pm_prop(:, :), ri_j(:)
     integer, allocatable :: tq_link(:, :), tq_end(:, :)   !< (2, ntq): [b, a] links (a = 0: ground), ends 0/1
     real(dp), allocatable :: tq_coef(:, :)                !< (1 + 2 nh, ntq)
+    integer :: ncon = 0
+    integer, allocatable :: con_link(:, :), con_end(:, :)   !< (2, ncon) like the torques
     real(dp) :: grav(2) = 0.0_dp, ray(2) = 0.0_dp
   end type coupled_system
 
@@ -50,9 +52,10 @@ contains
 
   !> Build the system from flat arrays (see flexmech_api); status STATUS_BAD_INPUT on bad indices.
   subroutine coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
-                           tq_link, tq_end, tq_coef, grav, ray, status)
+                           tq_link, tq_end, tq_coef, ncon, con_link, con_end, grav, ray, status)
     type(coupled_system), intent(out) :: sys
     integer, intent(in) :: free_of(:), n_el(:), ld(:, :), pm_link(:), ri_link(:), ri_node(:), tq_link(:, :), tq_end(:, :)
+    integer, intent(in) :: ncon, con_link(:, :), con_end(:, :)   !< rotation constraints: the first ncon columns
     real(dp), intent(in) :: prop(:, :), pm_prop(:, :), ri_j(:), tq_coef(:, :), grav(2), ray(2)
     integer, intent(out) :: status
     integer :: l, nl, lo, hi, i, f
@@ -68,6 +71,12 @@ contains
     if (any(pm_link < 1) .or. any(pm_link > sys%nlinks) .or. any(ri_link < 1) .or. any(ri_link > sys%nlinks)) return
     if (any(tq_link < 0) .or. any(tq_link > sys%nlinks) .or. any(tq_link(1, :) < 1)) return
     if (mod(size(tq_coef, 1), 2) /= 1) return
+    if (ncon < 0 .or. ncon > size(con_link, 2)) return
+    if (ncon > 0) then
+      if (any(con_link(:, 1:ncon) < 0) .or. any(con_link(:, 1:ncon) > size(n_el)) .or. any(con_link(1, 1:ncon) < 1)) return
+    end if
+    sys%ncon = ncon
+    sys%con_link = con_link(:, 1:max(ncon, 0)); sys%con_end = con_end(:, 1:max(ncon, 0))
     sys%n_el = n_el; sys%ld = ld; sys%prop = prop; sys%free_of = free_of
     sys%npm = size(pm_link); sys%pm_link = pm_link; sys%pm_prop = pm_prop
     sys%nri = size(ri_link); sys%ri_link = ri_link; sys%ri_node = ri_node; sys%ri_j = ri_j
@@ -413,52 +422,100 @@ contains
     end do
   end subroutine assemble
 
+  !> Angle sum of constraint ic, sum_s sign_s psi_s (psi = phi + th_end, ground = 0), its gradient
+  !> over the free DOFs, and the velocity part of its second time derivative.
+  subroutine constraint_eval(sys, ic, q, v, angle, grad, acc0)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: ic
+    real(dp), intent(in) :: q(:), v(:)
+    real(dp), intent(out) :: angle, grad(:), acc0
+    integer :: s, l, nl, k
+    real(dp) :: psi, dpsi(sys%maxld), sg, cs, sn, ell, g(2), om, al0, al, zero(sys%maxld)
+    angle = 0.0_dp; grad = 0.0_dp; acc0 = 0.0_dp; zero = 0.0_dp
+    do s = 1, 2
+      l = sys%con_link(s, ic)
+      if (l == 0) cycle
+      sg = merge(1.0_dp, -1.0_dp, s == 1)
+      nl = 3*sys%n_el(l) + 3
+      call tangent_angle(sys, l, sys%con_end(s, ic), q(sys%ld(1:nl, l)), psi, dpsi(1:nl))
+      angle = angle + sg*psi
+      do k = 1, nl
+        if (sys%free_of(sys%ld(k, l)) > 0) grad(sys%free_of(sys%ld(k, l))) = grad(sys%free_of(sys%ld(k, l))) &
+                                                                             + sg*dpsi(k)
+      end do
+      call chord(q(sys%ld(1:nl, l)), v(sys%ld(1:nl, l)), zero(1:nl), cs, sn, ell, g, om, al0, al)
+      acc0 = acc0 + sg*al0
+    end do
+  end subroutine constraint_eval
+
   !> Newmark-Newton integration of the coupled model.
   !> q, v, a: (ndof) all-DOF state, constrained entries hold their values (prescribed ones are
-  !> overwritten from presc each step).  Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes),
-  !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the torques, max Newton
-!> iterations since the last frame].
-  subroutine coupled_run(sys, presc_dof, presc, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
-                         qf, vf, af, ef, status, fail_step, iters)
+  !> overwritten from presc each step).  Rotation constraints (sys%ncon): sum_s sign psi_s = cval(1,i,k),
+  !> enforced at the position level with Lagrange multipliers lam (the constraint torques).
+  !> Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes), lf (ncon, nframes) multipliers,
+  !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the inputs (torques and
+  !> prescribed rotations), max Newton iterations since the last frame].
+  subroutine coupled_run(sys, presc_dof, presc, cval, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
+                         qf, vf, af, lf, ef, status, fail_step, iters)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: presc_dof(:)          !< (np) prescribed DOFs (all-DOF numbers)
     real(dp), intent(in) :: presc(:, :, :)       !< (3, np, nsteps+1) [q, v, a] of prescribed DOFs
+    real(dp), intent(in) :: cval(:, :, :)        !< (3, ncon, nsteps+1) [angle, rate, acceleration] of constraints
     real(dp), intent(in) :: dt, beta, gamma, tol
     integer, intent(in) :: out_every, maxit
     real(dp), intent(inout) :: q(:), v(:), a(:)
-    real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), ef(:, :)
+    real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters
     real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), theta0(:), theta1(:)
-    integer, allocatable :: ipiv(:), freeidx(:)
-    integer :: nsteps, n, it, i, frame, info, itmax_frame, nf
+    real(dp), allocatable :: gt(:, :), x(:, :), amat(:, :), lam(:), dlam(:), gval(:), acc0(:), ang0(:), ang1(:), lam0(:)
+    integer, allocatable :: ipiv(:), freeidx(:), ipc(:)
+    integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev
-    logical :: converged
+    logical :: converged, refactor
     status = STATUS_OK; fail_step = 0; iters = 0
     nsteps = size(presc, 3) - 1
     nf = sys%nfree
-    if (out_every < 1 .or. dt <= 0.0_dp .or. size(qf, 2) /= nsteps/out_every + 1) then
+    nc = sys%ncon
+    refactor = .false.
+    if (out_every < 1 .or. dt <= 0.0_dp .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
+        (nc > 0 .and. size(cval, 3) /= nsteps + 1)) then
       status = STATUS_BAD_INPUT
       return
     end if
     allocate (ab(band_rows(sys%kl, sys%ku), nf), res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf))
     allocate (theta0(max(1, sys%ntq)), theta1(max(1, sys%ntq)), freeidx(nf))
+    allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
+              dlam(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), ang0(max(1, nc)), ang1(max(1, nc)), ipc(max(1, nc)), &
+              lam0(max(1, nc)))
     do i = 1, sys%ndof
       if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
     end do
+    lam = 0.0_dp
     call set_prescribed(1)
-    ! consistent initial acceleration: M a0 = -R(q0, v0, 0)
-    do i = 1, nf
-      a(freeidx(i)) = 0.0_dp
-    end do
+    ! consistent initial acceleration: [M G; G^T 0] [a; lam] = [-R(q0, v0, 0); cval'' - acc0]
+    a(freeidx) = 0.0_dp
     call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, ab, energy)
     rf = -res(freeidx)
-    call solve(rf)
+    call factor()
+    if (status /= STATUS_OK) return
+    call constraints(1)
+    if (status /= STATUS_OK) return
+    call band_solve_rhs(rf)
+    if (nc > 0) then
+      dlam(1:nc) = matmul(transpose(gt(:, 1:nc)), rf) - (cval(3, 1:nc, 1) - acc0(1:nc))
+      call small_solve(dlam)
+      rf = rf - matmul(x(:, 1:nc), dlam(1:nc))
+      lam(1:nc) = dlam(1:nc)
+    end if
     if (status /= STATUS_OK) return
     a(freeidx) = rf
     work = 0.0_dp
     call joint_angles(sys, q, theta0)
+    call con_angles(ang0)
+    lam0 = lam
     frame = 1
-    qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; ef(:, 1) = [energy(1), energy(2), 0.0_dp, 0.0_dp]
+    qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; lf(:, 1) = lam(1:size(lf, 1))
+    ef(:, 1) = [energy(1), energy(2), 0.0_dp, 0.0_dp]
     itmax_frame = 0
     do n = 1, nsteps
       qs = q + dt*v + (dt*dt*(0.5_dp - beta))*a
@@ -470,16 +527,21 @@ contains
         q(freeidx) = qs(freeidx) + (beta*dt*dt)*a(freeidx)
         v(freeidx) = vs(freeidx) + (gamma*dt)*a(freeidx)
         call assemble(sys, q, v, a, it == 1, gamma*dt, beta*dt*dt, res, ab, energy)
-        rf = -res(freeidx)
         if (it == 1) then
-          call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
-          status = lapack_status(info)
+          call factor()
           if (status /= STATUS_OK) exit
         end if
-        call dgbtrs('N', nf, sys%kl, sys%ku, 1, ab, size(ab, 1), ipiv, rf, nf, info)
-        if (.not. ieee_is_finite(sum(abs(rf)))) then
-          status = STATUS_NONFINITE
-          exit
+        call constraints(n + 1)      ! gradients (matrix part only at it == 1), values, G^T lam in res
+        if (status /= STATUS_OK) exit
+        rf = -res(freeidx)
+        call band_solve_rhs(rf)
+        if (status /= STATUS_OK) exit
+        if (nc > 0) then   ! Schur complement on the multipliers
+          dlam(1:nc) = matmul(transpose(gt(:, 1:nc)), rf) + gval(1:nc)/(beta*dt*dt)
+          call small_solve(dlam)
+          if (status /= STATUS_OK) exit
+          rf = rf - matmul(x(:, 1:nc), dlam(1:nc))
+          lam(1:nc) = lam(1:nc) + dlam(1:nc)
         end if
         a(freeidx) = a(freeidx) + rf
         da_norm = sqrt(sum(rf**2)); a_norm = sqrt(sum(a(freeidx)**2))
@@ -503,20 +565,30 @@ contains
       itmax_frame = max(itmax_frame, it)
       call joint_angles(sys, q, theta1)
       do i = 1, sys%ntq    ! work of the torques, trapezoidal in the joint angle
-        work = work + 0.5_dp*(torque(sys, i, theta0(i)) + torque(sys, i, theta1(i))) &
-               *atan2(sin(theta1(i) - theta0(i)), cos(theta1(i) - theta0(i)))
+        work = work + 0.5_dp*(torque(sys, i, theta0(i)) + torque(sys, i, theta1(i)))*wrap(theta1(i) - theta0(i))
       end do
       theta0 = theta1
+      call con_angles(ang1)
+      do i = 1, nc         ! work of the prescribed rotations (the constraint torque is -lam), trapezoidal
+        work = work - 0.5_dp*(lam0(i) + lam(i))*wrap(ang1(i) - ang0(i))
+      end do
+      ang0 = ang1
+      lam0 = lam
       if (mod(n, out_every) == 0) then
         call assemble(sys, q, v, a, .false., 0.0_dp, 0.0_dp, res, ab, energy)
         frame = frame + 1
-        qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a
+        qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a; lf(:, frame) = lam(1:size(lf, 1))
         ef(:, frame) = [energy(1), energy(2), work, real(itmax_frame, dp)]
         itmax_frame = 0
       end if
     end do
 
   contains
+
+    pure real(dp) function wrap(x)
+      real(dp), intent(in) :: x
+      wrap = atan2(sin(x), cos(x))
+    end function wrap
 
     subroutine set_prescribed(k)
       integer, intent(in) :: k
@@ -526,14 +598,62 @@ contains
       end do
     end subroutine set_prescribed
 
-    subroutine solve(x)
-      real(dp), intent(inout) :: x(:)
+    subroutine con_angles(ang)
+      real(dp), intent(out) :: ang(:)
+      integer :: ic
+      real(dp) :: a1
+      do ic = 1, nc
+        call constraint_eval(sys, ic, q, v, ang(ic), gt(:, ic), a1)
+      end do
+    end subroutine con_angles
+
+    !> Constraint gradients (X = S^-1 G and the Schur matrix when S was just factorized), values
+    !> g = angle - cval (principal value), velocity part of the angle acceleration, and G^T lam in res.
+    subroutine constraints(k)
+      integer, intent(in) :: k
+      integer :: ic, s, l, nl, j
+      real(dp) :: ang, psi, dpsi(sys%maxld), sg
+      do ic = 1, nc
+        call constraint_eval(sys, ic, q, v, ang, gt(:, ic), acc0(ic))
+        gval(ic) = wrap(ang - cval(1, ic, k))
+        do s = 1, 2            ! residual += G^T lam (over all DOFs)
+          l = sys%con_link(s, ic)
+          if (l == 0) cycle
+          sg = merge(1.0_dp, -1.0_dp, s == 1)
+          nl = 3*sys%n_el(l) + 3
+          call tangent_angle(sys, l, sys%con_end(s, ic), q(sys%ld(1:nl, l)), psi, dpsi(1:nl))
+          do j = 1, nl
+            res(sys%ld(j, l)) = res(sys%ld(j, l)) + sg*lam(ic)*dpsi(j)
+          end do
+        end do
+      end do
+      if (nc > 0 .and. refactor) then
+        x(:, 1:nc) = gt(:, 1:nc)
+        call dgbtrs('N', nf, sys%kl, sys%ku, nc, ab, size(ab, 1), ipiv, x, nf, info)
+        amat(1:nc, 1:nc) = matmul(transpose(gt(:, 1:nc)), x(:, 1:nc))
+        call dgetrf(nc, nc, amat, size(amat, 1), ipc, info)
+        status = lapack_status(info)
+        refactor = .false.
+      end if
+    end subroutine constraints
+
+    subroutine factor()
       call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
       status = lapack_status(info)
-      if (status /= STATUS_OK) return
-      call dgbtrs('N', nf, sys%kl, sys%ku, 1, ab, size(ab, 1), ipiv, x, nf, info)
-      if (.not. ieee_is_finite(sum(abs(x)))) status = STATUS_NONFINITE
-    end subroutine solve
+      refactor = .true.
+    end subroutine factor
+
+    subroutine band_solve_rhs(xx)
+      real(dp), intent(inout) :: xx(:)
+      call dgbtrs('N', nf, sys%kl, sys%ku, 1, ab, size(ab, 1), ipiv, xx, nf, info)
+      if (.not. ieee_is_finite(sum(abs(xx)))) status = STATUS_NONFINITE
+    end subroutine band_solve_rhs
+
+    subroutine small_solve(xx)
+      real(dp), intent(inout) :: xx(:)
+      call dgetrs('N', nc, 1, amat, size(amat, 1), ipc, xx, size(xx), info)
+      if (.not. ieee_is_finite(sum(abs(xx(1:nc))))) status = STATUS_NONFINITE
+    end subroutine small_solve
 
   end subroutine coupled_run
 
