@@ -173,10 +173,10 @@ contains
     real(dp), intent(in) :: q(:), v(:), a(:), xi, w, dm
     logical, intent(in) :: want
     real(dp), intent(inout) :: r(:), m(:, :), cv(:, :), kt(:, :), ekin, epot
-    integer :: n, idx(6), i, j, nl
+    integer :: n, idx(6), i, j, nl, ncl, cl(10)
     real(dp) :: cs, sn, ell, g(2), om, al0, al, le, nm(2, 6), de(6), dv(6), da(6)
     real(dp) :: ul(2), uld(2), uldd(2), rot(2, 2), ru(2), rou(2), roud(2), rd(2), rdd(2)
-    real(dp) :: jac(2, sys%maxld), bv(2, sys%maxld), bq(2, sys%maxld), ac(2, 2), w0(2), cdot(2), c(2), rn(2)
+    real(dp) :: jac(2, 10), bv(2, 10), bq(2, 10), ac(2, 2), w0(2), cdot(2), c(2), rn(2)
     n = sys%n_el(l); nl = 3*n + 3
     le = sys%prop(1, l)/n
     idx = elem_index(n, e)
@@ -198,21 +198,26 @@ contains
     rdd = (1.0_dp - w)*a(1:2) + w*a(3:4) + al*rou - om*om*ru + 2.0_dp*om*roud + matmul(rot, uldd)
     ekin = ekin + 0.5_dp*dm*(rd(1)**2 + rd(2)**2)
     epot = epot - dm*dot_product(sys%grav, (1.0_dp - w)*q(1:2) + w*q(3:4) + ru)
-    ! J = dr'/dq'
-    jac(:, 1:nl) = 0.0_dp
+    ! J = dr'/dq', on the (at most 10) columns this point touches: the link ends and the element's DOFs
+    ncl = 4
+    cl(1:4) = [1, 2, 3, 4]
+    jac(:, 1:4) = 0.0_dp
     jac(1, 1) = 1.0_dp - w; jac(2, 2) = 1.0_dp - w; jac(1, 3) = w; jac(2, 4) = w
     do j = 1, 2
       jac(:, j) = jac(:, j) - rou*g(j)
       jac(:, 2 + j) = jac(:, 2 + j) + rou*g(j)
     end do
     do i = 1, 6
-      if (idx(i) > 0) jac(:, idx(i)) = jac(:, idx(i)) + matmul(rot, nm(:, i))
+      if (idx(i) == 0) cycle
+      ncl = ncl + 1
+      cl(ncl) = idx(i)
+      jac(:, ncl) = matmul(rot, nm(:, i))
     end do
     rdd = rdd - sys%grav
-    r(1:nl) = r(1:nl) + dm*matmul(rdd, jac(:, 1:nl))
+    r(cl(1:ncl)) = r(cl(1:ncl)) + dm*matmul(rdd, jac(:, 1:ncl))
     if (.not. want) return
-    do j = 1, nl
-      m(1:nl, j) = m(1:nl, j) + dm*matmul(jac(:, j), jac(:, 1:nl))
+    do j = 1, ncl
+      m(cl(1:ncl), cl(j)) = m(cl(1:ncl), cl(j)) + dm*matmul(jac(:, j), jac(:, 1:ncl))
     end do
     ! dr''/dv: chord velocity through omega and alpha0, elastic velocities through 2 omega R Omega N
     c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
@@ -220,19 +225,16 @@ contains
     do j = 1, 2
       ac(:, j) = rou*w0(j) + (-2.0_dp*om*ru + 2.0_dp*roud)*g(j)
     end do
-    bv(:, 1:nl) = 0.0_dp
     bv(:, 1:2) = -ac; bv(:, 3:4) = ac
-    bq(:, 1:nl) = 0.0_dp
-    do i = 1, 6
-      if (idx(i) > 0) then
-        rn = matmul(rot, nm(:, i))                  ! R N_i
-        bv(:, idx(i)) = bv(:, idx(i)) + 2.0_dp*om*[-rn(2), rn(1)]      ! 2 omega R Omega N_i
-        bq(:, idx(i)) = al*[-rn(2), rn(1)] - om*om*rn                   ! at fixed chord
-      end if
+    bq(:, 1:4) = 0.0_dp
+    do j = 5, ncl
+      rn = jac(:, j)                                   ! R N_i
+      bv(:, j) = 2.0_dp*om*[-rn(2), rn(1)]             ! 2 omega R Omega N_i
+      bq(:, j) = al*[-rn(2), rn(1)] - om*om*rn         ! at fixed chord
     end do
-    do j = 1, nl
-      cv(1:nl, j) = cv(1:nl, j) + dm*matmul(bv(:, j), jac(:, 1:nl))
-      kt(1:nl, j) = kt(1:nl, j) + dm*matmul(bq(:, j), jac(:, 1:nl))
+    do j = 1, ncl
+      cv(cl(1:ncl), cl(j)) = cv(cl(1:ncl), cl(j)) + dm*matmul(bv(:, j), jac(:, 1:ncl))
+      kt(cl(1:ncl), cl(j)) = kt(cl(1:ncl), cl(j)) + dm*matmul(bq(:, j), jac(:, 1:ncl))
     end do
   end subroutine mass_point
 
