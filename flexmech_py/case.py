@@ -23,7 +23,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 __all__ = ["load_case", "validate_case", "apply_overrides", "MODELS", "SUPERPOSITION_MODELS", "JOINTS_OF", "OUTPUT_KINDS"]
 
 SUPERPOSITION_MODELS = ("hac", "classic", "classic-translational")
-MODELS = SUPERPOSITION_MODELS + ("coupled",)
+MODELS = SUPERPOSITION_MODELS + ("coupled", "nonlinear")
 MECHANISMS = ("fourbar", "serial")
 OUTPUT_KINDS = {
     # kind: (required keys, optional keys with defaults)

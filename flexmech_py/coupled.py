@@ -22,133 +22,160 @@ __all__ = ["CoupledModel", "chord_motion"]
 
 @dataclass
 class CoupledModel:
-    """DOF layout and kernel arguments of the coupled model of a case; build with :meth:`from_case`."""
+    """DOF layout and kernel arguments of the coupled model of a case; build with :meth:`from_case`.
+
+    The kernel works on *segments*: a segment is a stretch of one link between two mesh nodes with
+    its own chord frame.  The coupled model (``split=False``) has one segment per link; the
+    nonlinear co-rotational model (``split=True``) one per element, with the tangents welded at the
+    interior nodes (theory.md, sections 11-12).
+    """
 
     case: dict
     fe: FEModel
-    n_el: np.ndarray
-    ld: np.ndarray           # (maxld, nlinks) 1-based all-DOF numbers of each link's local vector
+    segments: list           # (link, k0, k1): mesh nodes k0..k1 of the link
+    n_el: np.ndarray         # elements per segment
+    ld: np.ndarray           # (maxld, nseg) 1-based all-DOF numbers of each segment's local vector
     ndof: int
-    free_of: np.ndarray      # (ndof,) 1-based free numbers, 0 = fixed or prescribed
-    q_fixed: np.ndarray      # (ndof,) values of fixed DOFs (ground positions, clamped rotations)
+    free_of: np.ndarray      # (ndof,) 1-based free numbers, 0 = fixed
+    q_fixed: np.ndarray      # (ndof,) values of fixed DOFs (ground positions)
     prop: np.ndarray
     pm: tuple
     ri: tuple
     tq: tuple
-    presc_dof: np.ndarray    # 0-based prescribed DOFs
-    constraints: list        # rotation constraints: ([link b, link a], [end b, end a], "drive" | "weld", Joint)
+    constraints: list        # rotation constraints: ([seg b, seg a], [end b, end a], kind, value or joint)
 
     @classmethod
-    def from_case(cls, case: dict, fe: FEModel | None = None) -> "CoupledModel":
+    def from_case(cls, case: dict, fe: FEModel | None = None, split: bool = False) -> "CoupledModel":
         fe = FEModel.from_case(case) if fe is None else fe
         links = case["links"]
-        nl = len(links)
-        n_el = np.array([ln["elements"] for ln in links], np.int32)
-        ground = _ground_points(case)
-        # rigid nodes: link ends merged at joints
-        ends = _UnionFind()
-        for j in fe.joints:
-            if j.inboard is not None:
-                ends.union((j.inboard, j.inboard_end), (j.outboard, j.outboard_end))
-        # End rotations relative to the chord are free DOFs at every joint: the physical angle of a
-        # link end is the tangent angle psi = phi_chord + th_end.  A torque-driven joint is a hub whose
-        # rotation is now free: its torque acts on the tangent angles (the seed's "clamped"/"locked"
-        # elastic condition of a driven joint means the link is clamped to its hub).  A kinematic drive
-        # prescribes the tangent angle at its joint, and a non-driven clamp or locked joint welds the
-        # tangents: both are rotation constraints (Lagrange multipliers, theory.md section 11).
+        n_link = [ln["elements"] for ln in links]
+        segments = [(li, k, k + 1) for li, n in enumerate(n_link) for k in range(n)] if split else \
+                   [(li, 0, n) for li, n in enumerate(n_link)]
+        first = {li: next(i for i, sg in enumerate(segments) if sg[0] == li and sg[1] == 0) for li in range(len(links))}
+        last = {li: next(i for i, sg in enumerate(segments) if sg[0] == li and sg[2] == n_link[li])
+                for li in range(len(links))}
+
+        def seg_end(li, end):   # (segment index, 0 start / 1 end) of a link end
+            return (first[li], 0) if end == "start" else (last[li], 1)
+
+        # A torque-driven joint is a hub whose rotation is now free: its torque acts on the tangent
+        # angles psi = phi_chord + th_end (the seed's "clamped"/"locked" elastic condition of a driven
+        # joint means the link is clamped to its hub).  A kinematic drive prescribes the tangent angle
+        # at its joint; a non-driven clamp or locked joint welds the tangents; interior nodes of a
+        # split link are welded too.  All are rotation constraints (Lagrange multipliers).
         driven = {t["joint"] for t in case["drive"].get("torques", [])}
         kin = fe.joints[0].name if case["drive"]["type"] == "kinematic" else None
-        cons = []   # (links [b, a], ends [b, a], kind) with kind "drive" or "weld"
+        cons = []
         for j in fe.joints:
-            ends_ = [0 if j.outboard_end == "start" else 1, 0 if j.inboard_end in (None, "start") else 1]
-            links_ = [j.outboard + 1, 0 if j.inboard is None else j.inboard + 1]
+            sb, eb = seg_end(j.outboard, j.outboard_end)
+            sa, ea = seg_end(j.inboard, j.inboard_end) if j.inboard is not None else (-1, 0)
             if j.name == kin:
-                cons.append((links_, ends_, "drive", j))
+                cons.append(([sb + 1, sa + 1], [eb, ea], "drive", j))
             elif j.name not in driven and j.elastic in ("clamp", "locked"):
-                cons.append((links_, ends_, "weld", j))
-        rots = _UnionFind()
-        dof, fixed_val, fixed = {}, {}, set()
+                cons.append(([sb + 1, sa + 1], [eb, ea], "weld", j))
+        for i in range(1, len(segments)):
+            if segments[i][0] == segments[i - 1][0]:   # consecutive elements of one link
+                cons.append(([i + 1, i], [0, 1], "weld", 0.0))
+        # DOFs: positions of the segment-end nodes (FE global nodes: shared at joints), end rotations
+        # relative to each segment's chord, interior elastic DOFs
+        dof, fixed_val = {}, {}
 
         def new(key):
             dof[key] = len(dof)
             return dof[key]
 
-        for li in range(nl):
-            for end in ("start", "end"):
-                r = ends.find((li, end))
-                if ("r", r) not in dof:
-                    new(("r", r)); dof[("r", r, 1)] = len(dof)
-                t = rots.find((li, end))
-                if ("t", t) not in dof:
-                    new(("t", t))
-        for j in fe.joints:  # ground joints: fixed positions, clamp fixes the end rotation
+        ground = _ground_points(case)
+        ld_cols = []
+        for si, (li, k0, k1) in enumerate(segments):
+            col = []
+            for k in (k0, k1):
+                node = fe.node_of[li][k]
+                if ("r", node) not in dof:
+                    new(("r", node)); new(("r", node, 1))
+                col += [dof[("r", node)], dof[("r", node, 1)]]
+            col.append(new(("t", si, 0)))
+            for k in range(1, k1 - k0):
+                col += [new(("e", si, k, "p")), new(("e", si, k, "v")), new(("e", si, k, "t"))]
+            col.append(new(("t", si, 1)))
+            ld_cols.append(col)
+        for j in fe.joints:  # ground joints: fixed positions
             if j.inboard is None:
-                r = ends.find((j.outboard, j.outboard_end))
-                for k, key in enumerate((("r", r), ("r", r, 1))):
-                    fixed.add(dof[key]); fixed_val[dof[key]] = ground[j.name][k]
+                node = fe.node_of[j.outboard][0 if j.outboard_end == "start" else -1]
+                fixed_val[dof[("r", node)]], fixed_val[dof[("r", node, 1)]] = ground[j.name]
+        ndof = len(dof)
+        n_el = np.array([k1 - k0 for _, k0, k1 in segments], np.int32)
         maxld = int(3 * n_el.max() + 3)
-        ld = np.zeros((maxld, nl), np.int32)
-        for li in range(nl):
-            n = int(n_el[li])
-            rs, re_ = ends.find((li, "start")), ends.find((li, "end"))
-            col = [dof[("r", rs)], dof[("r", rs, 1)], dof[("r", re_)], dof[("r", re_, 1)],
-                   dof[("t", rots.find((li, "start")))]]
-            for k in range(1, n):
-                col += [new(("e", li, k, "p")), new(("e", li, k, "v")), new(("e", li, k, "t"))]
-            col.append(dof[("t", rots.find((li, "end")))])
-            ld[: len(col), li] = np.array(col) + 1
-            ld[len(col):, li] = ld[0, li]   # padding (never read: the kernel uses 3n+3 entries)
-        ndof = len({v for v in dof.values()})
+        ld = np.zeros((maxld, len(segments)), np.int32)
+        for si, col in enumerate(ld_cols):
+            ld[: len(col), si] = np.array(col) + 1
+            ld[len(col):, si] = ld[0, si]   # padding (never read: the kernel uses 3n+3 entries)
         q_fixed = np.zeros(ndof)
-        for d, val in fixed_val.items():
-            q_fixed[d] = val
-        presc = []   # prescribed DOFs: none for now (the kernel supports them)
         mask = np.ones(ndof, bool)
-        mask[list(fixed)] = False
-        mask[presc] = False
+        for d, val in fixed_val.items():
+            q_fixed[d], mask[d] = val, False
         if not mask.any():
             raise CaseError("joints", "the coupled model has no free DOF")
-        free_of = rcm_free_numbering([ld[: 3 * n_el[li] + 3, li] - 1 for li in range(nl)], mask)
-        prop = np.array([[ln["length"], ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"],
-                          ln["youngs_modulus"] * ln["second_moment"]] for ln in links]).T
-        pm = [(fe.node_ref(p["at"], f"point_masses[{i}].at")[0] + 1, p["mass"],
-               fe.node_ref(p["at"], f"point_masses[{i}].at")[2]) for i, p in enumerate(case["point_masses"])]
+        free_of = rcm_free_numbering([np.array(c) for c in ld_cols], mask)
+        prop = np.array([[links[li]["length"] * (k1 - k0) / n_link[li], links[li]["density"] * links[li]["area"],
+                          links[li]["youngs_modulus"] * links[li]["area"],
+                          links[li]["youngs_modulus"] * links[li]["second_moment"]] for li, k0, k1 in segments]).T
+
+        def seg_at(li, k):   # (segment, node index within it) holding mesh node k of link li
+            for si, (l2, k0, k1) in enumerate(segments):
+                if l2 == li and k0 <= k <= k1:
+                    return si, k - k0
+            raise AssertionError((li, k))
+
+        pm = []
+        for i, p in enumerate(case["point_masses"]):
+            li, _, zeta = fe.node_ref(p["at"], f"point_masses[{i}].at")
+            si, kk = seg_at(li, int(round(zeta / links[li]["length"] * n_link[li])))
+            pm.append((si + 1, p["mass"], kk * prop[0, si] / n_el[si]))
         ri = []
         for i, r in enumerate(case["rotary_inertias"]):
             _, node, _ = fe.node_ref(r["at"], f"rotary_inertias[{i}].at")
             lw = fe.link_names.index(r["turns_with"])
-            ri.append((lw + 1, fe.node_of[lw].index(node), r["inertia"]))
+            si, kk = seg_at(lw, fe.node_of[lw].index(node))
+            ri.append((si + 1, kk, r["inertia"]))
         tq = []
         if case["drive"]["type"] == "torque":
             nh = max(max(len(t["sin"]), len(t["cos"])) for t in case["drive"]["torques"])
             for t in case["drive"]["torques"]:
                 j = next(jj for jj in fe.joints if jj.name == t["joint"])
+                sb, eb = seg_end(j.outboard, j.outboard_end)
+                sa, ea = seg_end(j.inboard, j.inboard_end) if j.inboard is not None else (-1, 0)
                 coef = [t["constant"]] + (t["sin"] + [0.0] * nh)[:nh] + (t["cos"] + [0.0] * nh)[:nh]
-                tq.append(([j.outboard + 1, 0 if j.inboard is None else j.inboard + 1],
-                           [0 if j.outboard_end == "start" else 1, 0 if j.inboard_end in (None, "start") else 1], coef))
-        return cls(case=case, fe=fe, n_el=n_el, ld=np.asfortranarray(ld), ndof=ndof, free_of=free_of,
-                   q_fixed=q_fixed, prop=np.asfortranarray(prop), pm=_pack_pm(pm), ri=_pack_ri(ri), tq=_pack_tq(tq),
-                   presc_dof=np.array(presc, np.int32), constraints=cons)
+                tq.append(([sb + 1, sa + 1], [eb, ea], coef))
+        return cls(case=case, fe=fe, segments=segments, n_el=n_el, ld=np.asfortranarray(ld), ndof=ndof,
+                   free_of=free_of, q_fixed=q_fixed, prop=np.asfortranarray(prop), pm=_pack_pm(pm), ri=_pack_ri(ri),
+                   tq=_pack_tq(tq), constraints=cons)
 
     # ------------------------------------------------------------------ helpers
-    def link_slice(self, li: int) -> np.ndarray:
-        """0-based all-DOF numbers of link li's local vector (length 3n+3)."""
-        return self.ld[: 3 * self.n_el[li] + 3, li] - 1
+    def seg_slice(self, si: int) -> np.ndarray:
+        """0-based all-DOF numbers of segment si's local vector (length 3n+3)."""
+        return self.ld[: 3 * self.n_el[si] + 3, si] - 1
+
+    def link_ends(self, li: int) -> tuple[np.ndarray, np.ndarray]:
+        """0-based DOF pairs (x, y) of the start and end node of link li."""
+        segs = [si for si, sg in enumerate(self.segments) if sg[0] == li]
+        return self.seg_slice(segs[0])[0:2], self.seg_slice(segs[-1])[2:4]
 
     def _args(self):
         return (self.free_of, self.n_el, self.ld, self.prop) + self.pm + self.ri + self.tq
 
     def initial_state(self, q_rigid: np.ndarray, qd_rigid: np.ndarray, mech) -> tuple[np.ndarray, np.ndarray]:
-        """All-DOF (q, v) at rest elastically, with the link ends on the rigid configuration."""
+        """All-DOF (q, v) at rest elastically, with every node on the rigid configuration."""
         km = mech.kinematics(q_rigid[None], qd_rigid[None], None)
         q, v = self.q_fixed.copy(), np.zeros(self.ndof)
-        for li in range(len(self.n_el)):
-            L = self.prop[0, li]
+        for si, (li, k0, k1) in enumerate(self.segments):
+            L = self.case["links"][li]["length"] / self.case["links"][li]["elements"]
             c, s = np.cos(km.phi[0, li]), np.sin(km.phi[0, li])
             w = km.omega[0, li]
-            dofs = self.link_slice(li)
-            pos = [km.ox[0, li], km.oy[0, li], km.ox[0, li] + L * c, km.oy[0, li] + L * s]
-            vel = [km.vx[0, li], km.vy[0, li], km.vx[0, li] - w * L * s, km.vy[0, li] + w * L * c]
+            dofs = self.seg_slice(si)
+            pos, vel = [], []
+            for k in (k0, k1):
+                pos += [km.ox[0, li] + k * L * c, km.oy[0, li] + k * L * s]
+                vel += [km.vx[0, li] - w * k * L * s, km.vy[0, li] + w * k * L * c]
             for k in range(4):
                 if self.free_of[dofs[k]] > 0:
                     q[dofs[k]], v[dofs[k]] = pos[k], vel[k]
@@ -163,7 +190,7 @@ class CoupledModel:
         for i, (_, _, kind, j) in enumerate(self.constraints):
             if kind == "drive":
                 out[:, i] = [q_rigid[:, 0], qd_rigid[:, 0], qdd_rigid[:, 0]]
-            else:
+            elif not isinstance(j, float):   # weld at a joint: its initial relative angle
                 out[0, i] = km0.phi[0, j.outboard] - (km0.phi[0, j.inboard] if j.inboard is not None else 0.0)
         return np.asfortranarray(out)
 
@@ -225,14 +252,15 @@ def _pack_tq(tq):
 
 
 def chord_motion(cm: CoupledModel, qf, vf, af) -> rigid.LinkMotion:
-    """Rigid motion of every link's chord over the frames (the coupled model's rigid motion)."""
-    nl = len(cm.n_el)
+    """Rigid motion of every link's chord (start node to end node) over the frames: the rigid
+    motion the coupled and nonlinear models compute."""
+    nl = len(cm.case["links"])
     out = {k: np.empty((qf.shape[1], nl)) for k in rigid.LinkMotion.__dataclass_fields__}
     for li in range(nl):
-        d = cm.link_slice(li)[:4]
-        rs, re_ = qf[d[:2]], qf[d[2:]]
-        vs, ve = vf[d[:2]], vf[d[2:]]
-        as_, ae = af[d[:2]], af[d[2:]]
+        ds, de = cm.link_ends(li)
+        rs, re_ = qf[ds], qf[de]
+        vs, ve = vf[ds], vf[de]
+        as_, ae = af[ds], af[de]
         c, cd, cdd = re_ - rs, ve - vs, ae - as_
         l2 = (c ** 2).sum(0)
         g = np.array([-c[1], c[0]]) / l2
@@ -244,3 +272,119 @@ def chord_motion(cm: CoupledModel, qf, vf, af) -> rigid.LinkMotion:
         out["vx"][:, li], out["vy"][:, li] = vs
         out["ax"][:, li], out["ay"][:, li] = as_
     return rigid.LinkMotion(**out)
+
+
+def _th(d, n: int, k: int) -> int:
+    """All-DOF number of the rotation of node k (0..n) in a segment's local vector d (0-based layout
+    [xs ys xe ye th_0 (p_k v_k th_k)_{k=1..n-1} th_n])."""
+    return d[3 * n + 2] if k == n else d[3 * k + 4]
+
+
+def _seg_chord(qf, d):
+    c = qf[d[2:4]] - qf[d[0:2]]
+    return c, np.arctan2(c[1], c[0])
+
+
+def node_state(cm: CoupledModel, qf, li: int, k: int):
+    """Total position (2, nf) and tangent angle (nf,) of mesh node k of link li."""
+    for si, (l2, k0, k1) in enumerate(cm.segments):
+        if l2 == li and k0 <= k <= k1:
+            break
+    d, n = cm.seg_slice(si), int(cm.n_el[si])
+    kk = k - k0
+    c, phi = _seg_chord(qf, d)
+    w = kk / n
+    p, v = (qf[d[3 * kk + 2]], qf[d[3 * kk + 3]]) if 0 < kk < n else (0.0, 0.0)
+    cs, sn = np.cos(phi), np.sin(phi)
+    pos = (1 - w) * qf[d[0:2]] + w * qf[d[2:4]] + np.array([cs * p - sn * v, sn * p + cs * v])
+    return pos, phi + qf[_th(d, n, kk)]
+
+
+def deviation(cm: CoupledModel, qf, ref) -> np.ndarray:
+    """Displacement from the rigid-body solution in the superposition DOF layout (ndof_fe, nf):
+    node translations = total position - rigid-body-solution position; rotations = total tangent
+    angle - rigid-body-solution link angle (principal value)."""
+    fe = cm.fe
+    u = np.zeros((fe.ndof, qf.shape[1]))
+    for li, ln in enumerate(cm.case["links"]):
+        n, L = ln["elements"], ln["length"]
+        cr, sr = np.cos(ref.phi[:, li]), np.sin(ref.phi[:, li])
+        for k in range(n + 1):
+            pos, psi = node_state(cm, qf, li, k)
+            node = fe.node_of[li][k]
+            u[fe.trans_dof[node]] = pos - np.array([ref.ox[:, li] + k / n * L * cr, ref.oy[:, li] + k / n * L * sr])
+            dphi = psi - ref.phi[:, li]
+            u[fe.rot_dof[(node, li)]] = np.arctan2(np.sin(dphi), np.cos(dphi))
+    return u
+
+
+def curvature(cm: CoupledModel, qf, li: int, frac: float) -> np.ndarray:
+    """Curvature [1/m] of link li at frac of its length, from the chord-frame elastic DOFs."""
+    n_link = cm.case["links"][li]["elements"]
+    s = frac * n_link
+    k = int(round(s))
+    parts = []   # (segment, element within it, xi)
+    for si, (l2, k0, k1) in enumerate(cm.segments):
+        if l2 != li:
+            continue
+        if abs(s - k) < 1e-9:     # at a mesh node: the elements that meet there
+            if k0 < k <= k1:
+                parts.append((si, k - k0 - 1, 1.0))
+            if k0 <= k < k1:
+                parts.append((si, k - k0, 0.0))
+        elif k0 <= s < k1 or (s == k1 == n_link):
+            e = min(int(np.floor(s)), k1 - 1)
+            parts.append((si, e - k0, s - e))
+    out = 0.0
+    for si, e, xi in parts:
+        d, n = cm.seg_slice(si), int(cm.n_el[si])
+        loc = np.zeros((6, qf.shape[1]))
+        for j, kk in enumerate((e, e + 1)):
+            if 0 < kk < n:
+                loc[3 * j], loc[3 * j + 1] = qf[d[3 * kk + 2]], qf[d[3 * kk + 3]]
+            loc[3 * j + 2] = qf[_th(d, n, kk)]
+        out = out + kernels.element_curvatures(loc, np.zeros(qf.shape[1]), cm.prop[0, si] / n, xi)
+    return out / len(parts)
+
+
+def joint_angles(cm: CoupledModel, qf) -> dict:
+    """{joint: angle (nf,)} measured at the joint: difference of the tangent angles of the outboard
+    and the inboard link there (ground: 0), unwrapped in time."""
+    out = {}
+    for j in cm.fe.joints:
+        tot = 0.0
+        for li, end, sign in ((j.outboard, j.outboard_end, 1.0), (j.inboard, j.inboard_end, -1.0)):
+            if li is not None:
+                tot = tot + sign * node_state(cm, qf, li, 0 if end == "start" else cm.case["links"][li]["elements"])[1]
+        out[j.name] = np.unwrap(tot)
+    return out
+
+
+def diagnostics(cm: CoupledModel, qf, ef, chord, ref, iters: int, nsteps: int) -> dict:
+    """Energy balance, Newton statistics, link-length drift and drift from the rigid-body solution."""
+    e = ef[0] + ef[1] - ef[2]
+    scale = max(np.max(np.abs(ef[0])), np.max(np.abs(ef[2])), 1e-300)
+    stretch = []
+    for si in range(len(cm.segments)):
+        d = cm.seg_slice(si)
+        ell = np.hypot(*(qf[d[2:4]] - qf[d[0:2]]))
+        stretch.append(float(np.max(np.abs(ell / cm.prop[0, si] - 1.0))))
+    tangents = joint_angles(cm, qf)
+    drift = {}
+    for j in cm.fe.joints:
+        th_r = np.unwrap(ref.phi[:, j.outboard] - (ref.phi[:, j.inboard] if j.inboard is not None else 0.0))
+        th_c = np.unwrap(chord.phi[:, j.outboard] - (chord.phi[:, j.inboard] if j.inboard is not None else 0.0))
+        dth = th_c - th_r
+        dth -= 2 * np.pi * np.round(dth[0] / (2 * np.pi))
+        dhub = tangents[j.name] - th_r
+        dhub -= 2 * np.pi * np.round(dhub[0] / (2 * np.pi))
+        drift[j.name] = {"max_abs_rad": float(np.max(np.abs(dth))), "final_rad": float(dth[-1]),
+                         "at_joint_tangents_max_abs_rad": float(np.max(np.abs(dhub)))}
+    return {"energy_balance": {"max_abs_drift_J": float(np.max(np.abs(e - e[0]))),
+                               "relative_drift": float(np.max(np.abs(e - e[0])) / scale),
+                               "final_kinetic_J": float(ef[0, -1]), "final_work_J": float(ef[2, -1])},
+            "newton": {"iterations": int(iters), "mean_per_step": iters / max(nsteps, 1),
+                       "max_per_step": int(np.max(ef[3]))},
+            "link_length_drift": {"max_relative": max(stretch), "bound": 1e-3, "within_bound": max(stretch) < 1e-3},
+            "joint_closure_error_m": 0.0,
+            "rigid_drift_from_rigid_body_solution": drift}

@@ -11,7 +11,8 @@ import numpy as np
 from . import kernels, rigid
 from .case import MODELS, SUPERPOSITION_MODELS
 from .errors import CaseError
-from .coupled import CoupledModel, chord_motion
+from . import coupled
+from .coupled import CoupledModel
 from .model import FEModel
 from .outputs import evaluate_outputs, output_unit
 from .results import Result
@@ -176,7 +177,7 @@ class Prepared:
         self.rig = self.rm.kernel_samples(self.gravity)
         self._checked = False
         self.q_free, self.q_val = elastic_torque_loads(case, self.fe, self.rm)
-        self.coupled = None
+        self.coupled = {}
         self.mech = build_mechanism(case)
         self.t_prepare = time.perf_counter() - t_start
 
@@ -187,8 +188,8 @@ class Prepared:
         model = case["solver"]["model"] if model is None else model
         if model not in MODELS:
             raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
-        if model == "coupled":
-            return self._run_coupled(t_start)
+        if model in ("coupled", "nonlinear"):
+            return self._run_coupled(t_start, model)
         if not self._checked:
             check_elastic_problem(fe, self.rig)
             self._checked = True
@@ -212,146 +213,43 @@ class Prepared:
                       a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing)
 
 
-    def _run_coupled(self, t_start: float) -> Result:
-        """The one-pass coupled model; the rigid-body solution on the grid is its reference."""
+    def _run_coupled(self, t_start: float, model: str) -> Result:
+        """The one-pass coupled model (one chord frame per link) or the nonlinear co-rotational model
+        (one per element); the rigid-body solution on the grid is their reference."""
         case, fe, sol = self.case, self.fe, self.case["solver"]
-        if self.coupled is None:
-            self.coupled = CoupledModel.from_case(case, fe)
-        cm = self.coupled
+        if model not in self.coupled:
+            self.coupled[model] = CoupledModel.from_case(case, fe, split=(model == "nonlinear"))
+        cm = self.coupled[model]
         q0, v0 = cm.initial_state(self.rm.q[0], self.rm.qd[0], self.mech)
         cval = cm.constraint_values(self.t, self.rm.q, self.rm.qd, self.rm.qdd, self.mech)
         t0 = time.perf_counter()
         qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, beta=sol["beta"], gamma=sol["gamma"],
-                                       out_every=self.out_every, tol=sol["newton_tol"], maxit=sol["newton_maxit"],
-                                       gravity=self.gravity, rayleigh=sol["rayleigh"])
+                                           out_every=self.out_every, tol=sol["newton_tol"], maxit=sol["newton_maxit"],
+                                           gravity=self.gravity, rayleigh=sol["rayleigh"])
         t_kernel = time.perf_counter() - t0
         idx = slice(0, self.nsteps + 1, self.out_every)
         ref = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx] for k in rigid.LinkMotion.__dataclass_fields__})
-        chord = chord_motion(cm, qf, vf, af)
-        u_dev = coupled_deviation(cm, qf, chord, ref)
+        chord = coupled.chord_motion(cm, qf, vf, af)
+        u_dev = coupled.deviation(cm, qf, ref)
         rig_chord = np.asfortranarray(np.stack([chord.phi, chord.omega, chord.alpha, chord.ax - self.gravity[0],
                                                 chord.ay - self.gravity[1]]).transpose(0, 2, 1))
         columns = evaluate_outputs(fe, case["outputs"], u_dev, ref, self.rm.q[idx], self.rm.qd[idx], self.rm.qdd[idx],
                                    rig_chord, "classic", joint_motion=chord,
-                                   curvature=lambda li, frac: coupled_curvature(cm, qf, li, frac))
-        joints = coupled_joint_angles(cm, qf, vf, af, chord)   # tangent angles at the joints (diagnostics)
+                                   curvature=lambda li, frac: coupled.curvature(cm, qf, li, frac))
         units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
         energy = {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}
         for k, y in energy.items():
             columns[k], units[k] = y, "J"
         columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
-        for (_, _, kind, j), lam in zip(cm.constraints, lf):
+        for (_, _, kind, _), lam in zip(cm.constraints, lf):
             if kind == "drive":   # the torque the kinematic drive applies (the constraint torque is -lambda)
                 columns["drive_torque"], units["drive_torque"] = -lam, "N m"
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
-        extra = {"coupled": coupled_diagnostics(cm, qf, ef, joints, chord, ref, fe, iters, self.nsteps)}
-        return Result(case=case, model="coupled", t=self.t[idx], columns=columns, units=units, fe=fe,
+        extra = {"coupled": coupled.diagnostics(cm, qf, ef, chord, ref, iters, self.nsteps)}
+        return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
                       q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_dev, v=np.zeros_like(u_dev),
                       a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra)
-
-
-def _th(d, n: int, k: int) -> int:
-    """All-DOF number of the rotation of node k (0..n) in a link's local vector d (0-based layout
-    [xs ys xe ye th_0 (p_k v_k th_k)_{k=1..n-1} th_n])."""
-    return d[3 * n + 2] if k == n else d[3 * k + 4]
-
-
-def coupled_deviation(cm, qf, chord, ref) -> np.ndarray:
-    """Displacement from the rigid-body solution in the superposition DOF layout (ndof_fe, nf):
-    node translations = total position - rigid-body-solution position; rotations = total tangent
-    angle - rigid-body-solution link angle."""
-    fe = cm.fe
-    u = np.zeros((fe.ndof, qf.shape[1]))
-    for li in range(len(cm.n_el)):
-        n, L = int(cm.n_el[li]), cm.prop[0, li]
-        d = cm.link_slice(li)
-        rs, re_ = qf[d[0:2]], qf[d[2:4]]
-        c, s = np.cos(chord.phi[:, li]), np.sin(chord.phi[:, li])
-        cr, sr = np.cos(ref.phi[:, li]), np.sin(ref.phi[:, li])
-        for k in range(n + 1):
-            w = k / n
-            p, v = (qf[d[3 * k + 2]], qf[d[3 * k + 3]]) if 0 < k < n else (0.0, 0.0)
-            th = qf[_th(d, n, k)]
-            total = (1 - w) * rs + w * re_ + np.array([c * p - s * v, s * p + c * v])
-            rigid_pt = np.array([ref.ox[:, li] + w * L * cr, ref.oy[:, li] + w * L * sr])
-            node = fe.node_of[li][k]
-            u[fe.trans_dof[node]] = total - rigid_pt
-            dphi = chord.phi[:, li] + th - ref.phi[:, li]
-            u[fe.rot_dof[(node, li)]] = np.arctan2(np.sin(dphi), np.cos(dphi))
-    return u
-
-
-def coupled_curvature(cm, qf, li: int, frac: float) -> np.ndarray:
-    """Curvature [1/m] of link li at frac of its length from the chord-frame elastic DOFs."""
-    n = int(cm.n_el[li])
-    le = cm.prop[0, li] / n
-    d = cm.link_slice(li)
-
-    def local(e):  # element e (0-based): [p, v, th, p, v, th], zero end translations
-        out = np.zeros((6, qf.shape[1]))
-        for j, k in enumerate((e, e + 1)):
-            if 0 < k < n:
-                out[3 * j], out[3 * j + 1] = qf[d[3 * k + 2]], qf[d[3 * k + 3]]
-            out[3 * j + 2] = qf[_th(d, n, k)]
-        return out
-
-    s = frac * n
-    k = int(round(s))
-    zero = np.zeros(qf.shape[1])
-    if abs(s - k) < 1e-9:
-        parts = ([(k - 1, 1.0)] if k > 0 else []) + ([(k, 0.0)] if k < n else [])
-    else:
-        e = min(int(np.floor(s)), n - 1)
-        parts = [(e, s - e)]
-    return sum(kernels.element_curvatures(local(e), zero, le, xi) for e, xi in parts) / len(parts)
-
-
-def coupled_joint_angles(cm, qf, vf, af, chord) -> dict:
-    """{joint: (angle, speed, acceleration)} over the frames, measured at the joint: the difference of
-    the tangent angles psi = phi_chord + th_end of the outboard and the inboard link (ground: 0)."""
-    out = {}
-    for j in cm.fe.joints:
-        tot = [0.0, 0.0, 0.0]
-        for li, end, sign in ((j.outboard, j.outboard_end, 1.0), (j.inboard, j.inboard_end, -1.0)):
-            if li is None:
-                continue
-            n = int(cm.n_el[li])
-            k = _th(cm.link_slice(li), n, 0 if end == "start" else n)
-            for i, (chord_q, x) in enumerate(((chord.phi, qf), (chord.omega, vf), (chord.alpha, af))):
-                tot[i] = tot[i] + sign * (chord_q[:, li] + x[k])
-        out[j.name] = (np.unwrap(tot[0]), tot[1], tot[2])
-    return out
-
-
-def coupled_diagnostics(cm, qf, ef, joints, chord, ref, fe, iters, nsteps) -> dict:
-    """Energy balance, Newton statistics, link-length drift and drift from the rigid-body solution."""
-    e = ef[0] + ef[1] - ef[2]
-    scale = max(np.max(np.abs(ef[0])), np.max(np.abs(ef[2])), 1e-300)
-    stretch = []
-    for li in range(len(cm.n_el)):
-        d = cm.link_slice(li)
-        ell = np.hypot(*(qf[d[2:4]] - qf[d[0:2]]))
-        stretch.append(float(np.max(np.abs(ell / cm.prop[0, li] - 1.0))))
-    drift = {}
-    for j in fe.joints:
-        th_r = np.unwrap(ref.phi[:, j.outboard] - (ref.phi[:, j.inboard] if j.inboard is not None else 0.0))
-        th_c = np.unwrap(chord.phi[:, j.outboard] - (chord.phi[:, j.inboard] if j.inboard is not None else 0.0))
-        dth = th_c - th_r
-        dth -= 2 * np.pi * np.round(dth[0] / (2 * np.pi))
-        dhub = joints[j.name][0] - th_r
-        dhub -= 2 * np.pi * np.round(dhub[0] / (2 * np.pi))
-        drift[j.name] = {"max_abs_rad": float(np.max(np.abs(dth))), "final_rad": float(dth[-1]),
-                         "at_joint_tangents_max_abs_rad": float(np.max(np.abs(dhub)))}
-    return {"energy_balance": {"max_abs_drift_J": float(np.max(np.abs(e - e[0]))),
-                               "relative_drift": float(np.max(np.abs(e - e[0])) / scale),
-                               "final_kinetic_J": float(ef[0, -1]), "final_work_J": float(ef[2, -1])},
-            "newton": {"iterations": int(iters), "mean_per_step": iters / max(nsteps, 1),
-                       "max_per_step": int(np.max(ef[3]))},
-            "link_length_drift": {"max_relative": max(stretch), "per_link": stretch,
-                                  "bound": 1e-3, "within_bound": max(stretch) < 1e-3},
-            "joint_closure_error_m": 0.0,
-            "rigid_drift_from_rigid_body_solution": drift}
 
 
 def simulate(case: dict, model: str | None = None, *, dt: float | None = None,

@@ -198,13 +198,12 @@ def test_weld_keeps_the_relative_angle(cases_dir):
     assert beta_ref == pytest.approx(0.5)
     # tangents welded: the joint angle at the tangents equals the initial one (drift from the rigid
     # solution, whose elbow is a free revolute, is large; the weld itself is exact)
-    from flexmech_py.coupled import CoupledModel
-    from flexmech_py.simulate import Prepared, coupled_joint_angles, chord_motion
+    from flexmech_py.coupled import joint_angles
     p = Prepared(case)
     cm = CoupledModel.from_case(case, p.fe)
     q0, v0 = cm.initial_state(p.rm.q[0], p.rm.qd[0], p.mech)
     qf, vf, af, lf, ef, _ = cm.run(q0, v0, p.t, cm.constraint_values(p.t, p.rm.q, p.rm.qd, p.rm.qdd, p.mech), p.dt,
                                    out_every=p.out_every)
-    ang = coupled_joint_angles(cm, qf, vf, af, chord_motion(cm, qf, vf, af))["joint_2"][0]
+    ang = joint_angles(cm, qf)["joint_2"]
     assert np.max(np.abs(ang - 0.5)) < 1e-10
     assert c["energy_balance"]["relative_drift"] < 1e-6

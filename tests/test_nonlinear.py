@@ -1,0 +1,127 @@
+"""The fully nonlinear (co-rotational) model: the large-deflection static cantilever against the
+elastica, the small-load limit (= the coupled model), energy in free motion, and mesh convergence."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_bvp
+
+import flexmech_py as fm
+from flexmech_py.coupled import CoupledModel, node_state
+from flexmech_py.model import FEModel
+from flexmech_py.simulate import simulate_models
+
+# Mattiasson (1981), tip-loaded cantilever: (PL^2/EI, vertical tip deflection / L, shortening / L);
+# the test computes the elastica itself (solve_bvp) and checks it against these published values first.
+MATTIASSON = [(1.0, 0.30172, 0.05643), (5.0, 0.71379, 0.38763)]
+
+
+def elastica_tip(k):
+    """Tip (x, y)/L of the elastica theta'' = -k cos(theta), theta(0) = 0, theta'(1) = 0."""
+    def f(s, y):
+        return np.vstack([y[1], -k * np.cos(y[0]), np.cos(y[0]), np.sin(y[0])])
+
+    def bc(ya, yb):
+        return np.array([ya[0], yb[1], ya[2], ya[3]])
+
+    s = np.linspace(0.0, 1.0, 201)
+    y0 = np.zeros((4, s.size))
+    y0[2] = s
+    sol = solve_bvp(f, bc, s, y0, tol=1e-10, max_nodes=100000)
+    assert sol.success
+    return sol.y[2, -1], sol.y[3, -1]
+
+
+def static_cantilever_tip(k, n):
+    """Static tip position of a cantilever (clamped at the origin along +X) under a downward tip load
+    P = k EI/L^2, nonlinear model with n elements: Newton on [R(q) - F + G^T lam; g(q)] = 0 with the
+    compiled residual R and its static tangent K_t, the weld constraints g by finite differences."""
+    L, E, I = 1.0, 2e11, 1e-9
+    case = fm.validate_case({
+        "mechanism": {"type": "serial"},
+        "links": [{"name": "b", "length": L, "area": 1e-4, "second_moment": I, "youngs_modulus": E,
+                   "density": 1.0, "elements": n}],
+        "drive": {"type": "torque", "torques": [{"joint": "base", "constant": 0.0}]},
+        "solver": {"t_end": 1.0, "dt": 1.0}, "outputs": {"a": {"kind": "joint_angle", "joint": "base"}}})
+    cm = CoupledModel.from_case(case, FEModel.from_case(case), split=True)
+    q = cm.q_fixed.copy()
+    for si, (_, k0, k1) in enumerate(cm.segments):
+        d = cm.seg_slice(si)
+        q[d[0]], q[d[2]] = k0 * L / n, k1 * L / n
+    free = np.flatnonzero(cm.free_of > 0)
+    free = free[np.argsort(cm.free_of[free])]
+    tip = cm.seg_slice(n - 1)[2:4]
+    zero = np.zeros(cm.ndof)
+
+    def g(qq):   # base tangent welded to the ground; tangents continuous at interior nodes
+        out = [node_state(cm, qq[:, None], 0, 0)[1][0]]
+        for si in range(1, n):
+            da, db = cm.seg_slice(si - 1), cm.seg_slice(si)
+            ca, cb = qq[da[2:4]] - qq[da[0:2]], qq[db[2:4]] - qq[db[0:2]]
+            out.append(np.arctan2(cb[1], cb[0]) + qq[db[4]] - np.arctan2(ca[1], ca[0]) - qq[da[5]])
+        return np.array(out)
+
+    def grad(qq, h=1e-7):
+        G = np.zeros((n, free.size))
+        for j, i in enumerate(free):
+            e = np.zeros(cm.ndof)
+            e[i] = h
+            G[:, j] = (g(qq + e) - g(qq - e)) / (2 * h)
+        return G
+
+    lam = np.zeros(n)
+    for frac in np.linspace(0.1, 1.0, 10):     # load stepping
+        F = np.zeros(cm.ndof)
+        F[tip[1]] = -frac * k * E * I / L**2
+        for _ in range(200):   # quasi-Newton: the constraint curvature (lam d2g/dq2) is left out
+            res, _, _, K, _ = cm.dense(q, zero, zero)
+            G = grad(q)
+            J = np.block([[K, G.T], [G, np.zeros((n, n))]])
+            r = np.concatenate([res[free] - F[free] + G.T @ lam, g(q)])
+            dx = np.linalg.solve(J, -r)
+            q[free] += dx[:free.size]
+            lam += dx[free.size:]
+            if np.max(np.abs(dx[:free.size])) < 1e-12 * L:
+                break
+    return q[tip[0]], q[tip[1]]
+
+
+def test_elastica_reference_matches_mattiasson():
+    for k, w, u in MATTIASSON:
+        x, y = elastica_tip(k)
+        assert y == pytest.approx(w, abs=1e-5) and 1 - x == pytest.approx(u, abs=1e-5)
+
+
+@pytest.mark.parametrize("k", [1.0, 5.0])
+def test_large_deflection_cantilever_against_elastica(k):
+    """Tip deflection of 30 % and 71 % of the length: error falls as h^2 with the mesh."""
+    x_ex, y_ex = elastica_tip(k)
+    errs = []
+    for n in (4, 8):
+        x, y = static_cantilever_tip(k, n)
+        errs.append(max(abs(x - x_ex), abs(-y - y_ex)))
+    print(f"\nelastica k={k}: tip error {errs} (L = 1)")
+    assert errs[1] < 2e-3                       # measured 1.5e-4 (k=1), 1.3e-3 (k=5) with 8 elements
+    assert np.log2(errs[0] / errs[1]) > 1.7     # second order
+
+
+def test_small_motion_limit_equals_coupled(cases_dir):
+    """Small deflections (the seed manipulator): the nonlinear and the coupled model agree."""
+    case = fm.load_case(cases_dir / "manipulator_bricout.toml", overrides=["solver.t_end=0.1"])
+    rr = simulate_models(case, ("coupled", "nonlinear"))
+    for col in ("tip_dy_elastic", "tip_transverse_elastic", "alpha", "beta"):
+        a, b = rr["coupled"][col], rr["nonlinear"][col]
+        assert np.max(np.abs(a - b)) < 2e-2 * np.max(np.abs(a)), col
+
+
+def test_energy_balance_and_mesh_convergence_fourbar(cases_dir):
+    """Seed four-bar over its first 0.1 s (before the deflections grow large): energy balance, and
+    the midspan strain converging with the mesh."""
+    case = fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=0.1"])
+    ys = []
+    for n in (2, 4, 8):
+        res = fm.simulate(case, model="nonlinear", elements_per_link=n)
+        assert res.extra["coupled"]["energy_balance"]["relative_drift"] < 1e-4
+        ys.append(res["strain_coupler_mid"])
+    e = [np.max(np.abs(ys[i] - ys[-1])) / np.max(np.abs(ys[-1])) for i in range(2)]
+    print(f"\nnonlinear four-bar coupler strain vs 8 elements: {e}")
+    assert e[0] > e[1]
