@@ -2,6 +2,8 @@
 
     flexmech run CASE.toml [--model M] [--dt S] [--elements-per-link N] [--set KEY.PATH=VALUE ...] [--out DIR]
     flexmech reproduce [--out DIR]
+    flexmech compare RESULT_DIR --reference FILE.csv [--x t|crank_angle] [--columns C ...] [--out DIR]
+    flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
 
 Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2.
 """
@@ -12,6 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from .case import MODELS as MODELS_ALL
 from .errors import FlexmechError
 
 __all__ = ["main"]
@@ -60,7 +63,51 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
     rp.add_argument("--t-end", type=_positive_float, default=None,
                     help="shorten every run to this many seconds (quick look; the seed's claims need the full runs)")
+
+    c = sub.add_parser("compare", help="compare a result with a reference curve, or several models of one case")
+    c.add_argument("result", nargs="?", help="a folder written by `flexmech run` (its timeseries.csv)")
+    c.add_argument("--reference", help="reference CSV (format: docs/compare.md)")
+    c.add_argument("--models", metavar="CASE", help="run several models of CASE and compare each with one of them")
+    c.add_argument("--reference-model", default="nonlinear", choices=MODELS, help="the model compared against")
+    c.add_argument("--model-list", default=",".join(MODELS),
+                   help="comma-separated models to run with --models (default: all)")
+    c.add_argument("--x", default="t", choices=("t", "crank_angle"), help="align by time or by (unwrapped) crank angle")
+    c.add_argument("--columns", nargs="+", help="columns to compare (default: all in common)")
+    c.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value (--models)")
+    c.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (--models)")
+    c.add_argument("--out", default=None, help="output folder (default: RESULT_DIR/compare, or ./compare)")
     return p
+
+
+def _cmd_compare(args) -> int:
+    from .compare import compare_models, compare_result_dir, table
+
+    if args.models:
+        from .case import load_case
+        from .simulate import _with_elements
+
+        if args.result or args.reference:
+            raise FlexmechError("compare: give either RESULT_DIR --reference FILE, or --models CASE, not both")
+        case = load_case(args.models, overrides=args.set)
+        if args.elements_per_link:
+            case = _with_elements(case, args.elements_per_link)
+        models = [m.strip() for m in args.model_list.split(",") if m.strip()]
+        bad = [m for m in models if m not in MODELS_ALL]
+        if bad:
+            raise FlexmechError(f"--model-list: unknown model(s) {', '.join(bad)}; choose from {', '.join(MODELS_ALL)}")
+        out, runs, paths = compare_models(case, models, args.reference_model, x=args.x, columns=args.columns,
+                                          out_dir=args.out or "compare")
+        for m, metrics in out.items():
+            print(f"{m} against {args.reference_model} (kernel {runs[m].timing['kernel_s']:.3f} s):")
+            print(table(metrics))
+    else:
+        if not args.result or not args.reference:
+            raise FlexmechError("compare: give RESULT_DIR and --reference FILE.csv, or --models CASE.toml")
+        metrics, paths = compare_result_dir(args.result, args.reference, x=args.x, columns=args.columns,
+                                            out_dir=args.out)
+        print(table(metrics))
+    print("wrote " + ", ".join(str(p) for p in paths[:4]) + (f" and {len(paths) - 4} more" if len(paths) > 4 else ""))
+    return 0
 
 
 def _cmd_run(args) -> int:
@@ -92,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return {"run": _cmd_run, "reproduce": _cmd_reproduce}[args.command](args)
+        return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare}[args.command](args)
     except FlexmechError as exc:
         print(f"flexmech: error: {exc}", file=sys.stderr)
         return 2

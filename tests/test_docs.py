@@ -144,7 +144,7 @@ def _commands(doc):
     return out
 
 
-CLI_COMMANDS = [c for doc in ("cli.md", "cases.md", "api.md") for c in _commands(doc)]
+CLI_COMMANDS = [c for doc in ("cli.md", "cases.md", "api.md", "compare.md") for c in _commands(doc)]
 
 
 def test_cli_md_has_examples():
@@ -162,6 +162,9 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
     rc = main(argv)
     err = capsys.readouterr().err
     assert rc == 0, err
+    if argv[0] == "compare":
+        assert list(tmp_path.rglob("compare.json"))
+        return
     csvs = list(tmp_path.rglob("timeseries.csv"))
     assert csvs
     cols, units = read_timeseries(csvs[0])

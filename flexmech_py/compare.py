@@ -1,0 +1,169 @@
+"""Compare a result with a reference curve (a digitized published curve, or another model's run).
+
+Reference CSV format (``docs/compare.md``): ``#`` comment lines first — one ``# source: ...``
+line is required (the citation), an optional ``# units: ...`` line gives the unit of every
+column — then a header line with the column names and the data rows.  ``timeseries.csv``
+files written by flexmech have this format, so any run can serve as a reference.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CaseError
+from .plots import line_figure
+from .results import _atomic_write
+
+__all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models"]
+
+ANGLE_UNITS = {"rad": 1.0, "deg": np.pi / 180.0}
+
+
+def read_reference(path) -> tuple[dict, dict, str]:
+    """({column: array}, {column: unit}, source) of a reference CSV; CaseError on a bad file."""
+    path = Path(path)
+    if not path.is_file():
+        raise CaseError("--reference", f"{str(path)!r} does not exist; give a CSV file (format: docs/compare.md)")
+    source, units, body = "", [], []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if line.startswith("#"):
+            key, _, val = line[1:].partition(":")
+            if key.strip() == "source":
+                source = val.strip()
+            elif key.strip() == "units":
+                units = [u.strip() for u in val.split(",")]
+        elif line.strip():
+            body.append(line)
+    if not body:
+        raise CaseError("--reference", f"{path}: no header line; the first non-comment line names the columns")
+    header = [h.strip() for h in body[0].split(",")]
+    try:
+        data = np.array([[float(x) for x in row.split(",")] for row in body[1:]], float).reshape(-1, len(header))
+    except ValueError as exc:
+        raise CaseError("--reference", f"{path}: data rows must hold {len(header)} numbers each ({exc})") from None
+    if data.shape[0] < 2:
+        raise CaseError("--reference", f"{path}: needs at least two data rows")
+    if units and len(units) != len(header):
+        raise CaseError("--reference", f"{path}: the '# units:' line has {len(units)} entries for {len(header)} columns")
+    if not source:
+        raise CaseError("--reference", f"{path}: add a '# source: <citation>' line saying where the curve comes from")
+    return ({h: data[:, i] for i, h in enumerate(header)}, dict(zip(header, units)) if units else {}, source)
+
+
+def _peak(x, y):
+    i = int(np.argmax(np.abs(y)))
+    return float(y[i]), float(x[i])
+
+
+def compare_columns(res_cols: dict, ref_cols: dict, x: str = "t", columns=None, ref_units=None) -> dict:
+    """Metrics of every compared column: the result interpolated onto the reference abscissa.
+
+    x: ``t`` or ``crank_angle`` (unwrapped; a reference in degrees, by its units line, is converted).
+    Returns {column: {max_error, rms_error (relative to the reference peak), peak_ref, peak_result,
+    peak_error (relative), peak_shift (in x units), correlation, points, x_range}}.
+    """
+    ref_units = ref_units or {}
+    for name, cols in (("result", res_cols), ("reference", ref_cols)):
+        if x not in cols:
+            raise CaseError("--x", f"the {name} has no column {x!r}; columns: {', '.join(cols)}")
+    xr = np.asarray(res_cols[x], float)
+    xf = np.asarray(ref_cols[x], float) * (ANGLE_UNITS.get(ref_units.get(x, "rad"), 1.0) if x != "t" else 1.0)
+    if np.any(np.diff(xr) <= 0):
+        raise CaseError("--x", f"the result's {x!r} is not increasing (the crank turns backwards?); compare by time")
+    order = np.argsort(xf)
+    common = [c for c in ref_cols if c != x and c in res_cols] if columns is None else list(columns)
+    if not common:
+        raise CaseError("--columns", f"no column in common; result: {', '.join(res_cols)}; "
+                                     f"reference: {', '.join(ref_cols)}")
+    out = {}
+    for c in common:
+        if c not in res_cols or c not in ref_cols:
+            raise CaseError("--columns", f"{c!r} is not in both files")
+        xs, yf = xf[order], np.asarray(ref_cols[c], float)[order]
+        sel = (xs >= xr[0]) & (xs <= xr[-1])
+        if sel.sum() < 2:
+            raise CaseError("--x", f"the result ({xr[0]:.4g}..{xr[-1]:.4g}) and the reference "
+                                   f"({xs[0]:.4g}..{xs[-1]:.4g}) do not overlap in {x}")
+        xs, yf = xs[sel], yf[sel]
+        yr = np.interp(xs, xr, np.asarray(res_cols[c], float))
+        pf, xpf = _peak(xs, yf)
+        pr, xpr = _peak(xs, yr)
+        scale = abs(pf) if pf != 0 else 1.0
+        err = yr - yf
+        corr = float(np.corrcoef(yr, yf)[0, 1]) if np.std(yr) > 0 and np.std(yf) > 0 else float("nan")
+        out[c] = {"max_error": float(np.max(np.abs(err)) / scale), "rms_error": float(np.sqrt(np.mean(err ** 2)) / scale),
+                  "peak_ref": pf, "peak_result": pr, "peak_error": (abs(pr) - abs(pf)) / scale,
+                  "peak_shift": xpr - xpf, "correlation": corr, "points": int(xs.size),
+                  "x_range": [float(xs[0]), float(xs[-1])], "_x": xs, "_ref": yf, "_res": yr}
+    return out
+
+
+def _write(metrics: dict, out_dir: Path, x: str, title: str, labels=("result", "reference"), extra=None) -> list[Path]:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for c, m in metrics.items():
+        p = line_figure(out_dir / f"compare_{c}.png",
+                        [{"x": m["_x"], "ylabel": c, "series": [(labels[1], m["_ref"], {"color": "k", "lw": 1.4}),
+                                                                (labels[0], m["_res"], {"color": "C3", "lw": 1.0})]},
+                         {"x": m["_x"], "ylabel": f"{labels[0]} - {labels[1]}",
+                          "series": [("", m["_res"] - m["_ref"], {"color": "C3", "lw": 0.8})]}],
+                        title=f"{title}: {c} (max error {100 * m['max_error']:.3g} % of the reference peak)", xlabel=x)
+        if p:
+            paths.append(p)
+    clean = {c: {k: v for k, v in m.items() if not k.startswith("_")} for c, m in metrics.items()}
+    js = out_dir / "compare.json"
+    _atomic_write(js, json.dumps({"x": x, **(extra or {}), "columns": clean}, indent=2) + "\n")
+    csv = out_dir / "compare.csv"
+    keys = ["max_error", "rms_error", "peak_ref", "peak_result", "peak_error", "peak_shift", "correlation", "points"]
+    _atomic_write(csv, "column," + ",".join(keys) + "\n"
+                  + "".join(f"{c}," + ",".join(f"{m[k]:.6g}" for k in keys) + "\n" for c, m in clean.items()))
+    return [js, csv] + paths
+
+
+def table(metrics: dict) -> str:
+    lines = [f"{'column':<26} {'max err':>9} {'rms err':>9} {'peak err':>9} {'peak shift':>11} {'corr':>7}"]
+    for c, m in metrics.items():
+        lines.append(f"{c:<26} {100 * m['max_error']:>8.3g}% {100 * m['rms_error']:>8.3g}% "
+                     f"{100 * m['peak_error']:>8.3g}% {m['peak_shift']:>11.4g} {m['correlation']:>7.4f}")
+    return "\n".join(lines)
+
+
+def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None):
+    """Compare a run folder (its timeseries.csv) with a reference CSV; writes compare.* into out_dir."""
+    from .results import read_timeseries
+
+    result_dir = Path(result_dir)
+    ts = result_dir / "timeseries.csv"
+    if not ts.is_file():
+        raise CaseError("RESULT_DIR", f"{str(result_dir)!r} holds no timeseries.csv; give a folder written by "
+                                      "`flexmech run`")
+    res_cols, _ = read_timeseries(ts)
+    ref_cols, ref_units, source = read_reference(reference)
+    metrics = compare_columns(res_cols, ref_cols, x=x, columns=columns, ref_units=ref_units)
+    paths = _write(metrics, Path(out_dir) if out_dir else result_dir / "compare", x, "comparison",
+                   extra={"reference": str(reference), "source": source, "result": str(result_dir)})
+    return metrics, paths
+
+
+def compare_models(case: dict, models, reference_model="nonlinear", x="t", columns=None, out_dir="compare"):
+    """Run several models of one case (one shared rigid motion) and compare each with reference_model."""
+    from .simulate import simulate_models
+
+    models = list(dict.fromkeys(list(models) + [reference_model]))
+    runs = simulate_models(case, models)
+    ref = runs[reference_model]
+    ref_cols = {"t": ref.t, **ref.columns}
+    out, paths = {}, []
+    for m in models:
+        if m == reference_model:
+            continue
+        cols = {"t": runs[m].t, **runs[m].columns}
+        use = columns or [c for c in case["outputs"] if c in cols and c in ref_cols]
+        out[m] = compare_columns(cols, ref_cols, x=x, columns=use)
+        paths += _write(out[m], Path(out_dir) / m, x, f"{m} against {reference_model}", labels=(m, reference_model),
+                        extra={"model": m, "reference_model": reference_model,
+                               "kernel_s": runs[m].timing["kernel_s"], "reference_kernel_s": ref.timing["kernel_s"]})
+    return out, runs, paths
