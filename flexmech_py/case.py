@@ -36,6 +36,7 @@ OUTPUT_KINDS = {
     "displacement": ({"at", "component"}, {}),
     "position": ({"at", "component"}, {}),
     "inertia_load": ({"component"}, {"at": None, "model": "run"}),
+    "axial_force": ({"link"}, {"at": 0.5}),
 }
 COMPONENTS = {
     "displacement": ("x", "y", "rotation", "axial", "transverse"),
@@ -44,7 +45,7 @@ COMPONENTS = {
 }
 UNITS = {
     "joint_angle": "rad", "joint_speed": "rad/s", "joint_acceleration": "rad/s^2", "link_angle": "rad",
-    "strain": "1", "curvature": "1/m", "position": "m",
+    "strain": "1", "curvature": "1/m", "position": "m", "axial_force": "N",
 }
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -350,7 +351,8 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
     r["loads"] = {"gravity": _vec(loads, "gravity", "loads", 2, default=[0.0, 0.0])}
 
     sol = raw.get("solver", {})
-    _keys(sol, {"t_end", "dt", "output_every", "beta", "gamma", "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit"}, "solver")
+    _keys(sol, {"t_end", "dt", "output_every", "beta", "gamma", "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit",
+                "geometric_stiffness", "geometric_tol", "geometric_maxit"}, "solver")
     t_end = _num(sol, "t_end", "solver", positive=True, required=True)
     dt = _num(sol, "dt", "solver", positive=True, required=True)
     if dt > t_end:
@@ -370,7 +372,11 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
                    "rigid_rtol": _num(sol, "rigid_rtol", "solver", default=1e-10, positive=True),
                    "rigid_atol": _num(sol, "rigid_atol", "solver", default=1e-12, positive=True),
                    "newton_tol": _num(sol, "newton_tol", "solver", default=1e-8, positive=True),
-                   "newton_maxit": _int(sol, "newton_maxit", "solver", default=25)}
+                   "newton_maxit": _int(sol, "newton_maxit", "solver", default=25),
+                   "geometric_stiffness": _str(sol, "geometric_stiffness", "solver", default="none",
+                                               choices=("none", "current", "lagged", "quasi_static")),
+                   "geometric_tol": _num(sol, "geometric_tol", "solver", default=1e-8, positive=True),
+                   "geometric_maxit": _int(sol, "geometric_maxit", "solver", default=50)}
     if mtype == "serial" and "outputs" not in raw:
         raise CaseError("outputs", "is missing; a serial chain needs an [outputs] table naming what to record")
     r["outputs"] = _outputs(raw.get("outputs"), joints, lnames, mtype)

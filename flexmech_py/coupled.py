@@ -388,3 +388,35 @@ def diagnostics(cm: CoupledModel, qf, ef, chord, ref, iters: int, nsteps: int) -
             "link_length_drift": {"max_relative": max(stretch), "bound": 1e-3, "within_bound": max(stretch) < 1e-3},
             "joint_closure_error_m": 0.0,
             "rigid_drift_from_rigid_body_solution": drift}
+
+
+def axial_forces(cm: CoupledModel, qf) -> np.ndarray:
+    """(nel, nf) axial force [N] of every FE element (link order): EA times the chord stretch of its
+    segment plus its elastic axial strain."""
+    fe = cm.fe
+    out = np.empty((fe.nel, qf.shape[1]))
+    for si, (li, k0, k1) in enumerate(cm.segments):
+        d, n = cm.seg_slice(si), int(cm.n_el[si])
+        ls = cm.prop[0, si]
+        eps_c = np.hypot(*(qf[d[2:4]] - qf[d[0:2]])) / ls - 1.0
+        els = fe.link_elements(li)
+        for e in range(n):
+            p1 = qf[d[3 * e + 2]] if 0 < e < n else 0.0
+            p2 = qf[d[3 * (e + 1) + 2]] if 0 < e + 1 < n else 0.0
+            out[els[k0 + e]] = cm.prop[2, si] * (eps_c + (p2 - p1) / (ls / n))
+    return out
+
+
+def validity(fe: FEModel, axial: np.ndarray, u_dev: np.ndarray) -> dict:
+    """Per link: the largest compressive and tensile axial force over the Euler load
+    pi^2 EI / L^2 of the link, and the largest displacement from the rigid motion over its length."""
+    out = {}
+    for li, ln in enumerate(fe.case["links"]):
+        ne = np.pi ** 2 * ln["youngs_modulus"] * ln["second_moment"] / ln["length"] ** 2
+        n = axial[fe.link_elements(li)]
+        disp = max(float(np.max(np.hypot(u_dev[fe.trans_dof[node, 0]], u_dev[fe.trans_dof[node, 1]])))
+                   for node in fe.node_of[li])
+        out[ln["name"]] = {"euler_load_N": ne, "max_compression_over_euler": float(max(0.0, -n.min()) / ne),
+                           "max_tension_over_euler": float(max(0.0, n.max()) / ne),
+                           "max_displacement_over_length": disp / ln["length"]}
+    return out

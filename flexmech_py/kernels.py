@@ -38,12 +38,21 @@ STATUS_MESSAGES = {
 }
 
 
-def check_status(status: int, what: str, time: float | None = None) -> None:
-    """Raise :class:`SolverError` for a non-zero kernel status code (the only translation point)."""
+GEOMETRIC_NOT_CONVERGED = ("the axial forces of the geometric stiffness did not converge within the step "
+                           "(raise solver.geometric_maxit or reduce solver.dt; if summary.json's validity shows "
+                           "compression beyond the Euler load, the linear model is past buckling here)")
+
+
+def check_status(status: int, what: str, time: float | None = None, iteration: str = "newton") -> None:
+    """Raise :class:`SolverError` for a non-zero kernel status code (the only translation point).
+
+    ``iteration`` names what status 5 refers to: ``newton`` (coupled/nonlinear) or ``geometric``."""
     status = int(status)
     if status == 0:
         return
     msg = STATUS_MESSAGES.get(status, f"unknown status code {status}")
+    if status == 5 and iteration == "geometric":
+        msg = GEOMETRIC_NOT_CONVERGED
     where = f" at t = {time:.6g} s" if time is not None else ""
     raise SolverError(f"{what} stopped{where}: {msg}", time=time, code=status)
 
@@ -53,7 +62,14 @@ def element_matrices(rho_a: float, ea: float, ei: float, length: float):
     for name, val in (("rho_a", rho_a), ("ea", ea), ("ei", ei), ("length", length)):
         if not np.isfinite(val) or val <= 0:
             raise FlexmechError(f"element_matrices: {name} must be a positive finite number, got {val!r}")
-    return api.element_matrices(rho_a, ea, ei, length)
+    return api.element_matrices(rho_a, ea, ei, length)[:5]
+
+
+def geometric_stiffness(length: float) -> np.ndarray:
+    """Local geometric stiffness per unit axial force (6 x 6, DOFs [p1 v1 th1 p2 v2 th2]): N * kg."""
+    if not np.isfinite(length) or length <= 0:
+        raise FlexmechError(f"geometric_stiffness: length must be a positive finite number, got {length!r}")
+    return api.element_matrices(1.0, 1.0, 1.0, length)[5]
 
 
 def element_curvatures(dglob, phi, length: float, xi: float) -> np.ndarray:

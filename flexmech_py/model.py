@@ -28,6 +28,7 @@ from .errors import CaseError
 __all__ = ["FEModel", "Joint", "LOAD_MODEL_CODE"]
 
 LOAD_MODEL_CODE = {"hac": 1, "classic": 2, "classic-translational": 3}
+GEOMETRIC_CODE = {"none": 0, "current": 1, "lagged": 2, "quasi_static": 3}
 
 
 @dataclass
@@ -296,8 +297,11 @@ class FEModel:
         return f
 
     def run(self, rig, model, dt, *, beta=0.25, gamma=0.5, out_every=1, rayleigh=(0.0, 0.0),
-            q_free=None, q_val=None, u0=None, v0=None, t0=0.0):
-        """Newmark run over rig (5, nlinks, nsteps+1); returns (uf, vf, af) frames over the free DOFs.
+            q_free=None, q_val=None, u0=None, v0=None, t0=0.0, geometric="none", geo_tol=1e-8, geo_maxit=50,
+            full=False):
+        """Newmark run over rig (5, nlinks, nsteps+1); returns (uf, vf, af) frames over the free DOFs
+        (with ``full=True`` also the element axial forces nf (nel, nframes) [N] and the number of
+        axial-force iterations).  ``geometric``: none | current | lagged | quasi_static.
 
         Raises SolverError (naming the time) if the compiled loop stops.
         """
@@ -311,8 +315,9 @@ class FEModel:
         if q_free is None:  # no applied elastic loads: one zero entry (f2py cannot pass empty arrays)
             q_free = np.ones(1, np.int32)
             q_val = np.zeros((1, nsteps + 1), order="F")
-        uf, vf, af, status, fail = kernels.api.ked_run(
+        uf, vf, af, nf, status, fail, geo_iters = kernels.api.ked_run(
             nframes, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
-            np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, beta, gamma, out_every, 1, u, v, a)
-        kernels.check_status(status, "Newmark integration", time=t0 + fail * dt if fail else t0)
-        return uf, vf, af
+            np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, beta, gamma, out_every, 1,
+            GEOMETRIC_CODE[geometric], geo_tol, geo_maxit, u, v, a)
+        kernels.check_status(status, "Newmark integration", time=t0 + fail * dt if fail else t0, iteration="geometric")
+        return (uf, vf, af, nf, geo_iters) if full else (uf, vf, af)

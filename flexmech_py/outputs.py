@@ -13,6 +13,7 @@ import numpy as np
 
 from . import kernels
 from .case import UNITS
+from .errors import CaseError
 
 __all__ = ["evaluate_outputs", "output_unit"]
 
@@ -65,13 +66,15 @@ def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float)
 
 
 def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, q, qd, qdd, rig_frames, run_model: str,
-                     load_cache: dict | None = None, joint_motion=None, curvature=None) -> dict[str, np.ndarray]:
+                     load_cache: dict | None = None, joint_motion=None, curvature=None,
+                     axial=None) -> dict[str, np.ndarray]:
     """Evaluate every named output over the frames.
 
     u_all (ndof, nf) elastic DOFs (displacements from the rigid motion ``motion``);
     rig_frames (5, nlinks, nf) the kernel rigid samples (for inertia loads).
     joint_motion: LinkMotion for joint and link angles (default ``motion``; the coupled model
-    passes its own rigid motion); curvature: callable(link, fraction) -> kappa (default: from u_all).
+    passes its own rigid motion); curvature: callable(link, fraction) -> kappa (default: from u_all);
+    axial: (nel, nf) element axial forces [N] for ``axial_force`` outputs.
     """
     joint_motion = motion if joint_motion is None else joint_motion
     out = {}
@@ -89,6 +92,18 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, q, qd, qdd, rig
             kap = (link_curvature(fe, u_all, motion.phi[:, li], li, sp["at"]) if curvature is None
                    else curvature(li, sp["at"]))
             out[name] = kap * links[li]["half_depth"] if kind == "strain" else kap
+        elif kind == "axial_force":
+            if axial is None:
+                raise CaseError(f"outputs.{name}", "axial forces are not available for this model")
+            li = fe.link_names.index(sp["link"])
+            els = fe.link_elements(li)
+            n = len(els)
+            s = sp["at"] * n
+            k = int(round(s))
+            if abs(s - k) < 1e-9 and 0 < k < n:
+                out[name] = 0.5 * (axial[els[k - 1]] + axial[els[k]])
+            else:
+                out[name] = axial[els[min(int(np.floor(s)), n - 1)]]
         elif kind in ("displacement", "position"):
             li, node, zeta = fe.node_ref(sp["at"], f"outputs.{name}.at")
             comp = sp["component"]

@@ -195,22 +195,30 @@ class Prepared:
             self._checked = True
         sol = case["solver"]
         t0 = time.perf_counter()
-        uf, vf, af = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
-                            out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free, q_val=self.q_val)
+        uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
+                                           out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free,
+                                           q_val=self.q_val, geometric=sol["geometric_stiffness"],
+                                           geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"], full=True)
         t_kernel = time.perf_counter() - t0
         idx = slice(0, self.nsteps + 1, self.out_every)
         motion_f = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx]
                                        for k in rigid.LinkMotion.__dataclass_fields__})
         rig_f = self.rm.kernel_samples(self.gravity, idx)
         u_all = fe.expand(uf)
+        if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
+            nf = np.array([[fe.el_prop[3, e] / fe.el_prop[0, e]] for e in range(fe.nel)]) * _axial_stretch(fe, u_all, motion_f)
         columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, self.rm.q[idx], self.rm.qd[idx],
-                                   self.rm.qdd[idx], rig_f, model)
+                                   self.rm.qdd[idx], rig_f, model, axial=nf)
         units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
+        extra = {"validity": coupled.validity(fe, nf, u_all)}
+        if sol["geometric_stiffness"] != "none":
+            extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": int(geo_iters),
+                                            "mean_per_step": geo_iters / self.nsteps}
         return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
                       q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_all, v=fe.expand(vf),
-                      a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing)
+                      a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra)
 
 
     def _run_coupled(self, t_start: float, model: str) -> Result:
@@ -235,7 +243,8 @@ class Prepared:
                                                 chord.ay - self.gravity[1]]).transpose(0, 2, 1))
         columns = evaluate_outputs(fe, case["outputs"], u_dev, ref, self.rm.q[idx], self.rm.qd[idx], self.rm.qdd[idx],
                                    rig_chord, "classic", joint_motion=chord,
-                                   curvature=lambda li, frac: coupled.curvature(cm, qf, li, frac))
+                                   curvature=lambda li, frac: coupled.curvature(cm, qf, li, frac),
+                                   axial=(axial := coupled.axial_forces(cm, qf)))
         units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
         energy = {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}
         for k, y in energy.items():
@@ -246,10 +255,22 @@ class Prepared:
                 columns["drive_torque"], units["drive_torque"] = -lam, "N m"
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
-        extra = {"coupled": coupled.diagnostics(cm, qf, ef, chord, ref, iters, self.nsteps)}
+        extra = {"coupled": coupled.diagnostics(cm, qf, ef, chord, ref, iters, self.nsteps),
+                 "validity": coupled.validity(fe, axial, u_dev)}
         return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
                       q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_dev, v=np.zeros_like(u_dev),
                       a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra)
+
+
+def _axial_stretch(fe, u_all, motion) -> np.ndarray:
+    """(nel, nf) elongation p2 - p1 [m] of every element in its link frame."""
+    out = np.empty((fe.nel, u_all.shape[1]))
+    for e in range(fe.nel):
+        li = fe.el_link[e] - 1
+        c, s = np.cos(motion.phi[:, li]), np.sin(motion.phi[:, li])
+        d = u_all[fe.el_dof[:, e] - 1]
+        out[e] = (c * d[3] + s * d[4]) - (c * d[0] + s * d[1])
+    return out
 
 
 def simulate(case: dict, model: str | None = None, *, dt: float | None = None,

@@ -31,7 +31,7 @@ module flexmech_api
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
   use flexmech_beam, only: beam_mass, beam_stiffness, beam_gyroscopic, beam_centrifugal, &
-                           beam_hac_coupling, beam_curvature, vec_to_local
+                           beam_hac_coupling, beam_curvature, vec_to_local, beam_geometric
   use flexmech_assembly, only: band_rows, band_to_dense
   use flexmech_ked, only: ked_system
   use flexmech_newmark, only: newmark_run, consistent_acceleration
@@ -45,15 +45,17 @@ contains
 
   !> Local element matrices of one beam element (DOFs [p1 v1 th1 p2 v2 th2]).
   !> m mass, k stiffness, g gyroscopic kernel (Coriolis = 2 omega g),
-  !> c centrifugal kernel (inertia stiffness = alpha g + omega^2 c), m0 Hac coupling (6 x 4).
-  subroutine element_matrices(rho_a, ea, ei, length, m, k, g, c, m0)
+  !> c centrifugal kernel (inertia stiffness = alpha g + omega^2 c), m0 Hac coupling (6 x 4),
+  !> kg geometric stiffness per unit axial force (N kg, N in newtons, tension > 0).
+  subroutine element_matrices(rho_a, ea, ei, length, m, k, g, c, m0, kg)
     real(dp), intent(in) :: rho_a, ea, ei, length
-    real(dp), intent(out) :: m(6, 6), k(6, 6), g(6, 6), c(6, 6), m0(6, 4)
+    real(dp), intent(out) :: m(6, 6), k(6, 6), g(6, 6), c(6, 6), m0(6, 4), kg(6, 6)
     m = beam_mass(rho_a, length)
     k = beam_stiffness(ea, ei, length)
     g = beam_gyroscopic(rho_a, length)
     c = beam_centrifugal(rho_a, length)
     m0 = beam_hac_coupling(rho_a, length)
+    kg = beam_geometric(length)
   end subroutine element_matrices
 
   !> Curvature v'' [1/m] at xi of one element over n frames, from its global DOFs and axis angle.
@@ -117,10 +119,13 @@ contains
   !> initial acceleration is computed from the equations of motion, else a0 is used.
   !> Outputs frames (nfree, nframes) at steps 0, out_every, ...; the final
   !> state in u0, v0, a0 (so a long run can be continued chunk by chunk).
+  !> geo_mode: 0 no geometric stiffness; 1 axial forces of the current state, iterated in each step
+  !> (geo_tol, geo_maxit); 2 axial forces lagged one step; 3 quasi-static axial forces from
+  !> K u = -F_rigid at each step.  nf (nel, nframes) returns the axial forces used [N].
   subroutine ked_run(nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes, &
                      free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, ri_prop, &
                      load_model, rayleigh, rig, q_free, q_val, dt, beta, gamma, out_every, init_accel, &
-                     u0, v0, a0, uf, vf, af, status, fail_step)
+                     geo_mode, geo_tol, geo_maxit, u0, v0, a0, uf, vf, af, nf, status, fail_step, geo_iters)
     integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes
     integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
     real(dp), intent(in) :: el_prop(5, nel)
@@ -134,12 +139,13 @@ contains
     integer, intent(in) :: q_free(nq)
     real(dp), intent(in) :: q_val(nq, nsteps + 1)
     real(dp), intent(in) :: dt, beta, gamma
-    integer, intent(in) :: out_every, init_accel
+    integer, intent(in) :: out_every, init_accel, geo_mode, geo_maxit
+    real(dp), intent(in) :: geo_tol
     real(dp), intent(inout) :: u0(nfree), v0(nfree), a0(nfree)
-    real(dp), intent(out) :: uf(nfree, nframes), vf(nfree, nframes), af(nfree, nframes)
-    integer, intent(out) :: status, fail_step
+    real(dp), intent(out) :: uf(nfree, nframes), vf(nfree, nframes), af(nfree, nframes), nf(nel, nframes)
+    integer, intent(out) :: status, fail_step, geo_iters
     type(ked_system) :: sys
-    uf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp
+    uf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; nf = 0.0_dp; geo_iters = 0
     fail_step = 0
     call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
                ri_link, ri_dof, ri_prop, load_model, rayleigh, status)
@@ -152,8 +158,12 @@ contains
       call consistent_acceleration(sys, rig(:, :, 1), q_free, q_val(:, 1), u0, v0, a0, status)
       if (status /= STATUS_OK) return
     end if
+    if (geo_mode < 0 .or. geo_mode > 3) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
     call newmark_run(sys, rig, q_free, q_val, dt, beta, gamma, out_every, u0, v0, a0, uf, vf, af, &
-                     status, fail_step)
+                     status, fail_step, geo_mode, geo_tol, geo_maxit, nf, geo_iters)
   end subroutine ked_run
 
   !> Dense system matrices over the free DOFs at one rigid sample:

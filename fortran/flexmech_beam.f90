@@ -23,7 +23,7 @@ module flexmech_beam
   implicit none
   private
   public :: beam_mass, beam_stiffness, beam_gyroscopic, beam_centrifugal, beam_hac_coupling
-  public :: beam_curvature, rotate_to_global, vec_to_local, vec_to_global, transformation
+  public :: beam_curvature, rotate_to_global, vec_to_local, vec_to_global, transformation, beam_geometric
 
   real(dp), parameter :: gauss_x(4) = [ &
     0.5_dp - 0.5_dp*0.8611363115940526_dp, 0.5_dp - 0.5_dp*0.3399810435848563_dp, &
@@ -149,6 +149,20 @@ contains
                          -12.0_dp, -6.0_dp*len, 12.0_dp, -6.0_dp*len, &
                          6.0_dp*len, 2.0_dp*l2, -6.0_dp*len, 4.0_dp*l2], [4, 4])
   end function beam_stiffness
+
+  !> Geometric stiffness per unit axial force, int N_v'^T N_v' dzeta on [v1 th1 v2 th2] (local, 1/m, -, m);
+  !> the element's geometric stiffness is N * beam_geometric(L), N the axial force [N] (tension > 0).
+  pure function beam_geometric(len) result(kg)
+    real(dp), intent(in) :: len  !< element length [m]
+    real(dp) :: kg(6, 6), l2
+    integer, parameter :: t(4) = [2, 3, 5, 6]
+    kg = 0.0_dp
+    l2 = len*len
+    kg(t, t) = 1.0_dp/(30.0_dp*len)*reshape([36.0_dp, 3.0_dp*len, -36.0_dp, 3.0_dp*len, &
+                                              3.0_dp*len, 4.0_dp*l2, -3.0_dp*len, -l2, &
+                                              -36.0_dp, -3.0_dp*len, 36.0_dp, -3.0_dp*len, &
+                                              3.0_dp*len, -l2, -3.0_dp*len, 4.0_dp*l2], [4, 4])
+  end function beam_geometric
 
   !> Curvature v''(zeta) [1/m] of the Hermite field at xi = zeta/L from local DOFs.
   pure function beam_curvature(dloc, len, xi) result(kappa)

@@ -19,14 +19,13 @@
 module flexmech_coupled
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, STATUS_BAD_INPUT
+  use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
+                             STATUS_BAD_INPUT, STATUS_NEWTON
   use flexmech_beam, only: beam_mass, beam_stiffness
   use flexmech_assembly, only: band_rows, band_add_element, band_to_dense
   implicit none
   private
   public :: coupled_system, coupled_build, coupled_run, coupled_dense, STATUS_NEWTON
-
-  integer, parameter :: STATUS_NEWTON = 5   !< Newton iterations did not converge
 
   real(dp), parameter :: gx(4) = [ &
     0.5_dp - 0.5_dp*0.8611363115940526_dp, 0.5_dp - 0.5_dp*0.3399810435848563_dp, &

@@ -18,7 +18,7 @@
 module flexmech_ked
   use flexmech_kinds, only: dp
   use flexmech_beam, only: beam_mass, beam_stiffness, beam_gyroscopic, beam_centrifugal, &
-                           beam_hac_coupling, rotate_to_global, vec_to_local, vec_to_global
+                           beam_hac_coupling, beam_geometric, rotate_to_global, vec_to_local, vec_to_global
   use flexmech_assembly, only: band_add_element, band_add_diagonal, half_bandwidth
   implicit none
   private
@@ -31,7 +31,10 @@ module flexmech_ked
     integer :: load_model = LOAD_CLASSIC
     real(dp) :: ray_m = 0.0_dp, ray_k = 0.0_dp   !< Rayleigh damping C = ray_m M + ray_k K
     integer, allocatable :: el_link(:), el_dof(:, :), el_free(:, :)
-    real(dp), allocatable :: el_len(:), el_z0(:)
+    real(dp), allocatable :: el_len(:), el_z0(:), el_ea(:)
+    logical :: geo = .false.                       !< add the geometric stiffness nax(e) * kg(e)
+    real(dp), allocatable :: nax(:)                !< (nel) axial force of each element [N], tension > 0
+    real(dp), allocatable :: kg(:, :, :)           !< (6, 6, nel) geometric stiffness per unit axial force
     real(dp), allocatable :: m(:, :, :), k(:, :, :), g(:, :, :), c(:, :, :), m0(:, :, :)
     integer, allocatable :: lm_link(:), lm_dof(:, :), lm_free(:, :)
     real(dp), allocatable :: lm_mass(:), lm_z(:)
@@ -42,6 +45,7 @@ module flexmech_ked
     procedure :: assemble => ked_assemble
     procedure :: rigid_load => ked_rigid_load
     procedure :: element_load
+    procedure :: axial_forces
   end type ked_system
 
 contains
@@ -83,6 +87,12 @@ contains
     end do
     sys%el_len = el_prop(1, :)
     sys%el_z0 = el_prop(2, :)
+    sys%el_ea = el_prop(4, :)
+    allocate (sys%nax(sys%nel), sys%kg(6, 6, sys%nel))
+    sys%nax = 0.0_dp
+    do e = 1, sys%nel
+      sys%kg(:, :, e) = beam_geometric(el_prop(1, e))
+    end do
     allocate (sys%m(6, 6, sys%nel), sys%k(6, 6, sys%nel), sys%g(6, 6, sys%nel), &
               sys%c(6, 6, sys%nel), sys%m0(6, 4, sys%nel))
     do e = 1, sys%nel
@@ -164,11 +174,31 @@ contains
     end if
   end subroutine ked_rigid_load
 
+  !> Axial force EA (p2 - p1)/L of every element [N] from the free-DOF displacements u at a rigid sample.
+  pure subroutine axial_forces(sys, rig, u, nax)
+    class(ked_system), intent(in) :: sys
+    real(dp), intent(in) :: rig(:, :), u(:)
+    real(dp), intent(out) :: nax(:)
+    integer :: e, i
+    real(dp) :: ue(6), ul(6), phi
+    do e = 1, sys%nel
+      do i = 1, 6
+        ue(i) = 0.0_dp
+        if (sys%el_free(i, e) > 0) ue(i) = u(sys%el_free(i, e))
+      end do
+      phi = rig(1, sys%el_link(e))
+      ul = vec_to_local(ue, cos(phi), sin(phi))
+      nax(e) = sys%el_ea(e)*(ul(4) - ul(1))/sys%el_len(e)
+    end do
+  end subroutine axial_forces
+
   !> Effective matrix S = M + cc*C + ck*K in band storage and residual
   !> r = -F_rigid - C v - K u over the free DOFs, for one rigid sample.
   !> C = Cg + Rayleigh, K = K_elastic + Kc.  u, v are full free-DOF vectors.
-  subroutine ked_assemble(sys, rig, cc, ck, u, v, ab, r)
+  !> With cm = 0 and static = .true.: S = K_elastic (+ geometric) and r = -F_rigid (quasi-static problem).
+  subroutine ked_assemble(sys, rig, cc, ck, u, v, ab, r, static)
     class(ked_system), intent(in) :: sys
+    logical, intent(in), optional :: static  !< assemble the quasi-static problem K u = -F_rigid
     real(dp), intent(in) :: rig(:, :)    !< (5, nlinks) rigid sample
     real(dp), intent(in) :: cc, ck       !< coefficients of C and K in S
     real(dp), intent(in) :: u(:), v(:)   !< (nfree) displacement and velocity where K, C act
@@ -176,7 +206,11 @@ contains
     real(dp), intent(out) :: r(:)        !< (nfree) residual
     integer :: e, i, j, n
     integer :: idx(6)
-    real(dp) :: cs, sn, om, al, ce(6, 6), ke(6, 6), se(6, 6), ue(6), ve(6), re(6), a(2), mi
+    real(dp) :: cs, sn, om, al, ce(6, 6), ke(6, 6), se(6, 6), ue(6), ve(6), re(6), a(2), mi, cm
+    logical :: qs
+    qs = .false.
+    if (present(static)) qs = static
+    cm = merge(0.0_dp, 1.0_dp, qs)
     ab = 0.0_dp
     r = 0.0_dp
     do e = 1, sys%nel
@@ -184,10 +218,15 @@ contains
       cs = cos(rig(1, j)); sn = sin(rig(1, j)); om = rig(2, j); al = rig(3, j)
       idx = sys%el_free(:, e)
       ce = (2.0_dp*om)*sys%g(:, :, e)
-      ke = sys%k(:, :, e) + al*sys%g(:, :, e) + (om*om)*sys%c(:, :, e)
+      if (qs) then
+        ke = sys%k(:, :, e)
+      else
+        ke = sys%k(:, :, e) + al*sys%g(:, :, e) + (om*om)*sys%c(:, :, e)
+      end if
+      if (sys%geo) ke = ke + sys%nax(e)*sys%kg(:, :, e)
       if (sys%ray_m /= 0.0_dp) ce = ce + sys%ray_m*sys%m(:, :, e)
       if (sys%ray_k /= 0.0_dp) ce = ce + sys%ray_k*sys%k(:, :, e)
-      se = sys%m(:, :, e) + cc*ce + ck*ke
+      se = cm*sys%m(:, :, e) + cc*ce + ck*ke
       call band_add_element(ab, sys%kl, sys%ku, idx, rotate_to_global(se, cs, sn))
       do i = 1, 6
         n = idx(i)
@@ -210,7 +249,7 @@ contains
       do n = 1, 2
         j = sys%lm_free(n, i)
         if (j == 0) cycle
-        call band_add_diagonal(ab, sys%kl, sys%ku, j, mi*(1.0_dp + cc*sys%ray_m))
+        call band_add_diagonal(ab, sys%kl, sys%ku, j, mi*(cm + cc*sys%ray_m))
         r(j) = r(j) - mi*(a(n) + sys%ray_m*v(j))
       end do
     end do
@@ -218,7 +257,7 @@ contains
       j = sys%ri_free(i)
       if (j == 0) cycle
       mi = sys%ri_j(i)
-      call band_add_diagonal(ab, sys%kl, sys%ku, j, mi*(1.0_dp + cc*sys%ray_m))
+      call band_add_diagonal(ab, sys%kl, sys%ku, j, mi*(cm + cc*sys%ray_m))
       r(j) = r(j) - mi*sys%ray_m*v(j)
       if (sys%load_model /= LOAD_CLASSIC_TRANSLATIONAL) r(j) = r(j) - mi*rig(3, sys%ri_link(i))
     end do

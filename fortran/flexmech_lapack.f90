@@ -8,16 +8,18 @@
 !>   2  non-finite value (NaN or Inf) in the solution
 !>   3  illegal argument passed to LAPACK (info < 0): a bug, please report
 !>   4  invalid input to a compiled routine (sizes, indices, coefficients)
+!>   5  iterations inside a step did not converge (Newton in the coupled and nonlinear models,
+!>      the axial forces of the geometric stiffness)
 module flexmech_lapack
   use flexmech_kinds, only: dp
   implicit none
   private
   public :: dgbtrf, dgbtrs, dgetrf, dgetrs
-  public :: STATUS_OK, STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT
+  public :: STATUS_OK, STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON
   public :: lapack_status
 
   integer, parameter :: STATUS_OK = 0, STATUS_SINGULAR = 1, STATUS_NONFINITE = 2, &
-                        STATUS_LAPACK_ARG = 3, STATUS_BAD_INPUT = 4
+                        STATUS_LAPACK_ARG = 3, STATUS_BAD_INPUT = 4, STATUS_NEWTON = 5
 
   interface
     subroutine dgbtrf(m, n, kl, ku, ab, ldab, ipiv, info)

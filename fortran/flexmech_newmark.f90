@@ -9,12 +9,18 @@
 module flexmech_newmark
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE, STATUS_BAD_INPUT
+  use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE, STATUS_BAD_INPUT, &
+                             STATUS_GEO => STATUS_NEWTON
+
   use flexmech_assembly, only: band_rows
   use flexmech_ked, only: ked_system
   implicit none
   private
   public :: newmark_run, consistent_acceleration
+  public :: GEO_NONE, GEO_CURRENT, GEO_LAGGED, GEO_QUASI_STATIC
+
+  !> Source of the axial forces of the geometric stiffness
+  integer, parameter :: GEO_NONE = 0, GEO_CURRENT = 1, GEO_LAGGED = 2, GEO_QUASI_STATIC = 3
 
 contains
 
@@ -57,8 +63,13 @@ contains
   !> On return (u, v, a) is the last state reached; on failure status /= 0 and
   !> fail_step is the step (1-based) that failed, frames after it untouched.
   subroutine newmark_run(sys, rig, q_free, q_val, dt, beta, gamma, out_every, u, v, a, &
-                         uf, vf, af, status, fail_step)
-    type(ked_system), intent(in) :: sys
+                         uf, vf, af, status, fail_step, geo_mode, geo_tol, geo_maxit, nf, geo_iters)
+    type(ked_system), intent(inout) :: sys
+    integer, intent(in) :: geo_mode                !< GEO_* source of the axial forces
+    real(dp), intent(in) :: geo_tol                !< GEO_CURRENT: relative tolerance on the axial forces
+    integer, intent(in) :: geo_maxit               !< GEO_CURRENT: fixed-point iterations allowed per step
+    real(dp), intent(inout) :: nf(:, :)            !< (nel, nframes) axial forces at the frames [N]
+    integer, intent(out) :: geo_iters              !< total axial-force iterations
     real(dp), intent(in) :: rig(:, :, :)   !< (5, nlinks, nsteps+1) rigid samples on the time grid
     integer, intent(in) :: q_free(:)       !< (nq) free DOFs loaded by applied generalized forces
     real(dp), intent(in) :: q_val(:, :)    !< (nq, nsteps+1) their values
@@ -67,9 +78,10 @@ contains
     real(dp), intent(inout) :: u(:), v(:), a(:)      !< (nfree) state
     real(dp), intent(inout) :: uf(:, :), vf(:, :), af(:, :)  !< (nfree, nframes)
     integer, intent(out) :: status, fail_step
-    real(dp), allocatable :: ab(:, :), up(:), vp(:)
+    real(dp), allocatable :: ab(:, :), up(:), vp(:), nnew(:), us(:), a0(:), z(:)
     integer, allocatable :: ipiv(:)
-    integer :: n, i, nsteps, frame
+    integer :: n, i, nsteps, frame, it
+    logical :: done
     status = STATUS_OK
     fail_step = 0
     nsteps = size(rig, 3) - 1
@@ -79,25 +91,74 @@ contains
       return
     end if
     allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree), ipiv(sys%nfree), up(sys%nfree), vp(sys%nfree))
-    uf(:, 1) = u; vf(:, 1) = v; af(:, 1) = a
+    allocate (nnew(sys%nel), us(sys%nfree), a0(sys%nfree), z(sys%nfree))
+    z = 0.0_dp
+    geo_iters = 0
+    sys%geo = geo_mode /= GEO_NONE
+    if (sys%geo) call sys%axial_forces(rig(:, :, 1), u, sys%nax)
+    uf(:, 1) = u; vf(:, 1) = v; af(:, 1) = a; nf(:, 1) = sys%nax
     frame = 1
     do n = 1, nsteps
       up = u + dt*v + (dt*dt*(0.5_dp - beta))*a
       vp = v + (dt*(1.0_dp - gamma))*a
-      call sys%assemble(rig(:, :, n + 1), gamma*dt, beta*dt*dt, up, vp, ab, a)
-      do i = 1, size(q_free)
-        a(q_free(i)) = a(q_free(i)) + q_val(i, n + 1)
+      if (geo_mode == GEO_QUASI_STATIC) then   ! N from K u = -F_rigid at this configuration
+        sys%geo = .false.
+        call sys%assemble(rig(:, :, n + 1), 0.0_dp, 1.0_dp, z, z, ab, us, static=.true.)
+        do i = 1, size(q_free)
+          us(q_free(i)) = us(q_free(i)) + q_val(i, n + 1)
+        end do
+        call band_solve(sys, ab, ipiv, us, status)
+        if (status /= STATUS_OK) then
+          fail_step = n
+          return
+        end if
+        call sys%axial_forces(rig(:, :, n + 1), us, sys%nax)
+        sys%geo = .true.
+      end if
+      a0 = a
+      done = .false.
+      do it = 1, merge(geo_maxit, 1, geo_mode == GEO_CURRENT)
+        a = a0
+        call sys%assemble(rig(:, :, n + 1), gamma*dt, beta*dt*dt, up, vp, ab, a)
+        do i = 1, size(q_free)
+          a(q_free(i)) = a(q_free(i)) + q_val(i, n + 1)
+        end do
+        call band_solve(sys, ab, ipiv, a, status)
+        if (status /= STATUS_OK) then
+          fail_step = n
+          return
+        end if
+        if (geo_mode /= GEO_CURRENT) then
+          done = .true.
+          exit
+        end if
+        ! GEO_CURRENT: axial forces of the new state; iterate until they stop changing
+        geo_iters = geo_iters + 1
+        call sys%axial_forces(rig(:, :, n + 1), up + (beta*dt*dt)*a, nnew)
+        if (maxval(abs(nnew - sys%nax)) <= geo_tol*max(maxval(abs(nnew)), tiny(1.0_dp))) then
+          sys%nax = nnew
+          done = .true.
+          exit
+        end if
+        ! plain substitution first; if it has not settled after 5 iterations, relax it (the axial
+        ! forces near the Euler load make the plain iteration oscillate)
+        if (it <= 5) then
+          sys%nax = nnew
+        else
+          sys%nax = 0.5_dp*(sys%nax + nnew)
+        end if
       end do
-      call band_solve(sys, ab, ipiv, a, status)
-      if (status /= STATUS_OK) then
+      if (.not. done) then
+        status = STATUS_GEO
         fail_step = n
         return
       end if
       u = up + (beta*dt*dt)*a
       v = vp + (gamma*dt)*a
+      if (geo_mode == GEO_LAGGED) call sys%axial_forces(rig(:, :, n + 1), u, sys%nax)
       if (mod(n, out_every) == 0) then
         frame = frame + 1
-        uf(:, frame) = u; vf(:, frame) = v; af(:, frame) = a
+        uf(:, frame) = u; vf(:, frame) = v; af(:, frame) = a; nf(:, frame) = sys%nax
       end if
     end do
   end subroutine newmark_run
