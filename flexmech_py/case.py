@@ -54,14 +54,14 @@ def JOINTS_OF(mech_type: str, nlinks: int) -> dict[str, tuple[str, ...]]:
     """Joints of a mechanism type: name -> allowed elastic conditions (first = default)."""
     if mech_type == "fourbar":
         return {
-            "crank_pivot": ("clamp", "pin"),
-            "crank_coupler": ("pin", "locked"),
-            "coupler_follower": ("pin", "locked"),
-            "follower_pivot": ("pin", "clamp"),
+            "crank_pivot": ("clamp", "pin", "torque"),
+            "crank_coupler": ("pin", "locked", "torque"),
+            "coupler_follower": ("pin", "locked", "torque"),
+            "follower_pivot": ("pin", "clamp", "torque"),
         }
-    joints = {"base": ("clamp", "pin")}
+    joints = {"base": ("clamp", "pin", "torque")}
     for k in range(2, nlinks + 1):
-        joints[f"joint_{k}"] = ("locked", "pin")
+        joints[f"joint_{k}"] = ("locked", "pin", "torque")
     return joints
 
 
@@ -314,6 +314,11 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
     r["joints"] = {j: _str(jr, j, "joints", default=allowed[0], choices=allowed) for j, allowed in joints.items()}
 
     r["drive"] = _drive(raw.get("drive"), r["mechanism"], joints, ndof)
+    driven = {t["joint"] for t in r["drive"].get("torques", [])}
+    for j, cond in r["joints"].items():
+        if cond == "torque" and j not in driven:
+            raise CaseError(f"joints.{j}", "'torque' leaves a driven joint free in the elastic problem, loaded by its "
+                                           "torque; this joint has no [[drive.torques]] entry: add one or use pin/clamp/locked")
 
     ini = raw.get("initial", {})
     _keys(ini, {"angles", "speeds"}, "initial")

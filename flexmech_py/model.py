@@ -151,7 +151,7 @@ class FEModel:
         # rotational DOF groups: (node, link) pairs, merged by locked joints
         rots = _UnionFind()
         for j in joints:
-            if j.inboard is not None and j.elastic == "locked":
+            if j.inboard is not None and j.elastic == "locked":   # "torque" and "pin": separate rotations
                 na = node_of[j.inboard][0 if j.inboard_end == "start" else -1]
                 rots.union((na, j.inboard), (na, j.outboard))
         # DOF numbering (before bandwidth reduction): node translations, then rotations

@@ -149,8 +149,11 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray) -> None:
     ev = np.linalg.eigvalsh(0.5 * (k + k.T))
     scale = np.max(np.abs(ev))
     nzero = int(np.sum(np.abs(ev) < 1e-10 * scale))
-    if nzero:
-        raise CaseError("joints", f"the elastic problem has {nzero} zero-stiffness mode(s): the joints leave the "
+    # a joint left free with 'torque' turns the mechanism's own degree of freedom into a zero-stiffness
+    # mode of the elastic problem, on purpose (theory.md section 14)
+    allowed = min(sum(1 for j in fe.joints if j.elastic == "torque"), len(fe.case["initial"]["angles"]))
+    if nzero > allowed:
+        raise CaseError("joints", f"the elastic problem has {nzero - allowed} unintended zero-stiffness mode(s): the joints leave the "
                                   "mechanism free to move elastically; clamp the driven ground joint "
                                   "(crank_pivot/base = 'clamp') or lock a joint")
 

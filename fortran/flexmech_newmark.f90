@@ -82,6 +82,7 @@ contains
     integer, allocatable :: ipiv(:)
     integer :: n, i, nsteps, frame, it
     logical :: done
+    real(dp) :: penalty
     status = STATUS_OK
     fail_step = 0
     nsteps = size(rig, 3) - 1
@@ -104,8 +105,12 @@ contains
       if (geo_mode == GEO_QUASI_STATIC) then   ! N from K u = -F_rigid at this configuration
         sys%geo = .false.
         call sys%assemble(rig(:, :, n + 1), 0.0_dp, 1.0_dp, z, z, ab, us, static=.true.)
+        ! driven joints locked: a stiff spring on every DOF an applied torque acts on (joints left
+        ! free with 'torque' are otherwise zero-stiffness modes of K)
+        penalty = 1.0e8_dp*maxval(abs(ab(sys%kl + sys%ku + 1, :)))
         do i = 1, size(q_free)
           us(q_free(i)) = us(q_free(i)) + q_val(i, n + 1)
+          if (any(q_val(i, :) /= 0.0_dp)) ab(sys%kl + sys%ku + 1, q_free(i)) = ab(sys%kl + sys%ku + 1, q_free(i)) + penalty
         end do
         call band_solve(sys, ab, ipiv, us, status)
         if (status /= STATUS_OK) then

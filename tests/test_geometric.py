@@ -83,3 +83,31 @@ def test_seed_fourbar_sources(cases_dir):
     c = fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=0.15", 'solver.geometric_stiffness="lagged"'])
     r = fm.simulate(c, model="classic", elements_per_link=8)
     assert np.max(np.abs(r["strain_coupler_mid"])) > 0.1      # 10 % strain: the lagged axial force blows up
+
+
+@pytest.mark.parametrize("model, balanced", [("classic", True), ("hac", True), ("classic-translational", False)])
+def test_torque_joint_mode_carries_no_net_rigid_body_load(cases_dir, model, balanced):
+    """With the crank pivot left free ('torque'), the mechanism's own motion is a zero-stiffness mode of
+    the elastic problem; the applied torque and the rigid-inertia load balance on it (the rigid-body
+    equations of motion), so the net load on the mode vanishes to round-off for the exact loads."""
+    from flexmech_py.simulate import Prepared
+    case = fm.load_case(cases_dir / "fourbar_hac.toml", overrides=['joints.crank_pivot="torque"', "solver.t_end=0.05"])
+    p = Prepared(case)
+    fe = p.fe
+    worst = 0.0
+    for i in (100, 2500, 5000):
+        _, _, k, f = fe.matrices(p.rig[:, :, i] * np.array([1, 0, 0, 0, 0])[:, None], model)
+        _, _, _, f = fe.matrices(p.rig[:, :, i], model)
+        ev, vec = np.linalg.eigh(0.5 * (k + k.T))
+        mode = vec[:, np.argmin(np.abs(ev))]
+        q = np.zeros(fe.nfree)
+        q[p.q_free - 1] = p.q_val[:, i]
+        load = q - fe.restrict(f)
+        worst = max(worst, abs(mode @ load) / np.linalg.norm(fe.restrict(f)))
+    print(f"\n{model}: net load on the mechanism mode / |F| = {worst:.2e}")
+    assert (worst < 1e-8) if balanced else (worst > 1e-4)
+
+
+def test_torque_joint_needs_a_torque(cases_dir):
+    with pytest.raises(fm.CaseError, match="joints.follower_pivot"):
+        fm.load_case(cases_dir / "fourbar_hac.toml", overrides=['joints.follower_pivot="torque"'])
