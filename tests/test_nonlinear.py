@@ -125,3 +125,35 @@ def test_energy_balance_and_mesh_convergence_fourbar(cases_dir):
     e = [np.max(np.abs(ys[i] - ys[-1])) / np.max(np.abs(ys[-1])) for i in range(2)]
     print(f"\nnonlinear four-bar coupler strain vs 8 elements: {e}")
     assert e[0] > e[1]
+
+
+def test_rigid_limit_fourbar(cases_dir):
+    """Links 1e4 times stiffer: the nonlinear model's crank follows the rigid-body solution."""
+    ov = [f"links.{k}.youngs_modulus=0.71e15" for k in ("crank", "coupler", "follower")] + ["solver.t_end=0.15"]
+    res = fm.simulate(fm.load_case(cases_dir / "fourbar_hac.toml", overrides=ov), model="nonlinear")
+    assert res.extra["coupled"]["rigid_drift_from_rigid_body_solution"]["crank_pivot"]["max_abs_rad"] < 1e-3
+
+
+def test_energy_conserved_in_free_motion():
+    """A flexible double pendulum swinging under gravity, no inputs: T + V constant."""
+    links = [{"name": f"l{k}", "length": 0.5, "area": 1e-4, "second_moment": 2e-10, "youngs_modulus": 7e10,
+              "density": 2700.0, "elements": 3} for k in (1, 2)]
+    case = fm.validate_case({
+        "mechanism": {"type": "serial"}, "links": links, "joints": {"base": "pin", "joint_2": "pin"},
+        "drive": {"type": "torque", "torques": [{"joint": "base", "constant": 0.0}]},
+        "initial": {"angles": [0.3, 0.8]}, "loads": {"gravity": [0.0, -9.81]},
+        "solver": {"t_end": 0.3, "dt": 2e-5, "output_every": 100},
+        "outputs": {"a": {"kind": "joint_angle", "joint": "base"}}})
+    res = fm.simulate(case, model="nonlinear")
+    e = res["energy_kinetic"] + res["energy_potential"]
+    assert np.max(res["energy_kinetic"]) > 0.1
+    assert np.max(np.abs(e - e[0])) < 1e-6 * np.max(res["energy_kinetic"])
+
+
+def test_time_step_convergence_manipulator(cases_dir):
+    case = fm.load_case(cases_dir / "manipulator_bricout.toml", overrides=["solver.t_end=0.05"])
+    from flexmech_py.simulate import Prepared
+    ys = [Prepared(case, dt=dt, out_every=int(round(2e-5 / dt))).run("nonlinear")["tip_dy_elastic"]
+          for dt in (2e-5, 1e-5, 5e-6, 2.5e-6)]
+    d = [np.max(np.abs(ys[i] - ys[i + 1])) for i in range(3)]
+    assert 1.7 < np.log2(d[-2] / d[-1]) < 2.3
