@@ -56,6 +56,7 @@ class Result:
     dt: float
     timing: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)   # model-specific summary entries (e.g. the coupled model's)
+    axial: np.ndarray | None = None             # (nel, nf) element axial forces [N], tension > 0
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "t":

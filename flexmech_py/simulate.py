@@ -184,8 +184,9 @@ class Prepared:
         self.mech = build_mechanism(case)
         self.t_prepare = time.perf_counter() - t_start
 
-    def run(self, model: str | None = None) -> Result:
-        """Integrate the elastic equations with one rigid-inertia load model."""
+    def run(self, model: str | None = None, geometric: str | None = None) -> Result:
+        """Integrate the elastic equations with one model (``geometric`` overrides
+        ``solver.geometric_stiffness`` for a superposition model)."""
         t_start = time.perf_counter()
         case, fe = self.case, self.fe
         model = case["solver"]["model"] if model is None else model
@@ -196,7 +197,9 @@ class Prepared:
         if not self._checked:
             check_elastic_problem(fe, self.rig)
             self._checked = True
-        sol = case["solver"]
+        sol = dict(case["solver"])
+        if geometric is not None:
+            sol["geometric_stiffness"] = geometric
         t0 = time.perf_counter()
         uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
                                            out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free,
@@ -221,7 +224,8 @@ class Prepared:
                                             "mean_per_step": geo_iters / self.nsteps}
         return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
                       q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_all, v=fe.expand(vf),
-                      a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra)
+                      a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
+                      axial=nf)
 
 
     def _run_coupled(self, t_start: float, model: str) -> Result:
@@ -262,7 +266,8 @@ class Prepared:
                  "validity": coupled.validity(fe, axial, u_dev)}
         return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
                       q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_dev, v=np.zeros_like(u_dev),
-                      a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra)
+                      a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
+                      axial=axial)
 
 
 def _axial_stretch(fe, u_all, motion) -> np.ndarray:

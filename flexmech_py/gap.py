@@ -1,0 +1,141 @@
+"""The model gap: every linear configuration against the nonlinear model, over windows of
+increasing length, with the time each leaves its validity range and its cost.
+
+Used by ``flexmech reproduce`` (its report) and ``docs/validation.md``; regenerate with
+``flexmech reproduce``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .simulate import Prepared
+
+__all__ = ["CONFIGS", "gap_study", "validity_time", "gap_table"]
+
+# (model, geometric-stiffness source, driven-joint condition): "seed" keeps the case file's joints
+CONFIGS = [("hac", "none", "seed"), ("classic", "none", "seed"), ("classic-translational", "none", "seed"),
+           ("classic", "quasi_static", "seed"), ("classic", "current", "seed"), ("classic", "quasi_static", "torque"),
+           ("coupled", "none", "seed")]
+THRESHOLDS = {"compression_over_euler": 1.0, "displacement_over_length": 0.02}   # buckling; "a few per cent"
+
+
+def deflection_over_length(res) -> np.ndarray:
+    """(nlinks, nf) largest distance of a link's nodes from the chord through its end nodes, over its
+    length: the bending deflection, whatever the model (total positions = rigid-body solution + u)."""
+    from .simulate import build_mechanism
+
+    fe = res.fe
+    km = build_mechanism(res.case).kinematics(res.q, res.qd, res.qdd)
+    out = np.zeros((len(fe.case["links"]), res.t.size))
+    for li, ln in enumerate(fe.case["links"]):
+        n, L = ln["elements"], ln["length"]
+        c, s = np.cos(km.phi[:, li]), np.sin(km.phi[:, li])
+        pos = [np.array([km.ox[:, li] + k / n * L * c, km.oy[:, li] + k / n * L * s])
+               + res.u[fe.trans_dof[fe.node_of[li][k]]] for k in range(n + 1)]
+        chord = pos[-1] - pos[0]
+        ell = np.hypot(chord[0], chord[1])
+        for p in pos[1:-1]:
+            d = p - pos[0]
+            out[li] = np.maximum(out[li], np.abs(chord[0] * d[1] - chord[1] * d[0]) / ell / L)
+    return out
+
+
+def validity_time(res) -> tuple[float, float]:
+    """First times [s] at which (a) any link's bending deflection from its chord exceeds 2 % of its
+    length and (b) any link's compressive axial force exceeds its Euler load (inf if never).  (b)
+    also catches short axial transients (a torque step sends axial waves through the links)."""
+    fe = res.fe
+    bad = (deflection_over_length(res) > THRESHOLDS["displacement_over_length"]).any(axis=0)
+    comp = np.zeros(res.t.size, bool)
+    if res.axial is not None:
+        for li, ln in enumerate(fe.case["links"]):
+            ne = np.pi ** 2 * ln["youngs_modulus"] * ln["second_moment"] / ln["length"] ** 2
+            comp |= (-res.axial[fe.link_elements(li)]).max(axis=0) > THRESHOLDS["compression_over_euler"] * ne
+
+    def first(mask):
+        return float(res.t[np.argmax(mask)]) if mask.any() else float("inf")
+
+    return first(bad), first(comp)
+
+
+def _driven_torque_case(case):
+    import copy
+
+    c = copy.deepcopy(case)
+    for t in c["drive"].get("torques", []):
+        c["joints"][t["joint"]] = "torque"
+    return c
+
+
+def gap_study(case: dict, column: str, windows, elements=8, ref_elements=16, configs=CONFIGS, progress=None) -> dict:
+    """Run the configurations and the nonlinear reference on one case; returns a dict with rows.
+
+    The 'closest' configuration is judged over the longest window in which the nonlinear run's
+    deflections stay below 2 % of the link lengths."""
+    say = progress or (lambda m: None)
+    t0 = time.perf_counter()
+    ref_prep = Prepared(case, elements_per_link=ref_elements)
+    ref = ref_prep.run("nonlinear")
+    say(f"  nonlinear reference ({ref_elements} elements per link): {time.perf_counter() - t0:.1f} s")
+    preps = {"seed": Prepared(case, elements_per_link=elements, out_every=case["solver"]["output_every"])}
+    y_ref = ref.columns[column]
+    rows = []
+    for model, geo, joint in configs:
+        if joint == "torque":
+            if case["drive"]["type"] != "torque":
+                continue
+            if "torque" not in preps:
+                preps["torque"] = Prepared(_driven_torque_case(case), elements_per_link=elements)
+        prep = preps[joint]
+        row = {"model": model, "geometric": geo, "joint": joint, "elements": elements}
+        try:
+            r = prep.run(model, geometric=geo if model not in ("coupled", "nonlinear") else None)
+        except Exception as exc:   # a configuration that fails is reported, not hidden
+            row.update(errors=[float("nan")] * len(windows), validity_s=(float("nan"),) * 2, kernel_s=float("nan"),
+                       failed=str(exc).split(":")[0] + ": " + str(exc).split(":", 1)[-1][:80])
+            rows.append(row)
+            continue
+        y = np.interp(ref.t, r.t, r.columns[column])
+        errs = []
+        for w in windows:
+            sel = ref.t <= w + 1e-12
+            pk = np.max(np.abs(y_ref[sel]))
+            errs.append(float(np.max(np.abs(y[sel] - y_ref[sel])) / pk) if pk > 0 else float("nan"))
+        row.update(errors=errs, validity_s=validity_time(r), kernel_s=r.timing["kernel_s"], failed="")
+        rows.append(row)
+    return {"column": column, "windows": list(windows), "rows": rows, "reference_validity_s": validity_time(ref),
+            "reference_kernel_s": ref.timing["kernel_s"], "ref_elements": ref_elements}
+
+
+def gap_table(name: str, study: dict) -> list[str]:
+    w = study["windows"]
+    lines = [f"**{name}** — `{study['column']}` against the nonlinear model ({study['ref_elements']} elements per "
+             f"link, kernel {study['reference_kernel_s']:.2f} s); in the nonlinear run a deflection first exceeds "
+             f"2 % of its link's length at t = {study['reference_validity_s'][0]:.4g} s and a compressive force "
+             f"the Euler load at t = {study['reference_validity_s'][1]:.4g} s.", "",
+             "| model | K_σ | driven joints | elements | " + " | ".join(f"[0, {x:g}] s" for x in w)
+             + " | deflection > 2 % L at [s] | compression > N_Euler at [s] | kernel [s] |",
+             "|---|---|---|---|" + "---|" * len(w) + "---|---|---|"]
+    for r in study["rows"]:
+        if r["failed"]:
+            when = r["failed"].split(" s:")[0].rsplit("t = ", 1)[-1] if "t = " in r["failed"] else "?"
+            cells = [f"stopped at t = {when} s"] + ["–"] * (len(w) - 1)
+            tail = " – | – | – |"
+        else:
+            cells = [f"{100 * e:.3g} %" for e in r["errors"]]
+            tail = f" {r['validity_s'][0]:.4g} | {r['validity_s'][1]:.4g} | {r['kernel_s']:.3g} |"
+        lines.append(f"| {r['model']} | {r['geometric']} | {r['joint']} | {r['elements']} | " + " | ".join(cells)
+                     + " |" + tail)
+    ok = [r for r in study["rows"] if not r["failed"]]
+    if ok:
+        # the best configuration over the longest window inside the reference's validity range
+        k = max([i for i, x in enumerate(w) if x <= study["reference_validity_s"][0]] or [0])
+        best = min(ok, key=lambda r: r["errors"][k])
+        verdict = "within" if best["errors"][k] <= 0.10 else "NOT within"
+        lines += ["", f"Closest over [0, {w[k]:g}] s (the nonlinear deflections below 2 % of the link lengths): "
+                      f"{best['model']}, K_σ {best['geometric']}, driven joints {best['joint']}: "
+                      f"{100 * best['errors'][k]:.3g} % — {verdict} 10 %."]
+    return lines + [""]
