@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_bvp
 
+from conftest import assert_free_pendulum_conserves_energy
+
 import flexmech_py as fm
 from flexmech_py.coupled import CoupledModel, node_state
 from flexmech_py.model import FEModel
@@ -136,18 +138,7 @@ def test_rigid_limit_fourbar(cases_dir):
 
 def test_energy_conserved_in_free_motion():
     """A flexible double pendulum swinging under gravity, no inputs: T + V constant."""
-    links = [{"name": f"l{k}", "length": 0.5, "area": 1e-4, "second_moment": 2e-10, "youngs_modulus": 7e10,
-              "density": 2700.0, "elements": 3} for k in (1, 2)]
-    case = fm.validate_case({
-        "mechanism": {"type": "serial"}, "links": links, "joints": {"base": "pin", "joint_2": "pin"},
-        "drive": {"type": "torque", "torques": [{"joint": "base", "constant": 0.0}]},
-        "initial": {"angles": [0.3, 0.8]}, "loads": {"gravity": [0.0, -9.81]},
-        "solver": {"t_end": 0.3, "dt": 2e-5, "output_every": 100},
-        "outputs": {"a": {"kind": "joint_angle", "joint": "base"}}})
-    res = fm.simulate(case, model="nonlinear")
-    e = res["energy_kinetic"] + res["energy_potential"]
-    assert np.max(res["energy_kinetic"]) > 0.1
-    assert np.max(np.abs(e - e[0])) < 1e-6 * np.max(res["energy_kinetic"])
+    assert_free_pendulum_conserves_energy("nonlinear", elements=3)
 
 
 def test_time_step_convergence_manipulator(cases_dir):
