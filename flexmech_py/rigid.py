@@ -325,9 +325,24 @@ def _wrench(phi, omega, alpha, ax, ay, m, s, j):
                      j * alpha + s * (c * ay - sn * ax)], axis=-1)
 
 
+def motion_and_jacobian(mech, q, qd, strict=True):
+    """Kinematics (qdd = 0) and Jacobian, remembering the last single-sample call: the ODE right-hand
+    side asks for the same state twice (dynamics and generalized forces)."""
+    q = np.asarray(q, dtype=float)
+    qd = np.asarray(qd, dtype=float)
+    key = (q.tobytes(), qd.tobytes(), strict)
+    cache = getattr(mech, "_mj_cache", None)
+    if cache is not None and cache[0] == key:
+        return cache[1]
+    out = mech._motion_and_jacobian(q, qd, strict)
+    if q.size == mech.ndof:
+        mech._mj_cache = (key, out)
+    return out
+
+
 def _dynamics(mech, mk, q, qd, gravity, strict=True):
     """M (N, ndof, ndof) and h = inertial bias - gravity (N, ndof)."""
-    kin, J = mech._motion_and_jacobian(q, qd, strict)
+    kin, J = motion_and_jacobian(mech, q, qd, strict)
     m, s, j = mk
     # M: generalized inertial force of the unit accelerations qdd = e_i (qd = 0)
     Wu = _wrench(kin.phi[..., None], 0.0, J[:, :, 2], J[:, :, 0], J[:, :, 1],

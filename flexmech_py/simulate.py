@@ -102,7 +102,7 @@ def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMoti
         torques = [(tq, _joint_links(fe, tq["joint"])) for tq in drive["torques"]]
 
         def gen_force(_t, q, qd):
-            km, jac = mech._motion_and_jacobian(q, qd * 0.0, strict=False)  # angles and d(phi)/dq
+            km, jac = rigid.motion_and_jacobian(mech, q, qd, strict=False)  # angles and d(phi)/dq (cached)
             Q = np.zeros_like(q)
             for tq, j in torques:
                 theta = km.phi[:, j.outboard] - (km.phi[:, j.inboard] if j.inboard is not None else 0.0)
