@@ -329,8 +329,8 @@ def motion_and_jacobian(mech, q, qd, strict=True):
     """Kinematics (qdd = 0) and Jacobian, remembering the last single-sample call: the ODE right-hand
     side asks for the same state twice (dynamics and generalized forces)."""
     q = np.asarray(q, dtype=float)
-    qd = np.asarray(qd, dtype=float)
-    key = (q.tobytes(), qd.tobytes(), strict)
+    qd = None if qd is None else np.asarray(qd, dtype=float)
+    key = (q.tobytes(), None if qd is None else qd.tobytes(), strict)
     cache = getattr(mech, "_mj_cache", None)
     if cache is not None and cache[0] == key:
         return cache[1]
