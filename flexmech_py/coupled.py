@@ -15,7 +15,7 @@ import numpy as np
 
 from . import kernels, rigid
 from .errors import CaseError
-from .model import FEModel, _UnionFind, rcm_free_numbering
+from .model import FEModel, rcm_free_numbering
 
 __all__ = ["CoupledModel", "chord_motion"]
 

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from . import kernels, rigid
+from . import rigid
 from .case import MODELS, SUPERPOSITION_MODELS
 from .errors import CaseError
 from . import coupled

@@ -5,7 +5,6 @@ import json
 import numpy as np
 import pytest
 
-import flexmech_py as fm
 from flexmech_py.cli import main
 from flexmech_py.compare import compare_columns, read_reference
 
