@@ -141,7 +141,7 @@ class CoupledModel:
         if case["drive"]["type"] == "torque":
             nh = max(max(len(t["sin"]), len(t["cos"])) for t in case["drive"]["torques"])
             for t in case["drive"]["torques"]:
-                j = next(jj for jj in fe.joints if jj.name == t["joint"])
+                j = fe.joint(t["joint"])
                 sb, eb = seg_end(j.outboard, j.outboard_end)
                 sa, ea = seg_end(j.inboard, j.inboard_end) if j.inboard is not None else (-1, 0)
                 coef = [t["constant"]] + (t["sin"] + [0.0] * nh)[:nh] + (t["cos"] + [0.0] * nh)[:nh]

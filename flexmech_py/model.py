@@ -244,6 +244,10 @@ class FEModel:
     def nel(self) -> int:
         return self.el_link.size
 
+    def joint(self, name: str) -> Joint:
+        """The joint called ``name``."""
+        return next(j for j in self.joints if j.name == name)
+
     def free_translational(self) -> np.ndarray:
         """All-DOF numbers (0-based) of the free translational DOFs."""
         t = self.trans_dof.ravel()

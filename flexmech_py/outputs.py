@@ -28,12 +28,8 @@ def output_unit(spec: dict) -> str:
     return "N m" if comp == "rotation" else "N"  # inertia_load
 
 
-def _joint(fe, name):
-    return next(j for j in fe.joints if j.name == name)
-
-
 def _joint_rigid(fe, motion, name, attr):
-    j = _joint(fe, name)
+    j = fe.joint(name)
     val = getattr(motion, attr)[:, j.outboard]
     if j.inboard is not None:
         val = val - getattr(motion, attr)[:, j.inboard]

@@ -79,11 +79,6 @@ class RigidMotion:
         return np.asfortranarray(rig.transpose(0, 2, 1))
 
 
-def _joint_links(fe, name):
-    j = next(j for j in fe.joints if j.name == name)
-    return j
-
-
 def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMotion:
     """Rigid-body motion on the grid t: kinematic drive, or torque-driven forward dynamics."""
     mech = build_mechanism(case) if mech is None else mech
@@ -99,7 +94,7 @@ def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMoti
             rigid.check_motion(mech, q, t)
     else:
         masses = link_masses(case, fe)
-        torques = [(tq, _joint_links(fe, tq["joint"])) for tq in drive["torques"]]
+        torques = [(tq, fe.joint(tq["joint"])) for tq in drive["torques"]]
 
         def gen_force(_t, q, qd):
             km, jac = rigid.motion_and_jacobian(mech, q, qd, strict=False)  # angles and d(phi)/dq (cached)
@@ -127,7 +122,7 @@ def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion):
         return None, None
     q_all = np.zeros((fe.ndof, rm.t.size))
     for tq in drive["torques"]:
-        j = _joint_links(fe, tq["joint"])
+        j = fe.joint(tq["joint"])
         theta = rm.motion.phi[:, j.outboard] - (rm.motion.phi[:, j.inboard] if j.inboard is not None else 0.0)
         tau = torque_value(tq, theta)
         node = fe.node_of[j.outboard][0 if j.outboard_end == "start" else -1]

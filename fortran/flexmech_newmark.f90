@@ -78,7 +78,8 @@ contains
     real(dp), intent(inout) :: u(:), v(:), a(:)      !< (nfree) state
     real(dp), intent(inout) :: uf(:, :), vf(:, :), af(:, :)  !< (nfree, nframes)
     integer, intent(out) :: status, fail_step
-    real(dp), allocatable :: ab(:, :), up(:), vp(:), nnew(:), us(:), a0(:), z(:)
+    real(dp), allocatable :: ab(:, :), up(:), vp(:), nnew(:), us(:), z(:)
+    logical, allocatable :: locked(:)
     integer, allocatable :: ipiv(:)
     integer :: n, i, nsteps, frame, it
     logical :: done
@@ -92,8 +93,11 @@ contains
       return
     end if
     allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree), ipiv(sys%nfree), up(sys%nfree), vp(sys%nfree))
-    allocate (nnew(sys%nel), us(sys%nfree), a0(sys%nfree), z(sys%nfree))
+    allocate (nnew(sys%nel), us(sys%nfree), z(sys%nfree), locked(size(q_free)))
     z = 0.0_dp
+    do i = 1, size(q_free)   ! DOFs an applied torque ever acts on (locked in the quasi-static solve)
+      locked(i) = any(q_val(i, :) /= 0.0_dp)
+    end do
     geo_iters = 0
     sys%geo = geo_mode /= GEO_NONE
     if (sys%geo) call sys%axial_forces(rig(:, :, 1), u, sys%nax)
@@ -110,7 +114,7 @@ contains
         penalty = 1.0e8_dp*maxval(abs(ab(sys%kl + sys%ku + 1, :)))
         do i = 1, size(q_free)
           us(q_free(i)) = us(q_free(i)) + q_val(i, n + 1)
-          if (any(q_val(i, :) /= 0.0_dp)) ab(sys%kl + sys%ku + 1, q_free(i)) = ab(sys%kl + sys%ku + 1, q_free(i)) + penalty
+          if (locked(i)) ab(sys%kl + sys%ku + 1, q_free(i)) = ab(sys%kl + sys%ku + 1, q_free(i)) + penalty
         end do
         call band_solve(sys, ab, ipiv, us, status)
         if (status /= STATUS_OK) then
@@ -120,10 +124,8 @@ contains
         call sys%axial_forces(rig(:, :, n + 1), us, sys%nax)
         sys%geo = .true.
       end if
-      a0 = a
       done = .false.
       do it = 1, merge(geo_maxit, 1, geo_mode == GEO_CURRENT)
-        a = a0
         call sys%assemble(rig(:, :, n + 1), gamma*dt, beta*dt*dt, up, vp, ab, a)
         do i = 1, size(q_free)
           a(q_free(i)) = a(q_free(i)) + q_val(i, n + 1)
