@@ -215,6 +215,17 @@ def _largest_displacement(res) -> tuple[str, dict]:
              "frame_time_s": float(res.t[-1])})
 
 
+def _grew(res) -> bool:
+    """Evidence of growth before a failure: at least 3 frames and the largest elastic displacement
+    of the last frame is (within 10 %) the largest of the run, and not zero."""
+    if res.t.size < 3:
+        return False
+    fe = res.fe
+    tr = fe.trans_dof.ravel()
+    amp = np.max(np.abs(res.u[tr]), axis=0)
+    return bool(amp[-1] > 0 and amp[-1] >= 0.9 * np.max(amp))
+
+
 def _shortest_period(prep, model: str, res, data) -> float | None:
     """Shortest natural period [s] of the elastic model linearized at the last kept frame (dense
     eigenproblem; None for models above 1500 free DOFs)."""
@@ -311,6 +322,14 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
     elif hs is None and ratio is not None and ratio > 0.25:
         cause = "step_too_large"
         ctext = f"probably the time step{res_txt}; reduce solver.dt"
+    elif not _grew(res) and code == kernels.STATUS_NEWTON:
+        cause = "solver_settings"
+        ctext = ("the motion had not grown before the failure and it persists at dt/2: solver.newton_tol is below what "
+                 "the iteration can reach (round-off) or solver.newton_maxit is too small; raise them")
+    elif not _grew(res):
+        cause = "unknown"
+        ctext = ("the motion had not grown before the failure and it persists at dt/2; check the case (joints, masses, "
+                 "drive) and report it with the case file if it looks right")
     else:
         cause = "physical_instability"
         again = (f"at dt/2 it fails again at t = {_fmt_t(hs['failed_at_s'])} s" if hs and hs.get("failed_at_s")

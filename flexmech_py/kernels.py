@@ -43,7 +43,7 @@ STATUS_WHAT = {
     2: "the solution became non-finite (NaN or Inf)",
     3: "LAPACK rejected an argument (a flexmech bug: please report it with the case file)",
     4: "invalid input to a compiled routine",
-    5: "the Newton iterations did not converge within solver.newton_maxit",
+    5: "Newton iterations did not converge within solver.newton_maxit",
     6: "the elastic state grew beyond solver.divergence_limit",
 }
 STATUS_WHAT_GEOMETRIC = "the geometric-stiffness axial forces did not converge within solver.geometric_maxit"
