@@ -179,15 +179,18 @@ class Prepared:
         self.mech = build_mechanism(case)
         self.t_prepare = time.perf_counter() - t_start
 
-    def run(self, model: str | None = None, geometric: str | None = None) -> Result:
+    def run(self, model: str | None = None, geometric: str | None = None, *, u0=None, v0=None) -> Result:
         """Integrate the elastic equations with one model (``geometric`` overrides
-        ``solver.geometric_stiffness`` for a superposition model)."""
+        ``solver.geometric_stiffness`` for a superposition model; ``u0``, ``v0`` (nfree,) an
+        initial elastic state other than rest, superposition models only)."""
         t_start = time.perf_counter()
         case, fe = self.case, self.fe
         model = case["solver"]["model"] if model is None else model
         if model not in MODELS:
             raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
         if model in ("coupled", "nonlinear"):
+            if u0 is not None or v0 is not None:
+                raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
             return self._run_coupled(t_start, model)
         if not self._checked:
             check_elastic_problem(fe, self.rig)
@@ -199,7 +202,8 @@ class Prepared:
         uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
                                            out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free,
                                            q_val=self.q_val, geometric=sol["geometric_stiffness"],
-                                           geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"], full=True)
+                                           geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"], full=True,
+                                           u0=u0, v0=v0)
         t_kernel = time.perf_counter() - t0
         idx = slice(0, self.nsteps + 1, self.out_every)
         motion_f = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx]
