@@ -84,7 +84,7 @@ def plot_result(res, out_dir) -> list[Path]:
     return [p for p in paths if p is not None]
 
 
-def plot_stability(rows: list, path, *, title: str = "", nmodes: int = 3, kmax: int = 4):
+def plot_stability(rows: list, path, *, title: str = "", nmodes: int = 3, kmax: int = 4, span_modes: int = 2):
     """Stability chart: top, max|mu| - 1 (log) against crank speed with the intervals where a
     parametric-resonance condition omega_i + omega_j = k Omega holds somewhere along the cycle shaded
     and labelled; bottom, the frozen natural-frequency bands along the cycle against speed with the
@@ -114,8 +114,8 @@ def plot_stability(rows: list, path, *, title: str = "", nmodes: int = 3, kmax: 
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     spans, ci = [], 0
     for k in range(1, kmax + 1):
-        for i in range(nm):
-            for j in range(i, nm):
+        for i in range(min(nm, span_modes)):
+            for j in range(i, min(nm, span_modes)):
                 inside = ((lo[:, i] + lo[:, j]) <= k * sp) & (k * sp <= (hi[:, i] + hi[:, j]))
                 if not inside.any():
                     continue
@@ -124,9 +124,10 @@ def plot_stability(rows: list, path, *, title: str = "", nmodes: int = 3, kmax: 
                 spans.append((a, b, name, colors[ci % len(colors)]))
                 ci += 1
     ymax = max(1.0, float(np.nanmax(np.maximum(mu1, floor))))
+    ax1.set_ylim(floor if mu1.min() < 1e-6 else 0.3 * mu1.min(), ymax * 10)
     for n, (a, b, name, col) in enumerate(spans):
         ax1.axvspan(a, max(b, a + 1e-9), color=col, alpha=0.15)
-        ax1.text(0.5 * (a + b), ymax * 10 ** (-0.5 - 0.45 * (n % 4)), name, color=col, fontsize=7, ha="center")
+        ax1.text(0.5 * (a + b), ymax * 10 ** (0.3 - 0.55 * (n % 6)), name, color=col, fontsize=7, ha="center")
     ax1.legend(fontsize=8, loc="lower right")
     for m in range(nm):
         ax2.fill_between(sp, lo[:, m], hi[:, m], alpha=0.35, label=f"ω{m + 1} along the cycle")
@@ -148,7 +149,7 @@ def plot_stability(rows: list, path, *, title: str = "", nmodes: int = 3, kmax: 
     ax2.legend(fontsize=8, loc="upper left")
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.08, right=0.88, top=0.92, bottom=0.07, hspace=0.08)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return Path(path)
