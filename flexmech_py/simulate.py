@@ -94,18 +94,12 @@ def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMoti
             rigid.check_motion(mech, q, t)
     else:
         masses = link_masses(case, fe)
-        torques = [(tq, fe.joint(tq["joint"])) for tq in drive["torques"]]
-
-        def gen_force(_t, q, qd):
-            km, jac = rigid.motion_and_jacobian(mech, q, qd, strict=False)  # angles and d(phi)/dq (cached)
-            Q = np.zeros_like(q)
-            for tq, j in torques:
-                theta = km.phi[:, j.outboard] - (km.phi[:, j.inboard] if j.inboard is not None else 0.0)
-                dphi = jac[:, j.outboard, 2, :] - (jac[:, j.inboard, 2, :] if j.inboard is not None else 0.0)
-                Q += torque_value(tq, theta)[:, None] * dphi
-            return Q
-
-        q, qd, qdd = rigid.integrate(mech, masses, q0, qd0, t, gen_force, gravity=tuple(case["loads"]["gravity"]),
+        joint_torques = []
+        for tq in drive["torques"]:
+            j = fe.joint(tq["joint"])
+            joint_torques.append((lambda theta, tq=tq: torque_value(tq, theta), j.outboard, j.inboard))
+        q, qd, qdd = rigid.integrate(mech, masses, q0, qd0, t, None, gravity=tuple(case["loads"]["gravity"]),
+                                     joint_torques=joint_torques,
                                      rtol=case["solver"]["rigid_rtol"], atol=case["solver"]["rigid_atol"])
     return RigidMotion(t, q, qd, qdd, mech.kinematics(q, qd, qdd))
 
