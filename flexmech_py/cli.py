@@ -4,6 +4,7 @@
     flexmech reproduce [--out DIR]
     flexmech compare RESULT_DIR --reference FILE.csv [--x t|crank_angle] [--columns C ...] [--out DIR]
     flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
+    flexmech bench [--quick] [--out DIR] [--cases DIR]
 
 Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2.
 """
@@ -78,7 +79,21 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value (--models)")
     c.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (--models)")
     c.add_argument("--out", default=None, help="output folder (default: RESULT_DIR/compare, or ./compare)")
+
+    b = sub.add_parser("bench", help="measure kernel, start-up, memory and solver costs (docs/performance.md)")
+    b.add_argument("--quick", action="store_true", help="a reduced ladder (1..8 elements per link, fewer steps)")
+    b.add_argument("--out", default="bench", help="output folder for the CSV files and bench.png (default: ./bench)")
+    b.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
     return p
+
+
+def _cmd_bench(args) -> int:
+    from .bench import report, run_bench
+
+    res = run_bench(args.out, quick=args.quick, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True))
+    print(report(res))
+    print("wrote " + ", ".join(str(p) for p in res["paths"]))
+    return 0
 
 
 def _cmd_compare(args) -> int:
@@ -142,7 +157,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare}[args.command](args)
+        return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare,
+                "bench": _cmd_bench}[args.command](args)
     except FlexmechError as exc:
         print(f"flexmech: error: {exc}", file=sys.stderr)
         return 2

@@ -23,12 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmech_py.dop853 import dop853
 from flexmech_py.errors import MechanismError, SolverError
 
 __all__ = [
     "LinkMotion", "LinkMass", "FourBar", "SerialChain",
     "mass_matrix", "bias_forces", "kinetic_energy", "potential_energy",
-    "joint_torque_generalized_force", "integrate",
+    "joint_torque_generalized_force", "integrate", "integrate_dense",
     "constant_speed", "spinup", "check_motion",
 ]
 
@@ -444,27 +445,39 @@ def _torque_force(phi, J, joint_torques):
 
 def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.0),
               rtol=1e-10, atol=1e-12, joint_torques=()):
+    """Torque-driven forward dynamics sampled on the grid t: (q, qd, qdd), each (N, ndof);
+    see :func:`integrate_dense` for the arguments."""
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or len(t) < 2 or np.any(np.diff(t) <= 0):
+        raise ValueError("t must be an increasing 1-D time grid with at least 2 samples")
+    return integrate_dense(mech, masses, q0, qd0, (t[0], t[-1]), generalized_force, gravity, rtol, atol,
+                           joint_torques)(t)
+
+
+def integrate_dense(mech, masses, q0, qd0, t_span, generalized_force=None, gravity=(0.0, 0.0),
+                    rtol=1e-10, atol=1e-12, joint_torques=()):
     """Torque-driven forward dynamics M qdd + h = Q from (q0, qd0) at t[0].
 
-    t: increasing output times [s]; generalized_force(t, q, qd) -> Q, vectorised: t (N,),
+    t_span: (t0, t1) [s]; generalized_force(t, q, qd) -> Q, vectorised: t (N,),
     q and qd (N, ndof) -> Q (N, ndof) (None: 0; the ODE calls it with N = 1);
     joint_torques: [(tau, link_b, link_a), ...], a torque tau(theta) [N m] (vectorised over
     theta = phi_b - phi_a [rad]) on link_b with the reaction on link_a (None = ground), added to Q
     (a FourBar driven only by joint torques uses a float right-hand side, about 30x cheaper);
-    gravity (g_x, g_y) [m/s^2].  Solved with DOP853 (scipy solve_ivp), sampled at t.
-    Returns (q, qd, qdd), each (N, ndof), qdd from the equations of motion.  A
+    gravity (g_x, g_y) [m/s^2].  Solved with DOP853 (flexmech_py.dop853: scipy's solve_ivp DOP853
+    transcribed, without scipy.integrate's import cost), sampled at t.
+    Returns sample(t) -> (q, qd, qdd), each (N, ndof), for times t (N,) in t_span: the solver's dense
+    output (its memory grows with the solver's steps, not with len(t)), qdd from the equations of
+    motion; chunks of a long grid can be sampled one after the other.  A
     FourBar approaching a toggle or assembly limit stops with a MechanismError
     naming the time and the crank angle, at |sin(theta4 - theta3)| = 1e-6 or, when
     the crank angle cannot resolve the motion that close to the limit to rtol, earlier
     (at most at 1e-2; see FourBar._stop_margin).
     """
-    from scipy.integrate import solve_ivp   # imported here: it costs about 0.3 s of start-up
-
     nd = mech.ndof
     mk = _mass_arrays(mech, masses)
-    t = np.asarray(t, dtype=float)
-    if t.ndim != 1 or len(t) < 2 or np.any(np.diff(t) <= 0):
-        raise ValueError("t must be an increasing 1-D time grid with at least 2 samples")
+    t = np.asarray(t_span, dtype=float)
+    if t.shape != (2,) or not t[1] > t[0]:
+        raise ValueError("t_span must be (t0, t1) with t1 > t0")
     y0 = np.concatenate([_as2d(q0, nd)[0], _as2d(qd0, nd, "qd0")[0]])
     force = generalized_force or (lambda ti, q, qd: np.zeros_like(q))
     joint_torques = list(joint_torques)
@@ -496,22 +509,30 @@ def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.
                 Q = Q + _torque_force(km.phi, jac, joint_torques).reshape(nd)
             return np.concatenate([y[nd:], np.linalg.solve(M[0], Q - h[0])])
 
-    sol = solve_ivp(rhs, (t[0], t[-1]), y0, method="DOP853", t_eval=t, events=events,
-                    rtol=rtol, atol=atol)
-    if sol.status == 1:
-        te, qe = sol.t_events[0][0], sol.y_events[0][0][0]
+    status, sol, te, ye, message = dop853(rhs, t[0], y0, t[-1], rtol, atol, events[0] if events else None)
+    if status == 1:
+        qe = ye[0]
         raise MechanismError(
             f"four-bar reaches a toggle or assembly limit at t = {te:.6g} s, crank angle {qe:.6g} "
             f"rad (|sin(theta4-theta3)| = {np.sqrt(max(mech._sin2(qe), 0.0)):.2g}); the crank "
             f"cannot be driven past it")
-    if sol.status != 0:
-        raise SolverError(f"rigid-body integration failed: {sol.message}", time=float(sol.t[-1]))
-    q, qd = sol.y[:nd].T, sol.y[nd:].T
-    M, h = _dynamics(mech, mk, q, qd, gravity)
-    Q = np.broadcast_to(np.asarray(force(t, q, qd), dtype=float), q.shape)
-    if joint_torques:
-        Q = Q + _torque_force(mech.kinematics(q).phi, mech.jacobian(q), joint_torques)
-    return q, qd, np.linalg.solve(M, (Q - h)[..., None])[..., 0]
+    if status != 0:
+        raise SolverError(f"rigid-body integration failed: {message}", time=float(te))
+    dense, t0, t1 = sol, t[0], t[-1]
+
+    def sample(ts):
+        ts = np.asarray(ts, dtype=float)
+        if ts.ndim != 1 or ts.size < 1 or ts.min() < t0 - 1e-12 * abs(t1) or ts.max() > t1 + 1e-12 * abs(t1):
+            raise ValueError(f"sample times must be a 1-D array within [{t0}, {t1}] s")
+        y = dense(ts).reshape(2 * nd, ts.size)
+        q, qd = y[:nd].T, y[nd:].T
+        M, h = _dynamics(mech, mk, q, qd, gravity)
+        Q = np.broadcast_to(np.asarray(force(ts, q, qd), dtype=float), q.shape)
+        if joint_torques:
+            Q = Q + _torque_force(mech.kinematics(q).phi, mech.jacobian(q), joint_torques)
+        return q, qd, np.linalg.solve(M, (Q - h)[..., None])[..., 0]
+
+    return sample
 
 
 def constant_speed(t, q0, speed):

@@ -17,7 +17,7 @@ from .model import FEModel
 from .outputs import evaluate_outputs, output_unit
 from .results import Result
 
-__all__ = ["simulate", "simulate_models", "Prepared", "build_mechanism", "link_masses", "rigid_motion", "time_grid", "RigidMotion"]
+__all__ = ["simulate", "simulate_models", "Prepared", "RigidSource", "build_mechanism", "link_masses", "rigid_motion", "time_grid", "RigidMotion"]
 
 
 def build_mechanism(case: dict):
@@ -79,29 +79,46 @@ class RigidMotion:
         return np.asfortranarray(rig.transpose(0, 2, 1))
 
 
+class RigidSource:
+    """The rigid-body motion of a case as a function of time: ``source(t)`` is the RigidMotion on any
+    increasing grid t inside [0, t_end] (kinematic drives in closed form; torque drives from the
+    dense output of one forward-dynamics integration), so a long run can sample it chunk by chunk."""
+
+    def __init__(self, case: dict, fe: FEModel, t_end: float, mech=None):
+        self.case = case
+        self.mech = build_mechanism(case) if mech is None else mech
+        drive = case["drive"]
+        self.q0 = np.array(case["initial"]["angles"], float)
+        qd0 = np.array(case["initial"]["speeds"], float)
+        self._dense = None
+        if drive["type"] != "kinematic":
+            masses = link_masses(case, fe)
+            joint_torques = []
+            for tq in drive["torques"]:
+                j = fe.joint(tq["joint"])
+                joint_torques.append((lambda theta, tq=tq: torque_value(tq, theta), j.outboard, j.inboard))
+            self._dense = rigid.integrate_dense(self.mech, masses, self.q0, qd0, (0.0, t_end), None,
+                                                gravity=tuple(case["loads"]["gravity"]), joint_torques=joint_torques,
+                                                rtol=case["solver"]["rigid_rtol"], atol=case["solver"]["rigid_atol"])
+
+    def __call__(self, t: np.ndarray) -> RigidMotion:
+        drive, mech = self.case["drive"], self.mech
+        if self._dense is None:
+            if drive["law"] == "constant_speed":
+                q, qd, qdd = rigid.constant_speed(t, self.q0[0], drive["speed"])
+            else:
+                q, qd, qdd = rigid.spinup(t, drive["final_speed"], drive["spinup_time"], q0=self.q0[0])
+            if isinstance(mech, rigid.FourBar):
+                rigid.check_motion(mech, q, t)
+        else:
+            q, qd, qdd = self._dense(t)
+        return RigidMotion(t, q, qd, qdd, mech.kinematics(q, qd, qdd))
+
+
 def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMotion:
     """Rigid-body motion on the grid t: kinematic drive, or torque-driven forward dynamics."""
-    mech = build_mechanism(case) if mech is None else mech
-    drive = case["drive"]
-    q0 = np.array(case["initial"]["angles"], float)
-    qd0 = np.array(case["initial"]["speeds"], float)
-    if drive["type"] == "kinematic":
-        if drive["law"] == "constant_speed":
-            q, qd, qdd = rigid.constant_speed(t, q0[0], drive["speed"])
-        else:
-            q, qd, qdd = rigid.spinup(t, drive["final_speed"], drive["spinup_time"], q0=q0[0])
-        if isinstance(mech, rigid.FourBar):
-            rigid.check_motion(mech, q, t)
-    else:
-        masses = link_masses(case, fe)
-        joint_torques = []
-        for tq in drive["torques"]:
-            j = fe.joint(tq["joint"])
-            joint_torques.append((lambda theta, tq=tq: torque_value(tq, theta), j.outboard, j.inboard))
-        q, qd, qdd = rigid.integrate(mech, masses, q0, qd0, t, None, gravity=tuple(case["loads"]["gravity"]),
-                                     joint_torques=joint_torques,
-                                     rtol=case["solver"]["rigid_rtol"], atol=case["solver"]["rigid_atol"])
-    return RigidMotion(t, q, qd, qdd, mech.kinematics(q, qd, qdd))
+    t = np.asarray(t, float)
+    return RigidSource(case, fe, float(t[-1]), mech)(t)
 
 
 def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion):
@@ -148,30 +165,73 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray) -> None:
 
 
 class Prepared:
-    """A case made ready to run: FE model, time grid and rigid motion (shared by every model)."""
+    """A case made ready to run: FE model, time grid and rigid motion (shared by every model).
+
+    The superposition models run in chunks of ``chunk_steps`` steps (rounded up to a multiple of the
+    output decimation): the rigid motion is sampled and the kernel called per chunk, continuing from
+    the last state, so memory is O(frames), not O(steps).  ``rm``, ``rig``, ``q_free`` and ``q_val``
+    (the rigid motion on the whole grid) are computed when first used (the coupled models use them)."""
+
+    CHUNK_STEPS = 10_000
 
     def __init__(self, case: dict, *, dt: float | None = None, elements_per_link: int | None = None,
-                 out_every: int | None = None):
+                 out_every: int | None = None, chunk_steps: int | None = None):
         t_start = time.perf_counter()
         if elements_per_link is not None:
             case = _with_elements(case, elements_per_link)
         self.case = case
         self.nsteps, self.dt, self.out_every = time_grid(case, dt, out_every)
         self.t = np.linspace(0.0, case["solver"]["t_end"], self.nsteps + 1)
+        chunk = self.CHUNK_STEPS if chunk_steps is None else int(chunk_steps)
+        self.chunk_steps = self.out_every * max(1, math.ceil(chunk / self.out_every))
         self.fe = FEModel.from_case(case)
         for name, sp in case["outputs"].items():  # node references must fall on the mesh: check before running
             if isinstance(sp.get("at"), str):
                 self.fe.node_ref(sp["at"], f"outputs.{name}.at")
-        t0 = time.perf_counter()
-        self.rm = rigid_motion(case, self.fe, self.t)
-        self.t_rigid = time.perf_counter() - t0
-        self.gravity = case["loads"]["gravity"]
-        self.rig = self.rm.kernel_samples(self.gravity)
-        self._checked = False
-        self.q_free, self.q_val = elastic_torque_loads(case, self.fe, self.rm)
-        self.coupled = {}
         self.mech = build_mechanism(case)
+        t0, c0 = time.perf_counter(), time.thread_time()
+        self.source = RigidSource(case, self.fe, float(self.t[-1]), self.mech)
+        self.rm_frames = self.source(self.t[::self.out_every])   # the motion at the output frames
+        self.t_rigid, self.t_rigid_cpu = time.perf_counter() - t0, time.thread_time() - c0
+        self.gravity = case["loads"]["gravity"]
+        self._checked = False
+        self._full = None
+        self.coupled = {}
         self.t_prepare = time.perf_counter() - t_start
+
+    def _full_grid(self):
+        if self._full is None:
+            rm = self.source(self.t)
+            self._full = (rm, rm.kernel_samples(self.gravity)) + elastic_torque_loads(self.case, self.fe, rm)
+        return self._full
+
+    @property
+    def rm(self) -> RigidMotion:
+        """Rigid motion on the whole time grid (computed on first use)."""
+        return self._full_grid()[0]
+
+    @property
+    def rig(self) -> np.ndarray:
+        """Kernel samples (5, nlinks, nsteps+1) on the whole grid (computed on first use)."""
+        return self._full_grid()[1]
+
+    @property
+    def q_free(self):
+        return self._full_grid()[2]
+
+    @property
+    def q_val(self):
+        return self._full_grid()[3]
+
+    def _chunk(self, i0: int, i1: int):
+        """(rig, q_free, q_val) of steps i0..i1 (grid samples i0..i1 inclusive)."""
+        if self._full is not None or (i0 == 0 and i1 == self.nsteps):
+            _, rig, qf, qv = self._full_grid()
+            if qv is not None:
+                qv = np.asfortranarray(qv[:, i0:i1 + 1])
+            return np.asfortranarray(rig[:, :, i0:i1 + 1]), qf, qv
+        rm = self.source(self.t[i0:i1 + 1])
+        return (rm.kernel_samples(self.gravity),) + elastic_torque_loads(self.case, self.fe, rm)
 
     def run(self, model: str | None = None, geometric: str | None = None) -> Result:
         """Integrate the elastic equations with one model (``geometric`` overrides
@@ -184,27 +244,42 @@ class Prepared:
         if model in ("coupled", "nonlinear"):
             return self._run_coupled(t_start, model)
         if not self._checked:
-            check_elastic_problem(fe, self.rig)
+            check_elastic_problem(fe, self.rm_frames.kernel_samples(self.gravity)[:, :, :1])
             self._checked = True
         sol = dict(case["solver"])
         if geometric is not None:
             sol["geometric_stiffness"] = geometric
-        t0 = time.perf_counter()
-        uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
-                                           out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free,
-                                           q_val=self.q_val, geometric=sol["geometric_stiffness"],
-                                           geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"], full=True)
-        t_kernel = time.perf_counter() - t0
+        oe, nfr = self.out_every, self.nsteps // self.out_every + 1
+        uf, vf, af = (np.empty((fe.nfree, nfr), order="F") for _ in range(3))
+        nf, geo_iters = np.zeros((fe.nel, nfr), order="F"), 0
+        u = v = a = None
+        t_kernel = t_samples = c_kernel = 0.0
+        for i0 in range(0, self.nsteps, self.chunk_steps):
+            i1 = min(i0 + self.chunk_steps, self.nsteps)
+            ts = time.perf_counter()
+            rig, q_free, q_val = self._chunk(i0, i1)
+            t0, c0 = time.perf_counter(), time.thread_time()
+            out = fe.run(rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"], out_every=oe,
+                         rayleigh=sol["rayleigh"], q_free=q_free, q_val=q_val, u0=u, v0=v, a0=a, t0=self.t[i0],
+                         geometric=sol["geometric_stiffness"], geo_tol=sol["geometric_tol"],
+                         geo_maxit=sol["geometric_maxit"], full=True)
+            t_kernel += time.perf_counter() - t0
+            c_kernel += time.thread_time() - c0
+            t_samples += t0 - ts
+            f = slice(i0 // oe, i1 // oe + 1)   # a chunk's first frame is the previous chunk's last
+            uf[:, f], vf[:, f], af[:, f], nf[:, f] = out[:4]
+            geo_iters += int(out[4])
+            u, v, a = uf[:, f.stop - 1], vf[:, f.stop - 1], af[:, f.stop - 1]   # the state at step i1
         idx = slice(0, self.nsteps + 1, self.out_every)
-        motion_f = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx]
-                                       for k in rigid.LinkMotion.__dataclass_fields__})
-        rig_f = self.rm.kernel_samples(self.gravity, idx)
+        rmf = self.rm_frames
+        motion_f = rmf.motion
+        rig_f = rmf.kernel_samples(self.gravity)
         u_all = fe.expand(uf)
         if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
             nf = np.array([[fe.el_prop[3, e] / fe.el_prop[0, e]] for e in range(fe.nel)]) * _axial_stretch(fe, u_all, motion_f)
-        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, self.rm.q[idx], self.rm.qd[idx],
-                                   self.rm.qdd[idx], rig_f, model, axial=nf)
+        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rmf.q, rmf.qd, rmf.qdd, rig_f, model, axial=nf)
         units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
+        self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": t_samples}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
         extra = {"validity": coupled.validity(fe, nf, u_all)}
@@ -212,7 +287,7 @@ class Prepared:
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": int(geo_iters),
                                             "mean_per_step": geo_iters / self.nsteps}
         return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
-                      q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_all, v=fe.expand(vf),
+                      q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_all, v=fe.expand(vf),
                       a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
                       axial=nf)
 
@@ -226,11 +301,11 @@ class Prepared:
         cm = self.coupled[model]
         q0, v0 = cm.initial_state(self.rm.q[0], self.rm.qd[0], self.mech)
         cval = cm.constraint_values(self.t, self.rm.q, self.rm.qd, self.rm.qdd, self.mech)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, beta=sol["beta"], gamma=sol["gamma"],
                                            out_every=self.out_every, tol=sol["newton_tol"], maxit=sol["newton_maxit"],
                                            gravity=self.gravity, rayleigh=sol["rayleigh"])
-        t_kernel = time.perf_counter() - t0
+        t_kernel, c_kernel = time.perf_counter() - t0, time.thread_time() - c0
         idx = slice(0, self.nsteps + 1, self.out_every)
         ref = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx] for k in rigid.LinkMotion.__dataclass_fields__})
         chord = coupled.chord_motion(cm, qf, vf, af)
@@ -249,6 +324,7 @@ class Prepared:
         for (_, _, kind, _), lam in zip(cm.constraints, lf):
             if kind == "drive":   # the torque the kinematic drive applies (the constraint torque is -lambda)
                 columns["drive_torque"], units["drive_torque"] = -lam, "N m"
+        self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": 0.0}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
         extra = {"coupled": coupled.diagnostics(cm, qf, ef, chord, ref, iters, self.nsteps),
