@@ -181,7 +181,7 @@ class Prepared:
             case = _with_elements(case, elements_per_link)
         self.case = case
         self.nsteps, self.dt, self.out_every = time_grid(case, dt, out_every)
-        self.t = np.linspace(0.0, case["solver"]["t_end"], self.nsteps + 1)
+        self._t = None
         chunk = self.CHUNK_STEPS if chunk_steps is None else int(chunk_steps)
         self.chunk_steps = self.out_every * max(1, math.ceil(chunk / self.out_every))
         self.fe = FEModel.from_case(case)
@@ -190,14 +190,31 @@ class Prepared:
                 self.fe.node_ref(sp["at"], f"outputs.{name}.at")
         self.mech = build_mechanism(case)
         t0, c0 = time.perf_counter(), time.thread_time()
-        self.source = RigidSource(case, self.fe, float(self.t[-1]), self.mech)
-        self.rm_frames = self.source(self.t[::self.out_every])   # the motion at the output frames
+        self.source = RigidSource(case, self.fe, float(case["solver"]["t_end"]), self.mech)
+        self.rm_frames = self.source(self.times(0, self.nsteps, self.out_every))   # the motion at the output frames
         self.t_rigid, self.t_rigid_cpu = time.perf_counter() - t0, time.thread_time() - c0
         self.gravity = case["loads"]["gravity"]
         self._checked = False
         self._full = None
         self.coupled = {}
         self.t_prepare = time.perf_counter() - t_start
+
+    def times(self, i0: int, i1: int, every: int = 1) -> np.ndarray:
+        """Step times t_i = i t_end/N [s] for i = i0, i0 + every, ..., i1 (bit-equal to
+        linspace(0, t_end, N + 1)[i0:i1 + 1:every]) without holding the whole grid."""
+        t_end = float(self.case["solver"]["t_end"])
+        i = np.arange(i0, i1 + 1, every)
+        t = i * (t_end / self.nsteps)
+        if i.size and i[-1] == self.nsteps:
+            t[-1] = t_end
+        return t
+
+    @property
+    def t(self) -> np.ndarray:
+        """(N+1,) step times [s] (computed on first use)."""
+        if self._t is None:
+            self._t = np.linspace(0.0, self.case["solver"]["t_end"], self.nsteps + 1)
+        return self._t
 
     def _full_grid(self):
         if self._full is None:
@@ -230,7 +247,7 @@ class Prepared:
             if qv is not None:
                 qv = np.asfortranarray(qv[:, i0:i1 + 1])
             return np.asfortranarray(rig[:, :, i0:i1 + 1]), qf, qv
-        rm = self.source(self.t[i0:i1 + 1])
+        rm = self.source(self.times(i0, i1))
         return (rm.kernel_samples(self.gravity),) + elastic_torque_loads(self.case, self.fe, rm)
 
     def run(self, model: str | None = None, geometric: str | None = None) -> Result:
@@ -260,7 +277,7 @@ class Prepared:
             rig, q_free, q_val = self._chunk(i0, i1)
             t0, c0 = time.perf_counter(), time.thread_time()
             out = fe.run(rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"], out_every=oe,
-                         rayleigh=sol["rayleigh"], q_free=q_free, q_val=q_val, u0=u, v0=v, a0=a, t0=self.t[i0],
+                         rayleigh=sol["rayleigh"], q_free=q_free, q_val=q_val, u0=u, v0=v, a0=a, t0=i0 * self.dt,
                          geometric=sol["geometric_stiffness"], geo_tol=sol["geometric_tol"],
                          geo_maxit=sol["geometric_maxit"], full=True)
             t_kernel += time.perf_counter() - t0
@@ -286,7 +303,7 @@ class Prepared:
         if sol["geometric_stiffness"] != "none":
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": int(geo_iters),
                                             "mean_per_step": geo_iters / self.nsteps}
-        return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
+        return Result(case=case, model=model, t=rmf.t, columns=columns, units=units, fe=fe,
                       q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_all, v=fe.expand(vf),
                       a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
                       axial=nf)
