@@ -138,9 +138,11 @@ def test_spinup_without_stiffening_diverges(spinup):
     none = by(rows, "model", "classic/none")[0]
     ref = by(rows, "model", ex.SPINUP_REFERENCE)[0]
     assert not ref["error"] and ref["t_last"] == pytest.approx(20.0)
-    # it grows past the beam length (or stops on the divergence guard) ...
-    assert none["peak"] > 10.0 or none["error"]
-    assert none["peak"] > 10 * ref["peak"] or none["error"]
+    # it grows past the beam length, or stops on the divergence guard ...
+    if none["error"]:
+        assert "divergence" in none["error"]
+    else:
+        assert none["peak"] > 10 * ref["peak"]
     # ... after the spin rate passed the first bending frequency
     assert none.get("t_past_L", none["t_last"]) > none["t_rate_w1"]
 
@@ -173,11 +175,15 @@ def test_long_run_amplitude_and_energy():
 
 # ------------------------------------------------------------------------------------------ 7
 def test_torque_step_high_frequency_content():
-    rows, _ = ex.torque_step_study(integrators=("newmark", "galpha-0.5"), models=("coupled",), dts=(1e-4,), t_end=0.02)
+    rows, _ = ex.torque_step_study(integrators=("newmark", "galpha-0.5"), models=("coupled",), dts=(1e-3,), t_end=0.02)
     nm, ga = rows[0], rows[1]
-    assert nm["hf_axial"] > 0.05                       # the step leaves axial ringing, undamped
-    assert ga["hf_axial"] < 0.5 * nm["hf_axial"]       # dissipation removes it ...
-    assert ga["bending_change"] < 0.1                  # ... and keeps the bending response
+    # the step leaves the axial chord-stretch modes ringing, aliased to the step frequency when unresolved
+    assert nm["hf_axial"] > 0.5 and nm["sawtooth_axial"] > 0.3
+    # generalized-alpha (rho_inf 0.5) removes it and halves the axial-force peak ...
+    assert ga["hf_axial"] < 0.5 * nm["hf_axial"] and ga["sawtooth_axial"] < 0.1 * nm["sawtooth_axial"]
+    assert ga["peak_axial"] < 0.6 * nm["peak_axial"]
+    # ... while the bending response stays within 10 %
+    assert abs(ga["peak_tip_dy"] / nm["peak_tip_dy"] - 1) < 0.1
 
 
 def test_every_extreme_case_has_a_header():
