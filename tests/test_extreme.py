@@ -17,7 +17,8 @@ def by(rows, key, value):
 # ------------------------------------------------------------------------------------------ 1
 @pytest.fixture(scope="module")
 def stiff():
-    return ex.stiff_study(integrators=("newmark", "galpha-0.8", "galpha-0.5", "galpha-0.0", "hht-0.05"), t_end=0.01)[0]
+    # full size: one crank cycle, 524 steps, cheap
+    return ex.stiff_study(integrators=("newmark", "galpha-0.8", "galpha-0.5", "galpha-0.0", "hht-0.05"))[0]
 
 
 def test_stiff_step_far_above_highest_period(stiff):
@@ -36,7 +37,7 @@ def test_stiff_average_acceleration_bounded_but_rings(stiff):
 
 
 def test_stiff_numerical_dissipation_removes_the_sawtooth(stiff):
-    for lab, limit in (("galpha-0.0", 1e-3), ("galpha-0.5", 1e-3), ("galpha-0.8", 0.05), ("hht-0.05", 1e-3)):
+    for lab, limit in (("galpha-0.0", 1e-3), ("galpha-0.5", 1e-3), ("galpha-0.8", 0.05), ("hht-0.05", 1e-2)):
         r = by(stiff, "integrator", ex.LABEL[lab])[0]
         assert r["sawtooth_strain"] < limit, lab
     nm = by(stiff, "integrator", ex.LABEL["newmark"])[0]
@@ -160,22 +161,27 @@ def test_spinup_stiffened_follows_nonlinear(spinup):
 
 # ------------------------------------------------------------------------------------------ 6
 def test_long_run_amplitude_and_energy():
-    rows, series = ex.long_run_study(integrators=("newmark", "galpha-0.8"), cycles=12, coupled_cycles=4, dt=2e-4)
+    rows, series = ex.long_run_study(integrators=("newmark", "galpha-0.8"), cycles=12, coupled_cycles=20, dt=2e-4,
+                                     coupled_dt=1e-4)
     hac = {r["integrator"]: r for r in rows if r["model"] == "hac"}
     cpl = {r["integrator"]: r for r in rows if r["model"] == "coupled"}
     nm, ga = hac[ex.LABEL["newmark"]], hac[ex.LABEL["galpha-0.8"]]
     # average acceleration: the free vibration of the start-up transient is kept (no decay) ...
     assert nm["change_last"] > 0.5 * nm["change_cycle2"]
-    # ... and generalized-alpha at w1 dt ~ 0.06 keeps most of it too (dissipation acts at w dt ~ 1)
-    assert ga["change_last"] > 0.3 * nm["change_last"]
-    # the coupled model with average acceleration conserves energy; dissipation only removes it
-    assert cpl[ex.LABEL["newmark"]]["energy_drift"] < 1e-3
-    assert cpl[ex.LABEL["galpha-0.8"]]["energy_final"] <= 1e-6
+    # ... and generalized-alpha at w1 dt ~ 0.06 keeps it too (its dissipation acts at w dt ~ 1)
+    assert ga["change_last"] > 0.8 * nm["change_last"]
+    assert ga["amp_last"] == pytest.approx(nm["amp_last"], rel=0.05)
+    # coupled model: the drive constraint's period-2-step mode grows under average acceleration ...
+    cn, cg = cpl[ex.LABEL["newmark"]], cpl[ex.LABEL["galpha-0.8"]]
+    assert cn["drive_saw_last"] > 3 * cn["drive_saw_first"]
+    # ... and stays down under generalized-alpha, which only removes energy
+    assert cg["drive_saw_last"] < 1.5 * cg["drive_saw_first"] and cg["drive_saw_last"] < 0.3 * cn["drive_saw_last"]
+    assert cg["energy_final"] < 0 and cg["energy_drift"] < 0.01
 
 
 # ------------------------------------------------------------------------------------------ 7
 def test_torque_step_high_frequency_content():
-    rows, _ = ex.torque_step_study(integrators=("newmark", "galpha-0.5"), models=("coupled",), dts=(1e-3,), t_end=0.02)
+    rows, _ = ex.torque_step_study(integrators=("newmark", "galpha-0.5"), models=("coupled",), dts=(1e-3,))
     nm, ga = rows[0], rows[1]
     # the step leaves the axial chord-stretch modes ringing, aliased to the step frequency when unresolved
     assert nm["hf_axial"] > 0.5 and nm["sawtooth_axial"] > 0.3
