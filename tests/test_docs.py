@@ -167,6 +167,9 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
     if argv[0] == "compare":
         assert list(tmp_path.rglob("compare.json"))
         return
+    if argv[0] in ("stability", "sweep"):   # their tables: stability.csv, sweep.csv
+        assert list(tmp_path.rglob(f"{argv[0]}.csv"))
+        return
     csvs = list(tmp_path.rglob("timeseries.csv"))
     assert csvs
     cols, units = read_timeseries(csvs[0])
