@@ -78,6 +78,12 @@ def test_critical_speeds_growth(critical):
     assert p[280.0]["undamped"]["growth"] > 5
     # principal parametric resonance (crank speed = 2 w1): exponential growth that 1 % damping does not stop
     assert p[560.0]["damped"]["growth"] > 1e3
+    # the time runs' growth per cycle is the largest Floquet multiplier where it dominates
+    for lab in ("undamped", "damped"):
+        assert p[560.0][lab]["per_cycle"] == pytest.approx(p[560.0][lab]["mu"], rel=0.05)
+    assert p[280.0]["undamped"]["floquet_unstable"] and p[560.0]["damped"]["floquet_unstable"]
+    assert not p[120.0]["undamped"]["floquet_unstable"] and not p[120.0]["damped"]["floquet_unstable"]
+    assert p[120.0]["kind"] == "bounded" and p[560.0]["kind"] == "unstable"
 
 
 # ------------------------------------------------------------------------------------------ 4
