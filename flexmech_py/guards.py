@@ -271,6 +271,15 @@ def _half_step_check(prep, model: str, geometric, t_fail: float) -> dict:
     return out
 
 
+def _undamped_constraints(prep, model: str, data) -> bool:
+    """A coupled/nonlinear run with rotation constraints (kinematic drive, clamped or locked joints)
+    integrated without numerical dissipation (Newmark, gamma = 1/2): its multipliers are undamped."""
+    sol = prep.case["solver"]
+    cm = (data or {}).get("cm")
+    return (model not in LINEAR_MODELS and sol.get("integrator", "newmark") == "newmark"
+            and abs(sol.get("gamma", 0.5) - 0.5) < 1e-12 and cm is not None and len(cm.constraints) > 0)
+
+
 def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True) -> SolverError:
     """The SolverError a failed run raises: one line naming the time, what stopped, the quantity
     and the likely cause; ``partial`` is marked failed and its summary carries the diagnosis."""
@@ -306,6 +315,12 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
         cause, ctext = "bug_or_input", kernels.STATUS_MESSAGES[code]
     elif code == kernels.STATUS_SINGULAR:
         cause, ctext = "singular", kernels.STATUS_MESSAGES[code]
+    elif _undamped_constraints(prep, model, data) and hs and "error" not in hs and hs["failed_at_s"] is not None:
+        cause = "undamped_integrator"
+        ctext = (f"the average-acceleration rule adds no numerical damping, and the constraint (drive) torques of the "
+                 f"{model} model carry a period-2 dt oscillation that it lets grow (at dt/2 the run fails again at "
+                 f"t = {_fmt_t(hs['failed_at_s'])} s); rerun with numerical dissipation: --integrator generalized-alpha "
+                 "--rho-inf 0.8 (theory.md §15)")
     elif hs and "error" not in hs and (hs["failed_at_s"] is None
                                        or hs["failed_at_s"] > t_fail + max(0.1 * t_fail, 20 * dt)):
         cause = "step_too_large"

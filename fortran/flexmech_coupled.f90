@@ -527,7 +527,7 @@ contains
     real(dp), allocatable :: gt(:, :), x(:, :), amat(:, :), lam(:), dlam(:), gval(:), acc0(:), ang0(:), ang1(:), lam0(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
-    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap
+    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref
     logical :: converged, refactor
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0
     nsteps = size(presc, 3) - 1
@@ -547,6 +547,9 @@ contains
     end if
     c1 = 1.0_dp/(1.0_dp - alpha_m)
     betap = beta*(1.0_dp - alpha_f)*c1
+    ! length scale of the mechanism [m] (largest nodal coordinate at the start): the absolute floor of
+    ! the Newton test, for steps where the accelerations themselves vanish (a smooth start from rest)
+    lref = max(maxval(abs(q)), tiny(1.0_dp))
     gammap = gamma*(1.0_dp - alpha_f)*c1
     allocate (ab(band_rows(sys%kl, sys%ku), nf), res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf))
     allocate (w(sys%ndof))
@@ -617,9 +620,10 @@ contains
         a(freeidx) = a(freeidx) + rf
         da_norm = sqrt(sum(rf**2)); a_norm = sqrt(sum(a(freeidx)**2))
         iters = iters + 1
-        ! converged, or stagnated at the round-off level of the residual (no further contraction
+        ! converged (relative to the accelerations, or the position correction below 1e-2 tol of the
+        ! mechanism size), or stagnated at the round-off level of the residual (no further contraction
         ! while already within sqrt(tol): the stiff chord terms limit the attainable precision)
-        if (da_norm <= tol*(a_norm + 1.0e-30) .or. &
+        if (da_norm <= tol*(a_norm + 1.0e-30) .or. betap*dt*dt*da_norm <= 1.0e-2_dp*tol*lref .or. &
             (it > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))) then
           converged = .true.
           exit
