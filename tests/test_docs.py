@@ -145,7 +145,7 @@ def _commands(doc):
     return out
 
 
-CLI_COMMANDS = [c for doc in ("cli.md", "cases.md", "api.md", "compare.md") for c in _commands(doc)]
+CLI_COMMANDS = [c for doc in ("cli.md", "cases.md", "api.md", "compare.md", "accuracy.md") for c in _commands(doc)]
 
 
 def test_cli_md_has_examples():
@@ -165,6 +165,9 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
     assert rc == 0, err
     if argv[0] == "compare":
         assert list(tmp_path.rglob("compare.json"))
+        return
+    if argv[0] == "accuracy":
+        assert list(tmp_path.rglob("accuracy.csv"))
         return
     csvs = list(tmp_path.rglob("timeseries.csv"))
     assert csvs
