@@ -119,6 +119,8 @@ def _add_accuracy_parser(sub) -> None:
                    help="time each run R times and keep the minimum kernel time (default 1)")
     a.add_argument("--jobs", type=_positive_int, default=None, metavar="J",
                    help="worker processes (default: every core; 1 for the least disturbed timings)")
+    a.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
+                   help="cost of a run: CPU time (default; robust on a shared machine) or wall time of the kernel")
     a.add_argument("--consistency", type=float, default=0.3,
                    help="largest difference of successive observed orders for Richardson extrapolation (default 0.3)")
     a.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
@@ -138,7 +140,7 @@ def _cmd_accuracy(args) -> int:
                         dt_levels=args.dt_levels, elements=args.elements, grid=args.grid, ref_dt_factor=args.ref_dt_factor,
                         ref_elements=args.ref_elements, columns=args.columns, tolerances=args.tolerances,
                         repeat=args.repeat, jobs=args.jobs, out_dir=out, progress=not args.quiet,
-                        consistency=args.consistency, plots=not args.no_plots)
+                        consistency=args.consistency, plots=not args.no_plots, clock=args.clock)
     b = st.batch
     print(f"{b['runs']} runs ({b['computed']} computed, {b['cached']} cached, {b['failed']} failed) in {b['wall_s']:.1f} s")
     for m, ref in st.reference.items():
@@ -152,7 +154,8 @@ def _cmd_accuracy(args) -> int:
         if e["column"] != "worst" and len(st.columns) > 1:
             continue
         what = (f"{e['integrator']}, dt {e['dt']:.3g} s, {e['elements_per_link']} elements/link: kernel "
-                f"{e['kernel_s']:.3f} s, error {e['error']:.2g}") if "integrator" in e else e.get("note", "")
+                f"{e['kernel_cpu_s']:.3g} s CPU, {e['kernel_s']:.3g} s wall, error {e['error']:.2g}") \
+            if "integrator" in e else e.get("note", "")
         print(f"cheapest {e['model']} to {e['tolerance']:g} ({e['column']}): {what}")
     print("wrote " + ", ".join(str(p) for p in st.paths))
     return 0
