@@ -47,6 +47,7 @@ UNITS = {
     "joint_angle": "rad", "joint_speed": "rad/s", "joint_acceleration": "rad/s^2", "link_angle": "rad",
     "strain": "1", "curvature": "1/m", "position": "m", "axial_force": "N",
 }
+ERROR_ESTIMATES = ("time", "none")   # step doubling (one more run at 2 dt), or nothing (guards.py)
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -132,7 +133,8 @@ def _links(raw) -> list[dict]:
     if not isinstance(raw, list) or not raw:
         raise CaseError("links", "is missing or empty; add one [[links]] table per link")
     out, names = [], set()
-    allowed = {"name", "length", "area", "second_moment", "youngs_modulus", "density", "half_depth", "elements"}
+    allowed = {"name", "length", "area", "second_moment", "youngs_modulus", "density", "half_depth", "elements",
+               "yield_strain"}
     for i, ln in enumerate(raw):
         w = f"links[{i}]"
         _keys(ln, allowed, w)
@@ -149,6 +151,7 @@ def _links(raw) -> list[dict]:
         if d["half_depth"] is None:  # rectangular section: h = sqrt(12 I / A)
             d["half_depth"] = 0.5 * math.sqrt(12.0 * d["second_moment"] / d["area"])
         d["elements"] = _int(ln, "elements", w)
+        d["yield_strain"] = _num(ln, "yield_strain", w, positive=True)   # None: no yield check (guards.py)
         out.append(d)
     return out
 
@@ -357,7 +360,7 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
 
     sol = raw.get("solver", {})
     _keys(sol, {"t_end", "dt", "output_every", "beta", "gamma", "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit",
-                "geometric_stiffness", "geometric_tol", "geometric_maxit"}, "solver")
+                "geometric_stiffness", "geometric_tol", "geometric_maxit", "error_estimate"}, "solver")
     t_end = _num(sol, "t_end", "solver", positive=True, required=True)
     dt = _num(sol, "dt", "solver", positive=True, required=True)
     if dt > t_end:
@@ -381,7 +384,8 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
                    "geometric_stiffness": _str(sol, "geometric_stiffness", "solver", default="none",
                                                choices=("none", "current", "lagged", "quasi_static")),
                    "geometric_tol": _num(sol, "geometric_tol", "solver", default=1e-8, positive=True),
-                   "geometric_maxit": _int(sol, "geometric_maxit", "solver", default=50)}
+                   "geometric_maxit": _int(sol, "geometric_maxit", "solver", default=50),
+                   "error_estimate": _str(sol, "error_estimate", "solver", default="time", choices=ERROR_ESTIMATES)}
     if mtype == "serial" and "outputs" not in raw:
         raise CaseError("outputs", "is missing; a serial chain needs an [outputs] table naming what to record")
     r["outputs"] = _outputs(raw.get("outputs"), joints, lnames, mtype)

@@ -6,7 +6,9 @@
     flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
 
-Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2.
+Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2; a run whose
+solver stopped writes its partial results, prints the diagnosis that way and exits with code 3.
+Validity warnings go to stderr as ``flexmech: warning: ...`` lines.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import sys
 from pathlib import Path
 
 from .case import MODELS as MODELS_ALL
-from .errors import FlexmechError
+from .errors import FlexmechError, SolverError
 
 __all__ = ["main"]
 
@@ -197,7 +199,20 @@ def _cmd_run(args) -> int:
     from .simulate import simulate
 
     case = load_case(args.case, overrides=args.set)
-    res = simulate(case, model=args.model, dt=args.dt, elements_per_link=args.elements_per_link)
+    try:
+        res = simulate(case, model=args.model, dt=args.dt, elements_per_link=args.elements_per_link)
+    except SolverError as exc:   # the solver stopped: keep and mark the frames before the failure
+        if exc.partial is None:
+            raise
+        res = exc.partial
+        out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{res.model}"
+        paths = res.write(out)
+        print(res.table())
+        print(f"wrote partial results (up to t = {res.t[-1]:.6g} s): " + ", ".join(str(p) for p in paths))
+        for w in res.extra.get("warnings", []):
+            print(f"flexmech: warning: {w}", file=sys.stderr)
+        print(f"flexmech: error: {exc}", file=sys.stderr)
+        return 3
     out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{res.model}"
     paths = res.write(out)
     if not args.no_plots:
@@ -206,6 +221,8 @@ def _cmd_run(args) -> int:
         paths += plot_result(res, out)
     print(res.table())
     print("wrote " + ", ".join(str(p) for p in paths))
+    for w in res.extra.get("warnings", []):
+        print(f"flexmech: warning: {w}", file=sys.stderr)
     return 0
 
 

@@ -212,7 +212,9 @@ class CoupledModel:
             nframes, nc, *self._args(), np.asfortranarray(con_link), np.asfortranarray(con_end), cval,
             np.asarray(gravity, float), np.asarray(rayleigh, float), presc_dof, presc, dt, beta, gamma, out_every,
             tol, maxit, q, v, a)
-        kernels.check_status(status, "coupled Newmark-Newton integration", time=fail * dt if fail else 0.0)
+        kernels.check_status(status, "coupled Newmark-Newton integration", time=fail * dt if fail else 0.0,
+                             step=int(fail), data={"qf": qf, "vf": vf, "af": af, "lf": lf[:nc], "ef": ef, "iters": iters,
+                                                   "q": q, "v": v, "a": a})
         return qf, vf, af, lf[:nc], ef, iters
 
     def dense(self, q, v, a, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)):

@@ -31,9 +31,20 @@ class MechanismError(FlexmechError):
 
 
 class SolverError(FlexmechError, RuntimeError):
-    """A compiled solver stopped (singular matrix, non-finite values, ...)."""
+    """A compiled solver stopped (singular matrix, non-finite values, divergence, Newton failure, ...).
 
-    def __init__(self, message: str, time: float | None = None, code: int | None = None):
+    Attributes: ``time`` [s] of the failed step, ``code`` (the kernel status), ``step`` (1-based
+    failed step), ``partial`` (a :class:`~flexmech_py.results.Result` holding the frames up to the
+    failure, marked ``status = "failed"``; None when nothing could be kept), ``failure`` (the
+    diagnosis written to summary.json: quantity, likely cause, evidence), ``data`` (the raw kernel
+    arrays, used internally to build ``partial``)."""
+
+    def __init__(self, message: str, time: float | None = None, code: int | None = None, *,
+                 step: int | None = None, data: dict | None = None, partial=None, failure: dict | None = None):
         self.time = time
         self.code = code
+        self.step = step
+        self.data = data
+        self.partial = partial
+        self.failure = failure
         super().__init__(message)

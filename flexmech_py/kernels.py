@@ -35,7 +35,21 @@ STATUS_MESSAGES = {
     4: "invalid input to a compiled routine (sizes, indices or coefficients)",
     5: "Newton iterations did not converge (reduce solver.dt, raise solver.newton_maxit, or the motion "
        "left the model's range of validity)",
+    6: "the elastic state grew beyond solver.divergence_limit (the solution is diverging)",
 }
+#: what stopped, in a few words (the diagnosis in flexmech_py.guards adds quantity and likely cause)
+STATUS_WHAT = {
+    1: "the system matrix became singular",
+    2: "the solution became non-finite (NaN or Inf)",
+    3: "LAPACK rejected an argument (a flexmech bug: please report it with the case file)",
+    4: "invalid input to a compiled routine",
+    5: "Newton iterations did not converge within solver.newton_maxit",
+    6: "the elastic state grew beyond solver.divergence_limit",
+}
+STATUS_WHAT_GEOMETRIC = "the geometric-stiffness axial forces did not converge within solver.geometric_maxit"
+STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED = range(1, 7)
+#: status codes a time loop returns while its earlier frames stay valid (partial results are kept)
+RUNTIME_FAILURES = (STATUS_SINGULAR, STATUS_NONFINITE, STATUS_NEWTON, STATUS_DIVERGED)
 
 
 GEOMETRIC_NOT_CONVERGED = ("the axial forces of the geometric stiffness did not converge within the step "
@@ -43,10 +57,13 @@ GEOMETRIC_NOT_CONVERGED = ("the axial forces of the geometric stiffness did not 
                            "compression beyond the Euler load, the linear model is past buckling here)")
 
 
-def check_status(status: int, what: str, time: float | None = None, iteration: str = "newton") -> None:
+def check_status(status: int, what: str, time: float | None = None, iteration: str = "newton",
+                 step: int | None = None, data: dict | None = None) -> None:
     """Raise :class:`SolverError` for a non-zero kernel status code (the only translation point).
 
-    ``iteration`` names what status 5 refers to: ``newton`` (coupled/nonlinear) or ``geometric``."""
+    ``iteration`` names what status 5 refers to: ``newton`` (coupled/nonlinear) or ``geometric``.
+    A time loop passes its failed ``step`` and its raw arrays ``data`` (frames before the failure and
+    the last state), from which :mod:`flexmech_py.guards` builds the partial result and the diagnosis."""
     status = int(status)
     if status == 0:
         return
@@ -54,7 +71,8 @@ def check_status(status: int, what: str, time: float | None = None, iteration: s
     if status == 5 and iteration == "geometric":
         msg = GEOMETRIC_NOT_CONVERGED
     where = f" at t = {time:.6g} s" if time is not None else ""
-    raise SolverError(f"{what} stopped{where}: {msg}", time=time, code=status)
+    raise SolverError(f"{what} stopped{where}: {msg}", time=time, code=status, step=step,
+                      data=data if status in RUNTIME_FAILURES else None)
 
 
 def element_matrices(rho_a: float, ea: float, ei: float, length: float):

@@ -323,5 +323,7 @@ class FEModel:
             nframes, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
             np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, beta, gamma, out_every, 1,
             GEOMETRIC_CODE[geometric], geo_tol, geo_maxit, u, v, a)
-        kernels.check_status(status, "Newmark integration", time=t0 + fail * dt if fail else t0, iteration="geometric")
+        kernels.check_status(status, "Newmark integration", time=t0 + fail * dt if fail else t0, iteration="geometric",
+                             step=int(fail), data={"uf": uf, "vf": vf, "af": af, "nf": nf, "geo_iters": geo_iters,
+                                                   "u": u, "v": v, "a": a})
         return (uf, vf, af, nf, geo_iters) if full else (uf, vf, af)

@@ -3,9 +3,10 @@
 Files (``docs/cli.md``):
 
 - ``timeseries.csv``: two ``#`` comment lines (provenance; units per column),
-  then a header ``t,<output names>`` and one row per output frame.
-- ``summary.json``: peaks, final values, steps, DOFs, timings, versions and
-  the fully resolved input.
+  then a header ``t,<output names>`` and one row per output frame.  A run that
+  stopped (partial result) has a third comment line ``# partial: ...`` first.
+- ``summary.json``: status, peaks, final values, steps, DOFs, timings, validity,
+  warnings, error estimate, versions and the fully resolved input.
 
 Files are written to a temporary name and renamed, so a failed run never
 leaves a half-written file behind.
@@ -57,6 +58,13 @@ class Result:
     timing: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)   # model-specific summary entries (e.g. the coupled model's)
     axial: np.ndarray | None = None             # (nel, nf) element axial forces [N], tension > 0
+    curvature: object = field(default=None, repr=False)   # callable(link, fraction) -> (nf,) curvature [1/m]
+    failure: dict | None = None                 # set when the run stopped: a partial result (guards.failed)
+
+    @property
+    def status(self) -> str:
+        """``"completed"``, or ``"failed"`` for the partial result of a run that stopped."""
+        return "failed" if self.failure else "completed"
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "t":
@@ -71,8 +79,11 @@ class Result:
             outs[name] = {"unit": self.units[name], "min": float(y.min()), "max": float(y.max()),
                           "peak_abs": float(abs(y[i])), "t_peak_abs": float(self.t[i]), "final": float(y[-1])}
         fe = self.fe
+        fail = {"failed_at_s": self.failure["time_s"], "failure": self.failure} if self.failure else {}
         return {
             "title": self.case["case"]["title"],
+            "status": self.status,
+            **fail,
             "model": self.model,
             "steps": self.nsteps,
             "dt": self.dt,
@@ -97,7 +108,44 @@ class Result:
                  f"{'output':<{w}}  {'unit':<7} {'min':>12} {'max':>12} {'final':>12}"]
         for name, o in s["outputs"].items():
             lines.append(f"{name:<{w}}  {o['unit']:<7} {o['min']:>12.5g} {o['max']:>12.5g} {o['final']:>12.5g}")
-        return "\n".join(lines)
+        if self.failure:
+            lines.insert(1, f"PARTIAL: the run stopped at t = {self.failure['time_s']:.6g} s; frames up to "
+                            f"t = {self.t[-1]:.6g} s")
+        return "\n".join(lines + self._validity_lines() + self._estimate_lines())
+
+    def _validity_lines(self) -> list[str]:
+        val, ov = self.extra.get("validity"), self.extra.get("validity_overall")
+        if not val or not ov:
+            return []
+        th = ov["thresholds"]
+        lines = [f"validity (limits: deflection {100 * th['deflection_over_length']:g} % of L, compression "
+                 f"{th['compression_over_euler']:g} x Euler load, yield strain if given)",
+                 f"{'link':<12} {'deflection/L':>12} {'max strain':>11} {'compr./Euler':>12}  first past a limit [s]"]
+        for name, v in list(val.items()) + [("overall", None)]:
+            if v is None:
+                d, e, c = ov["max_deflection_over_length"], ov["max_strain"], ov["max_compression_over_euler"]
+                first = ov["valid_until_s"]
+            else:
+                d, e, c = v["max_deflection_over_length"], v["max_strain"], v["max_compression_over_euler"]
+                times = [x for x in (v.get("deflection_exceeds_at_s"), v.get("compression_exceeds_at_s"),
+                                     v.get("strain_exceeds_yield_at_s")) if x is not None]
+                first = min(times) if times else None
+            lines.append(f"{name:<12} {100 * d:>11.3g}% {e:>11.3g} {c:>12.3g}  {'-' if first is None else f'{first:.4g}'}")
+        return lines
+
+    def _estimate_lines(self) -> list[str]:
+        est = self.extra.get("error_estimate")
+        if not est or est.get("method") == "none":
+            return []
+        if est.get("failed"):
+            return [f"error estimate (step doubling): {est['failed']}"]
+        if not est.get("worst_column"):
+            return []
+        w = est["worst_column"]
+        return [f"time-step error estimate (step doubling, dt vs 2 dt): largest in {w}, "
+                f"{est['columns'][w]['max_abs']:.3g}{'' if self.units.get(w, '1') == '1' else ' ' + self.units[w]} = "
+                f"{100 * est['worst_relative']:.3g} % "
+                f"of its peak (extra run {est.get('kernel_s', 0):.3f} s)"]
 
     # ------------------------------------------------------------------ files
     def write(self, out_dir) -> list[Path]:
@@ -106,7 +154,9 @@ class Result:
         out.mkdir(parents=True, exist_ok=True)
         names = list(self.columns)
         data = np.column_stack([self.t] + [self.columns[n] for n in names])
-        head = [f"# flexmech {versions()['flexmech']}; case {self.case['case']['title']!r}; model {self.model}; "
+        head = ([f"# partial: the run stopped at t = {self.failure['time_s']:.6g} s; frames up to t = {self.t[-1]:.6g} s "
+                 f"only ({self.failure.get('message', '')})"] if self.failure else [])
+        head += [f"# flexmech {versions()['flexmech']}; case {self.case['case']['title']!r}; model {self.model}; "
                 f"dt {self.dt:.6g} s; {self.nsteps} steps",
                 "# units: " + ",".join(["s"] + [self.units[n] for n in names]),
                 ",".join(["t"] + names)]

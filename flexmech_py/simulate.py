@@ -10,11 +10,11 @@ import numpy as np
 
 from . import rigid
 from .case import MODELS, SUPERPOSITION_MODELS
-from .errors import CaseError
-from . import coupled
+from .errors import CaseError, SolverError
+from . import coupled, guards
 from .coupled import CoupledModel
 from .model import FEModel
-from .outputs import evaluate_outputs, output_unit
+from .outputs import evaluate_outputs, link_curvature, output_unit
 from .results import Result
 
 __all__ = ["simulate", "simulate_models", "Prepared", "build_mechanism", "link_masses", "rigid_motion", "time_grid", "RigidMotion"]
@@ -179,14 +179,34 @@ class Prepared:
         self.mech = build_mechanism(case)
         self.t_prepare = time.perf_counter() - t_start
 
-    def run(self, model: str | None = None, geometric: str | None = None) -> Result:
+    def run(self, model: str | None = None, geometric: str | None = None, *, estimate: bool | None = None,
+            diagnose: bool = True) -> Result:
         """Integrate the elastic equations with one model (``geometric`` overrides
-        ``solver.geometric_stiffness`` for a superposition model)."""
-        t_start = time.perf_counter()
-        case, fe = self.case, self.fe
-        model = case["solver"]["model"] if model is None else model
+        ``solver.geometric_stiffness`` for a superposition model).
+
+        Every run gets the validity report and warnings (:mod:`flexmech_py.guards`);
+        ``estimate`` (default: ``solver.error_estimate != "none"``) adds the step-doubling error
+        estimate (one more run at 2 dt).  A failed run raises SolverError carrying the partial
+        result and, with ``diagnose``, the likely cause (which may cost a short run at dt/2)."""
+        model = self.case["solver"]["model"] if model is None else model
         if model not in MODELS:
             raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
+        try:
+            res = self._run_raw(model, geometric)
+        except SolverError as exc:
+            if exc.partial is None:
+                raise
+            guards.check_validity(exc.partial)
+            raise guards.failed(self, model, geometric, exc, diagnose=diagnose) from None
+        guards.check_validity(res)
+        if estimate is None:
+            estimate = self.case["solver"].get("error_estimate", "time") != "none"
+        res.extra["error_estimate"] = guards.error_estimate(self, res, geometric) if estimate else {"method": "none"}
+        return res
+
+    def _run_raw(self, model: str, geometric: str | None) -> Result:
+        t_start = time.perf_counter()
+        case, fe = self.case, self.fe
         if model in ("coupled", "nonlinear"):
             return self._run_coupled(t_start, model)
         if not self._checked:
@@ -196,12 +216,20 @@ class Prepared:
         if geometric is not None:
             sol["geometric_stiffness"] = geometric
         t0 = time.perf_counter()
-        uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
-                                           out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free,
-                                           q_val=self.q_val, geometric=sol["geometric_stiffness"],
-                                           geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"], full=True)
+        failure = None
+        try:
+            uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
+                                               out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free,
+                                               q_val=self.q_val, geometric=sol["geometric_stiffness"],
+                                               geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"], full=True)
+        except SolverError as exc:   # keep the frames before the failed step
+            if exc.data is None or exc.step is None or exc.step < 1:
+                raise
+            failure, k = exc, guards.frames_before(exc.step, self.out_every)
+            uf, vf, af, nf = (exc.data[n][:, :k] for n in ("uf", "vf", "af", "nf"))
+            geo_iters = exc.data["geo_iters"]
         t_kernel = time.perf_counter() - t0
-        idx = slice(0, self.nsteps + 1, self.out_every)
+        idx = slice(0, self.out_every * (uf.shape[1] - 1) + 1, self.out_every)
         motion_f = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx]
                                        for k in rigid.LinkMotion.__dataclass_fields__})
         rig_f = self.rm.kernel_samples(self.gravity, idx)
@@ -217,10 +245,12 @@ class Prepared:
         if sol["geometric_stiffness"] != "none":
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": int(geo_iters),
                                             "mean_per_step": geo_iters / self.nsteps}
-        return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
-                      q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_all, v=fe.expand(vf),
-                      a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
-                      axial=nf)
+        res = Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
+                     q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_all, v=fe.expand(vf),
+                     a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
+                     axial=nf)
+        res.curvature = lambda li, frac: link_curvature(fe, u_all, motion_f.phi[:, li], li, frac)
+        return guards.partial_or(res, failure, sol["geometric_stiffness"])
 
 
     def _run_coupled(self, t_start: float, model: str) -> Result:
@@ -233,11 +263,19 @@ class Prepared:
         q0, v0 = cm.initial_state(self.rm.q[0], self.rm.qd[0], self.mech)
         cval = cm.constraint_values(self.t, self.rm.q, self.rm.qd, self.rm.qdd, self.mech)
         t0 = time.perf_counter()
-        qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, beta=sol["beta"], gamma=sol["gamma"],
-                                           out_every=self.out_every, tol=sol["newton_tol"], maxit=sol["newton_maxit"],
-                                           gravity=self.gravity, rayleigh=sol["rayleigh"])
+        failure = None
+        try:
+            qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, beta=sol["beta"], gamma=sol["gamma"],
+                                               out_every=self.out_every, tol=sol["newton_tol"],
+                                               maxit=sol["newton_maxit"], gravity=self.gravity, rayleigh=sol["rayleigh"])
+        except SolverError as exc:   # keep the frames before the failed step
+            if exc.data is None or exc.step is None or exc.step < 1:
+                raise
+            failure, k = exc, guards.frames_before(exc.step, self.out_every)
+            qf, vf, af, lf, ef = (exc.data[n][:, :k] for n in ("qf", "vf", "af", "lf", "ef"))
+            iters = exc.data["iters"]
         t_kernel = time.perf_counter() - t0
-        idx = slice(0, self.nsteps + 1, self.out_every)
+        idx = slice(0, self.out_every * (qf.shape[1] - 1) + 1, self.out_every)
         ref = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx] for k in rigid.LinkMotion.__dataclass_fields__})
         chord = coupled.chord_motion(cm, qf, vf, af)
         u_dev = coupled.deviation(cm, qf, ref)
@@ -259,10 +297,12 @@ class Prepared:
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
         extra = {"coupled": coupled.diagnostics(cm, qf, ef, chord, ref, iters, self.nsteps),
                  "validity": coupled.validity(fe, axial, u_dev)}
-        return Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
-                      q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_dev, v=np.zeros_like(u_dev),
-                      a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
-                      axial=axial)
+        res = Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
+                     q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_dev, v=np.zeros_like(u_dev),
+                     a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
+                     axial=axial)
+        res.curvature = lambda li, frac: coupled.curvature(cm, qf, li, frac)
+        return guards.partial_or(res, failure, "coupled", cm=cm)
 
 
 def _axial_stretch(fe, u_all, motion) -> np.ndarray:

@@ -1,0 +1,413 @@
+"""Guards in every run: validity of the small-deformation models, failure diagnosis, error estimate.
+
+- :func:`check_validity` (every run, cheap): per link the largest bending deflection from the
+  chord over the link length, the largest extreme-fibre strain, the largest compressive axial force
+  over the Euler load, and when each first passes its threshold (``gap.THRESHOLDS``: deflection
+  2 % of L, compression 1 x the Euler load; a link's ``yield_strain`` when the case gives one).
+  Writes ``validity`` (per link), ``validity_overall`` and ``warnings`` into ``Result.extra``.
+- :func:`failed` (a run that stopped): names the time, the quantity and the likely cause (step
+  too large / physical instability / model outside its validity) from the run's own evidence —
+  the shortest period of the elastic model, a short check at dt/2, the validity measures before
+  the failure — and returns the SolverError that carries the partial result.
+- :func:`error_estimate` (``solver.error_estimate = "time"``): step doubling; the same model at
+  2 dt on the same rigid motion, error of the dt run ~ |y_dt - y_2dt| / (2^p - 1), p = 2.
+
+docs/stability.md ("Guards", "Validity warnings") documents the thresholds and messages.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+
+import numpy as np
+
+from . import coupled, kernels, rigid
+from .errors import SolverError
+
+__all__ = ["check_validity", "failed", "error_estimate", "frames_before", "partial_or", "ORDER"]
+
+ORDER = 2          # order of accuracy in time of every integrator flexmech ships (Newmark family, HHT, gen.-alpha)
+LINEAR_MODELS = ("hac", "classic", "classic-translational")
+
+
+def frames_before(fail_step: int, out_every: int) -> int:
+    """Number of output frames the time loop stored before it failed at step ``fail_step`` (1-based):
+    frames at steps 0, out_every, ... < fail_step."""
+    return (int(fail_step) - 1) // int(out_every) + 1
+
+
+def _first(t, mask) -> float | None:
+    return float(t[int(np.argmax(mask))]) if np.any(mask) else None
+
+
+def _fmt_t(x) -> str:
+    return f"{x:.4g}"
+
+
+# ----------------------------------------------------------------------------- validity
+def link_strains(res) -> np.ndarray:
+    """(nlinks, nf) largest extreme-fibre strain of every link over its mesh nodes:
+    c |kappa| + |N| / EA (bending strain of the outer fibre plus the axial strain of the adjacent
+    elements), c the half depth."""
+    fe = res.fe
+    out = np.zeros((len(res.case["links"]), res.t.size))
+    for li, ln in enumerate(res.case["links"]):
+        els = fe.link_elements(li)
+        n = len(els)
+        ea = ln["youngs_modulus"] * ln["area"]
+        ax = np.abs(res.axial[els]) / ea if res.axial is not None else np.zeros((n, res.t.size))
+        for k in range(n + 1):
+            kap = np.abs(res.curvature(li, k / n)) if res.curvature is not None else 0.0
+            eps_ax = np.max(ax[max(k - 1, 0):min(k + 1, n)], axis=0)
+            out[li] = np.maximum(out[li], ln["half_depth"] * kap + eps_ax)
+    return out
+
+
+def check_validity(res) -> dict:
+    """Validity measures of a run (or of its partial frames); fills ``res.extra`` and returns
+    ``validity_overall``."""
+    from .gap import THRESHOLDS, deflection_over_length   # gap imports simulate: import here
+
+    fe, t, links = res.fe, res.t, res.case["links"]
+    per_link = res.extra.get("validity") or coupled.validity(fe, res.axial, res.u)
+    defl = deflection_over_length(res)
+    strain = link_strains(res)
+    overall = {"thresholds": {"deflection_over_length": THRESHOLDS["displacement_over_length"],
+                              "compression_over_euler": THRESHOLDS["compression_over_euler"]},
+               "max_deflection_over_length": 0.0, "max_deflection_link": None, "max_strain": 0.0,
+               "max_strain_link": None, "max_compression_over_euler": 0.0, "max_compression_link": None,
+               "valid_until_s": None}
+    events = []   # (time, link, kind, peak)
+    for li, ln in enumerate(links):
+        name = ln["name"]
+        v = per_link[name]
+        comp = np.maximum(0.0, -res.axial[fe.link_elements(li)].min(axis=0)) / v["euler_load_N"]
+        v.update(max_deflection_over_length=float(defl[li].max()), max_strain=float(strain[li].max()),
+                 yield_strain=ln.get("yield_strain"),
+                 deflection_exceeds_at_s=_first(t, defl[li] > THRESHOLDS["displacement_over_length"]),
+                 compression_exceeds_at_s=_first(t, comp > THRESHOLDS["compression_over_euler"]),
+                 strain_exceeds_yield_at_s=(_first(t, strain[li] > ln["yield_strain"])
+                                            if ln.get("yield_strain") else None))
+        for key, vk, lk in (("max_deflection_over_length", "max_deflection_over_length", "max_deflection_link"),
+                            ("max_strain", "max_strain", "max_strain_link"),
+                            ("max_compression_over_euler", "max_compression_over_euler", "max_compression_link")):
+            if v[vk] >= overall[key] and (v[vk] > 0 or overall[lk] is None):
+                overall[key], overall[lk] = v[vk], name
+        for kind in ("compression", "deflection", "strain"):
+            tk = v[{"compression": "compression_exceeds_at_s", "deflection": "deflection_exceeds_at_s",
+                    "strain": "strain_exceeds_yield_at_s"}[kind]]
+            if tk is not None:
+                events.append((tk, name, kind, v))
+    events.sort(key=lambda e: e[0])
+    model = res.model
+    geo = res.extra.get("geometric_stiffness", {}).get("source", "none")
+    # the nonlinear model follows large deflections and buckling: only yielding leaves its validity
+    limiting = [e for e in events if model != "nonlinear" or e[2] == "strain"]
+    overall["valid_until_s"] = limiting[0][0] if limiting else None
+    overall["first_limit"] = ({"link": limiting[0][1], "kind": limiting[0][2], "time_s": limiting[0][0]}
+                              if limiting else None)
+    res.extra["validity"] = per_link
+    res.extra["validity_overall"] = overall
+    res.extra["warnings"] = _validity_warnings(res, events, limiting, model, geo)
+    return overall
+
+
+def _advice(model: str, geo: str) -> str:
+    if model in LINEAR_MODELS and geo == "none":
+        return ("a linear model without geometric stiffness neither stiffens in tension nor buckles in compression; "
+                "use --model nonlinear, or --set solver.geometric_stiffness=current")
+    if model in LINEAR_MODELS or model == "coupled":
+        return "use --model nonlinear"
+    return ""
+
+
+def _validity_warnings(res, events, limiting, model, geo) -> list[str]:
+    out = []
+    if limiting:
+        t0 = limiting[0][0]
+        k = int(np.searchsorted(res.t, t0))
+        speed = ""
+        if res.qd is not None and res.qd.size:
+            who = "crank" if res.case["mechanism"]["type"] == "fourbar" else "first joint"
+            speed = f" ({who} speed {abs(res.qd[k, 0]):.4g} rad/s)"
+        if model == "nonlinear":
+            out.append(f"the {model} model's results after t = {_fmt_t(t0)} s{speed} are outside its validity: "
+                       "the material yields there and every flexmech model is elastic")
+        else:
+            adv = _advice(model, geo)
+            buckles = " (a real link would buckle)" if any(e[2] == "compression" for e in limiting) else ""
+            out.append(f"the {model} model's results after t = {_fmt_t(t0)} s{speed} are outside its validity: "
+                       f"{_limits_before(res, np.inf)}{buckles}{'; ' + adv if adv else ''}")
+    for tk, name, kind, v in events:
+        if kind == "compression":
+            txt = (f"{name}: compressive axial force exceeds its Euler load ({v['euler_load_N']:.4g} N) from "
+                   f"t = {_fmt_t(tk)} s, up to {v['max_compression_over_euler']:.3g} times it")
+            txt += ("; the link buckles there (the nonlinear model follows it)" if model == "nonlinear" else
+                    f"; the {model} model's results after that time are outside its validity")
+        elif kind == "deflection":
+            txt = (f"{name}: elastic deflection exceeds 2 % of its length from t = {_fmt_t(tk)} s, up to "
+                   f"{100 * v['max_deflection_over_length']:.3g} %")
+            txt += ("; beyond the range of the linear models (the nonlinear model remains valid while each "
+                    "element's deflection stays small: refine the mesh to check)" if model == "nonlinear" else
+                    "; beyond the small-deflection range of this model")
+        else:
+            txt = (f"{name}: strain exceeds its yield strain {v['yield_strain']:.3g} from t = {_fmt_t(tk)} s, up to "
+                   f"{v['max_strain']:.3g}; the material yields and the elastic results after that time are not physical")
+        out.append(txt)
+    return out
+
+
+# ----------------------------------------------------------------------------- failures
+def partial_or(res, failure: SolverError | None, geometric: str, cm=None):
+    """Return ``res``, or, when the time loop stopped (``failure``), raise a SolverError carrying
+    ``res`` (its frames end before the failed step) as ``partial``."""
+    if failure is None:
+        return res
+    res.failure = {"code": failure.code, "step": failure.step, "time_s": failure.time}
+    raise SolverError(str(failure), time=failure.time, code=failure.code, step=failure.step,
+                      data=dict(failure.data, cm=cm, geometric=geometric), partial=res)
+
+
+def _limits_before(res, t_fail: float) -> str:
+    """The validity limits passed before t_fail, the earliest per kind, in time order."""
+    words = {"compression": "the {} is compressed beyond its Euler load from t = {} s",
+             "deflection": "the {}'s deflection passes 2 % of its length at t = {} s",
+             "strain": "the {}'s strain passes its yield strain at t = {} s"}
+    keys = {"compression": "compression_exceeds_at_s", "deflection": "deflection_exceeds_at_s",
+            "strain": "strain_exceeds_yield_at_s"}
+    parts = []
+    for kind in ("compression", "deflection", "strain"):
+        hits = [(v[keys[kind]], name) for name, v in res.extra["validity"].items()
+                if v.get(keys[kind]) is not None and v[keys[kind]] <= t_fail]
+        if hits:
+            tk, name = min(hits)
+            parts.append((tk, words[kind].format(name, _fmt_t(tk))))
+    return "; ".join(p for _, p in sorted(parts))
+
+
+def _node_label(fe, node: int) -> str:
+    for li, row in enumerate(fe.node_of):
+        if node in row:
+            k, n = row.index(node), len(row) - 1
+            pos = {0: "start", n: "end"}.get(k, "mid" if 2 * k == n else f"{k / n:.3g}")
+            return f"{fe.link_names[li]}.{pos}"
+    return f"node {node}"
+
+
+def _largest_displacement(res) -> tuple[str, dict]:
+    """Largest elastic displacement at the last kept frame: text and summary entry."""
+    fe, u = res.fe, res.u[:, -1]
+    best = (-1.0, 0, 0.0)
+    for li, ln in enumerate(res.case["links"]):
+        for node in fe.node_of[li]:
+            d = float(np.hypot(u[fe.trans_dof[node, 0]], u[fe.trans_dof[node, 1]]))
+            if not np.isfinite(d):
+                d = np.inf
+            if d / ln["length"] > best[0]:
+                best = (d / ln["length"], node, d)
+    rel, node, d = best
+    where = _node_label(fe, node)
+    return (f"largest elastic displacement at t = {_fmt_t(res.t[-1])} s: {d:.3g} m at {where} "
+            f"({100 * rel:.3g} % of the link length)",
+            {"quantity": "elastic displacement", "at": where, "value_m": d if np.isfinite(d) else None,
+             "over_link_length": rel if np.isfinite(rel) else None,
+             "frame_time_s": float(res.t[-1])})
+
+
+def _grew(res) -> bool:
+    """Evidence of growth before a failure: at least 3 frames and the largest elastic displacement
+    of the last frame is (within 10 %) the largest of the run, and not zero."""
+    if res.t.size < 3:
+        return False
+    fe = res.fe
+    tr = fe.trans_dof.ravel()
+    amp = np.max(np.abs(res.u[tr]), axis=0)
+    return bool(amp[-1] > 0 and amp[-1] >= 0.9 * np.max(amp))
+
+
+def _shortest_period(prep, model: str, res, data) -> float | None:
+    """Shortest natural period [s] of the elastic model linearized at the last kept frame (dense
+    eigenproblem; None for models above 1500 free DOFs)."""
+    import scipy.linalg
+
+    try:
+        if model in LINEAR_MODELS:
+            if prep.fe.nfree > 1500:
+                return None
+            m, _, k, _ = prep.fe.matrices(res.rig[:, :, -1], model)
+        else:
+            cm = data["cm"]
+            if cm is None or int(cm.free_of.max()) > 1500:
+                return None
+            _, m, _, k, _ = cm.dense(data["qf"][:, res.t.size - 1], np.zeros(cm.ndof), np.zeros(cm.ndof),
+                                     gravity=prep.gravity)
+        lam = scipy.linalg.eigh(0.5 * (k + k.T), 0.5 * (m + m.T), eigvals_only=True)
+    except Exception:   # a diagnosis must never hide the original failure
+        return None
+    lmax = float(np.max(lam))
+    return 2 * np.pi / np.sqrt(lmax) if lmax > 0 else None
+
+
+def _half_step_check(prep, model: str, geometric, t_fail: float) -> dict:
+    """Rerun at dt/2 up to 1.5 t_fail (at least 20 steps past it): does the failure stay?"""
+    from .simulate import Prepared
+
+    case = copy.deepcopy(prep.case)
+    t_check = min(case["solver"]["t_end"], 1.5 * t_fail + 20 * prep.dt)
+    case["solver"]["t_end"] = t_check
+    nsteps = max(2, int(np.ceil(t_check / (prep.dt / 2))))
+    t0 = time.perf_counter()
+    out = {"dt": None, "checked_until_s": t_check, "failed_at_s": None}
+    try:
+        p2 = Prepared(case, dt=prep.dt / 2, out_every=max(1, nsteps // 50))
+        out["dt"] = p2.dt
+        p2._run_raw(model, geometric)
+    except SolverError as exc:
+        out["failed_at_s"] = exc.time
+    except Exception as exc:   # the check is evidence only; record why it is missing
+        out["error"] = str(exc)
+    out["wall_s"] = time.perf_counter() - t0
+    return out
+
+
+def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True) -> SolverError:
+    """The SolverError a failed run raises: one line naming the time, what stopped, the quantity
+    and the likely cause; ``partial`` is marked failed and its summary carries the diagnosis."""
+    res, data, code, t_fail = exc.partial, exc.data, exc.code, exc.time
+    dt = prep.dt
+    geo = data.get("geometric", "none") if data else "none"
+    what = kernels.STATUS_WHAT.get(code, f"status {code}")
+    if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:
+        what = kernels.STATUS_WHAT_GEOMETRIC
+    elif code == kernels.STATUS_NEWTON:
+        what += f" = {prep.case['solver']['newton_maxit']} (tolerance {prep.case['solver']['newton_tol']:g})"
+    qtext, quantity = _largest_displacement(res)
+    comp = res.extra["validity_overall"]
+    if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:
+        quantity.update(max_compression_over_euler=comp["max_compression_over_euler"],
+                        link=comp["max_compression_link"])
+        qtext += (f"; largest compression {comp['max_compression_over_euler']:.3g} x the Euler load "
+                  f"({comp['max_compression_link']})")
+    evidence = {}
+    period = _shortest_period(prep, model, res, data or {})
+    if period:
+        evidence.update(shortest_period_s=period, dt_over_shortest_period=dt / period)
+    if diagnose and code in kernels.RUNTIME_FAILURES and code != kernels.STATUS_SINGULAR:
+        evidence["half_step"] = _half_step_check(prep, model, geometric, t_fail)
+    hs = evidence.get("half_step")
+    valid_until = comp["valid_until_s"]
+    ratio = evidence.get("dt_over_shortest_period")
+    res_txt = ""
+    if ratio:
+        part = f"{ratio:.3g} times" if ratio >= 1 else f"{ratio:.2g} of"
+        res_txt = f" (dt = {dt:.3g} s is {part} the shortest elastic period {period:.3g} s)"
+    if code in (kernels.STATUS_LAPACK_ARG, kernels.STATUS_BAD_INPUT):
+        cause, ctext = "bug_or_input", kernels.STATUS_MESSAGES[code]
+    elif code == kernels.STATUS_SINGULAR:
+        cause, ctext = "singular", kernels.STATUS_MESSAGES[code]
+    elif hs and "error" not in hs and (hs["failed_at_s"] is None
+                                       or hs["failed_at_s"] > t_fail + max(0.1 * t_fail, 20 * dt)):
+        cause = "step_too_large"
+        passed = ("passes t = " + _fmt_t(hs["checked_until_s"]) + " s" if hs["failed_at_s"] is None
+                  else "fails only at t = " + _fmt_t(hs["failed_at_s"]) + " s")
+        ctext = f"the time step is too large: at dt/2 the run {passed}{res_txt}; reduce solver.dt"
+    elif valid_until is not None and valid_until <= t_fail:
+        cause = "outside_validity"
+        adv = _advice(model, geo) or "the elastic model is past its range"
+        again = (f"; at dt/2 it fails again at t = {_fmt_t(hs['failed_at_s'])} s" if hs and hs.get("failed_at_s")
+                 else "")
+        ctext = (f"the model left its validity before the failure ({_limits_before(res, t_fail)}{again}), so the "
+                 f"growth is the model's, not the structure's; {adv}")
+    elif hs is None and ratio is not None and ratio > 0.25:
+        cause = "step_too_large"
+        ctext = f"probably the time step{res_txt}; reduce solver.dt"
+    elif not _grew(res) and code == kernels.STATUS_NEWTON:
+        cause = "solver_settings"
+        ctext = ("the motion had not grown before the failure and it persists at dt/2: solver.newton_tol is below what "
+                 "the iteration can reach (round-off) or solver.newton_maxit is too small; raise them")
+    elif not _grew(res):
+        cause = "unknown"
+        ctext = ("the motion had not grown before the failure and it persists at dt/2; check the case (joints, masses, "
+                 "drive) and report it with the case file if it looks right")
+    else:
+        cause = "physical_instability"
+        again = (f"at dt/2 it fails again at t = {_fmt_t(hs['failed_at_s'])} s" if hs and hs.get("failed_at_s")
+                 else "the step is well resolved")
+        ctext = (f"a physical instability of the model ({again}{res_txt}), e.g. parametric resonance; for a "
+                 "constant-speed drive, `flexmech stability CASE` maps the unstable speeds")
+    msg = (f"{model} run stopped at t = {_fmt_t(t_fail)} s: {what}; {qtext}. Likely cause: {ctext}. "
+           f"Partial results up to t = {_fmt_t(res.t[-1])} s are kept.")
+    failure = {"code": code, "step": exc.step, "what": what, "cause": cause, "message": msg,
+               "quantity": quantity, "evidence": evidence}
+    res.failure = dict(failure, time_s=t_fail)
+    res.extra["error_estimate"] = {"method": "none", "reason": "the run failed"}
+    return SolverError(msg, time=t_fail, code=code, step=exc.step, partial=res, failure=res.failure)
+
+
+# ----------------------------------------------------------------------------- error estimate
+def coarsened(prep):
+    """A copy of a Prepared run on every second step of its grid (the same rigid motion, sampled),
+    with output frames on the fine run's frames (every frame when out_every is even, every second
+    frame when it is odd).  None when the grid has fewer than two coarse frames."""
+    from .simulate import RigidMotion
+
+    oe, n = prep.out_every, prep.nsteps
+    if oe % 2 == 0:
+        oc, nc = oe // 2, n // 2
+    else:
+        oc, nc = oe, oe * (n // (2 * oe))
+    if nc < oc or nc < 1:
+        return None
+    sel = slice(0, 2 * nc + 1, 2)
+    pc = copy.copy(prep)
+    m = prep.rm.motion
+    pc.t, pc.nsteps, pc.dt, pc.out_every = prep.t[sel], nc, 2 * prep.dt, oc
+    pc.rm = RigidMotion(pc.t, prep.rm.q[sel], prep.rm.qd[sel], prep.rm.qdd[sel],
+                        rigid.LinkMotion(**{k: getattr(m, k)[sel] for k in rigid.LinkMotion.__dataclass_fields__}))
+    pc.rig = pc.rm.kernel_samples(prep.gravity)
+    if prep.q_val is not None:
+        pc.q_val = np.asfortranarray(prep.q_val[:, sel])
+    return pc
+
+
+SKIP_COLUMNS = ("newton_iterations",)   # solver statistics, not outputs
+
+
+def error_estimate(prep, res, geometric=None) -> dict:
+    """Step-doubling estimate of the time-discretization error of every output column of ``res``."""
+    pc = coarsened(prep)
+    out = {"method": "time", "order": ORDER, "dt": prep.dt}
+    if pc is None:
+        return dict(out, method="none", reason="too few steps for a run at 2 dt")
+    out["coarse_dt"] = pc.dt
+    t0 = time.perf_counter()
+    try:
+        rc = pc._run_raw(res.model, geometric)
+    except SolverError as exc:
+        out.update(failed=f"the run at 2 dt stopped at t = {_fmt_t(exc.time)} s", columns={}, worst_column=None)
+        res.extra.setdefault("warnings", []).append(
+            f"error estimate: the same run at 2 dt = {pc.dt:.3g} s stopped at t = {_fmt_t(exc.time)} s, so the step "
+            "dt is close to the limit of this model; check with a smaller solver.dt")
+        return out
+    out["kernel_s"] = rc.timing.get("kernel_s", 0.0)
+    out["wall_s"] = time.perf_counter() - t0
+    stride = 1 if prep.out_every % 2 == 0 else 2
+    nf = rc.t.size
+    assert np.allclose(res.t[::stride][:nf], rc.t, rtol=0, atol=1e-9 * prep.t[-1])
+    out["frames_compared"] = int(nf)
+    cols, worst = {}, (None, -1.0)
+    fac = 1.0 / (2 ** ORDER - 1)
+    for name, y in res.columns.items():
+        if name in SKIP_COLUMNS or name not in rc.columns:
+            continue
+        yf = np.asarray(y)[::stride][:nf]
+        e = fac * np.abs(yf - rc.columns[name])
+        peak = float(np.max(np.abs(y)))
+        emax = float(np.max(e))
+        rel = emax / peak if peak > 0 else (0.0 if emax == 0 else float("inf"))
+        cols[name] = {"max_abs": emax, "relative": rel, "t_max_s": float(rc.t[int(np.argmax(e))])}
+        if rel > worst[1]:
+            worst = (name, rel)
+    out.update(columns=cols, worst_column=worst[0], worst_relative=worst[1] if worst[0] else None)
+    return out

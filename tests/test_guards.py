@@ -1,0 +1,217 @@
+"""Guards in every run (flexmech_py/guards.py, docs/stability.md): failures stop with a diagnosis and
+keep their partial results, validity limits warn, and the step-doubling error estimate is honest.
+
+Run as a script to print the estimate-vs-actual table of docs/stability.md:
+    python tests/test_guards.py
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import flexmech_py as fm
+from flexmech_py.cli import main
+from flexmech_py.errors import SolverError
+from flexmech_py.gap import validity_time
+from flexmech_py.guards import frames_before
+from flexmech_py.results import read_timeseries
+from flexmech_py.simulate import Prepared
+
+CASES = Path(__file__).resolve().parents[1] / "cases"
+
+
+def _seed(*ov):
+    return fm.load_case(CASES / "fourbar_hac.toml", overrides=list(ov))
+
+
+# ----------------------------------------------------------------------------- failures
+@pytest.fixture(scope="module")
+def buckled():
+    """The seed four-bar, classic model with geometric stiffness from the current axial forces:
+    its follower is compressed far beyond the Euler load and the axial-force iteration stops."""
+    case = _seed("solver.t_end=0.16", "solver.geometric_stiffness=current")
+    with pytest.raises(SolverError) as info:
+        fm.simulate(case, model="classic")
+    return case, info.value
+
+
+def test_failure_keeps_finite_partial_frames_before_the_failed_step(buckled):
+    case, exc = buckled
+    res = exc.partial
+    oe = case["solver"]["output_every"]
+    assert exc.code == 5 and exc.step >= 1
+    assert res.t.size == frames_before(exc.step, oe)
+    assert res.t[-1] < exc.time <= res.t[-1] + oe * res.dt + 1e-12   # the last kept frame precedes the failure
+    assert exc.time == pytest.approx(exc.step * res.dt)
+    for name, y in res.columns.items():
+        assert y.shape == res.t.shape and np.all(np.isfinite(y)), name
+    # the partial frames equal those of a complete run that stops just before the failure
+    ok = fm.simulate(_seed(f"solver.t_end={res.t[-1]:.10g}", "solver.geometric_stiffness=current",
+                           "solver.error_estimate='none'"), model="classic")
+    assert ok.t.size == res.t.size
+    np.testing.assert_allclose(ok.columns["strain_follower_mid"], res.columns["strain_follower_mid"], rtol=1e-9, atol=1e-15)
+
+
+def test_failure_message_names_time_quantity_and_validity_cause(buckled):
+    _, exc = buckled
+    msg = str(exc)
+    assert f"t = {exc.time:.4g} s" in msg and "geometric-stiffness" in msg
+    assert "largest elastic displacement" in msg and "% of the link length" in msg
+    f = exc.failure
+    # the failure persists at dt/2 (not the step) and the follower was past its Euler load before it
+    assert f["evidence"]["half_step"]["failed_at_s"] == pytest.approx(exc.time, rel=0.05)
+    assert f["cause"] == "outside_validity" and "Euler load" in msg and "--model nonlinear" in msg
+    v = exc.partial.extra["validity"]["follower"]
+    assert v["compression_exceeds_at_s"] < exc.time and v["max_compression_over_euler"] > 1
+
+
+def test_failure_from_a_too_large_step_is_blamed_on_the_step():
+    """The nonlinear model's Newton iterations fail at dt = 4e-4 s (11 shortest periods) and pass at dt/2."""
+    case = _seed("solver.t_end=0.08", "solver.output_every=1", "solver.dt=4e-4")
+    with pytest.raises(SolverError) as info:
+        fm.simulate(case, model="nonlinear")
+    f = info.value.failure
+    assert info.value.code == 5 and f["cause"] == "step_too_large"
+    assert f["evidence"]["half_step"]["failed_at_s"] is None or f["evidence"]["half_step"]["failed_at_s"] > 1.1 * info.value.time
+    assert f["evidence"]["dt_over_shortest_period"] > 1
+    assert "reduce solver.dt" in str(info.value) and "Newton" in str(info.value)
+
+
+def test_cli_writes_marked_partial_results_and_exits_3(tmp_path, capsys):
+    rc = main(["run", str(CASES / "fourbar_hac.toml"), "--model", "classic", "--set", "solver.t_end=0.16",
+               "--set", "solver.geometric_stiffness=current", "--set", "solver.error_estimate='none'",
+               "--out", str(tmp_path)])
+    cap = capsys.readouterr()
+    assert rc == 3
+    errors = [ln for ln in cap.err.splitlines() if ln.startswith("flexmech: error: ")]
+    assert len(errors) == 1 and "classic run stopped at t = " in errors[0] and "Likely cause:" in errors[0]
+    assert "PARTIAL" in cap.out and "wrote partial results" in cap.out
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["status"] == "failed" and s["failure"]["cause"] == "outside_validity"
+    assert s["failed_at_s"] > s["t_end"] and s["frames"] == frames_before(s["failure"]["step"], 10)
+    lines = (tmp_path / "timeseries.csv").read_text().splitlines()
+    assert lines[0].startswith("# partial: the run stopped at t = ") and lines[1].startswith("# flexmech ")
+    cols, _ = read_timeseries(tmp_path / "timeseries.csv")
+    assert cols["t"].size == s["frames"] and cols["t"][-1] == pytest.approx(s["t_end"])
+    assert not list(tmp_path.glob("*.png"))
+
+
+def test_kernel_status_6_has_a_message():
+    from flexmech_py import kernels
+
+    with pytest.raises(SolverError, match="divergence_limit") as info:
+        kernels.check_status(6, "Newmark integration", time=0.1, step=5, data={"u": None})
+    assert info.value.code == 6 and info.value.step == 5 and info.value.data is not None
+    with pytest.raises(SolverError) as info:   # a bad-input status keeps no partial data
+        kernels.check_status(4, "Newmark integration", time=0.0, step=0, data={"u": None})
+    assert info.value.data is None
+
+
+# ----------------------------------------------------------------------------- validity
+@pytest.fixture(scope="module")
+def seed_run():
+    return fm.simulate(_seed("solver.t_end=0.12", "solver.error_estimate='none'"))
+
+
+def test_validity_times_agree_with_the_gap_study(seed_run):
+    res = seed_run
+    t_defl, t_comp = validity_time(res)
+    val, ov = res.extra["validity"], res.extra["validity_overall"]
+    assert min(v["deflection_exceeds_at_s"] or np.inf for v in val.values()) == pytest.approx(t_defl)
+    assert min(v["compression_exceeds_at_s"] or np.inf for v in val.values()) == pytest.approx(t_comp)
+    assert ov["valid_until_s"] == pytest.approx(min(t_defl, t_comp))
+    assert ov["max_compression_over_euler"] == max(v["max_compression_over_euler"] for v in val.values())
+
+
+def test_largest_strain_bounds_the_midspan_strain_outputs(seed_run):
+    """max_strain is over every node and includes the axial strain: at least the |midspan| strain."""
+    for link in ("coupler", "follower"):
+        v = seed_run.extra["validity"][link]
+        mid = np.max(np.abs(seed_run.columns[f"strain_{link}_mid"]))
+        assert mid <= v["max_strain"] <= mid + 0.1   # strains of order 1e-2 here
+
+
+def test_seed_fourbar_warns_plainly(seed_run):
+    w = seed_run.extra["warnings"]
+    head = w[0]
+    assert head.startswith("the hac model's results after t = ") and "outside its validity" in head
+    assert "crank speed" in head and "--model nonlinear" in head and "geometric_stiffness" in head
+    assert any("coupler: compressive axial force exceeds its Euler load" in x for x in w)
+    s = seed_run.summary()
+    assert s["warnings"] == w and s["status"] == "completed" and "failure" not in s
+
+
+def test_yield_strain_warns_only_when_passed():
+    case = _seed("solver.t_end=0.03", "solver.error_estimate='none'", "links.coupler.yield_strain=1e-4",
+                 "links.follower.yield_strain=1.0")
+    res = fm.simulate(case)
+    v = res.extra["validity"]
+    assert v["coupler"]["max_strain"] > 1e-4 and v["coupler"]["strain_exceeds_yield_at_s"] is not None
+    assert v["follower"]["strain_exceeds_yield_at_s"] is None and v["crank"]["yield_strain"] is None
+    assert any(x.startswith("coupler: strain exceeds its yield strain") for x in res.extra["warnings"])
+    assert not any(x.startswith("follower: strain") for x in res.extra["warnings"])
+
+
+def test_yield_strain_must_be_positive():
+    with pytest.raises(fm.CaseError, match=r"links\[1\].yield_strain"):
+        _seed("links.coupler.yield_strain=-1")
+
+
+def test_console_prints_validity_table_and_warnings(tmp_path, capsys):
+    rc = main(["run", str(CASES / "fourbar_hac.toml"), "--set", "solver.t_end=0.12", "--no-plots", "--out", str(tmp_path)])
+    cap = capsys.readouterr()
+    assert rc == 0
+    assert "validity (limits: deflection 2 % of L" in cap.out and "\noverall " in cap.out
+    assert "time-step error estimate" in cap.out
+    assert "flexmech: warning: the hac model's results after t = " in cap.err
+
+
+# ----------------------------------------------------------------------------- error estimate
+HONESTY_RUNS = [("fourbar_hac", "hac", 0.05, 1e-5, 10), ("fourbar_hac", "hac", 0.05, 4e-5, 5),
+                ("manipulator_bricout", "coupled", 0.05, 2e-5, 2)]
+
+
+def estimate_vs_actual(name, model, t_end, dt, oe):
+    """{column: (estimated, actual)} largest errors of a run at dt against a reference at dt/8."""
+    case = fm.load_case(CASES / f"{name}.toml", overrides=[f"solver.t_end={t_end}"])
+    res = Prepared(case, dt=dt, out_every=oe).run(model)
+    ref = Prepared(case, dt=dt / 8, out_every=8 * oe).run(model, estimate=False)
+    assert np.allclose(ref.t, res.t)
+    out = {}
+    for col, e in res.extra["error_estimate"]["columns"].items():
+        actual = float(np.max(np.abs(res.columns[col] - ref.columns[col])))
+        if actual > 1e-12 * np.max(np.abs(ref.columns[col])):   # skip the rigid columns (exact in both)
+            out[col] = (e["max_abs"], actual)
+    return res, out
+
+
+@pytest.mark.parametrize("name, model, t_end, dt, oe", HONESTY_RUNS)
+def test_error_estimate_is_honest(name, model, t_end, dt, oe):
+    res, pairs = estimate_vs_actual(name, model, t_end, dt, oe)
+    est = res.extra["error_estimate"]
+    assert est["method"] == "time" and est["coarse_dt"] == pytest.approx(2 * res.dt)
+    assert est["frames_compared"] == (res.t.size if oe % 2 == 0 else (res.t.size - 1) // 2 + 1)
+    assert pairs
+    for col, (e, a) in pairs.items():
+        assert 1 / 3 < e / a < 3, (col, e, a)
+    w = est["worst_column"]
+    assert est["worst_relative"] == max(c["relative"] for c in est["columns"].values())
+    assert est["columns"][w]["relative"] == pytest.approx(est["columns"][w]["max_abs"] / np.max(np.abs(res.columns[w])))
+
+
+def test_error_estimate_none_is_honoured():
+    res = fm.simulate(_seed("solver.t_end=0.01", "solver.error_estimate='none'"))
+    assert res.summary()["error_estimate"] == {"method": "none"}
+    with pytest.raises(fm.CaseError, match="solver.error_estimate"):
+        _seed("solver.error_estimate='space'")
+
+
+if __name__ == "__main__":   # the table of docs/stability.md
+    for run in HONESTY_RUNS + [("manipulator_bricout", "hac", 0.05, 1e-4, 2), ("fourbar_hac", "nonlinear", 0.02, 5e-6, 4)]:
+        _, pairs = estimate_vs_actual(*run)
+        ratios = {c: e / a for c, (e, a) in pairs.items()}
+        print(f"| {run[0]}, {run[1]}, t_end {run[2]} s, dt {run[3]:g} s, output_every {run[4]} | "
+              f"{min(ratios.values()):.2f}–{max(ratios.values()):.2f} | "
+              + ", ".join(f"{c} {r:.2f}" for c, r in ratios.items()))
