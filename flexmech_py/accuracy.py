@@ -64,10 +64,24 @@ DEFAULT_KINDS = ("strain", "displacement")   # output kinds compared by default 
 # ----------------------------------------------------------------------------- integrators
 @dataclass
 class Integrator:
-    """One time integrator: a label and the case overrides that select it."""
+    """One time integrator: a label, the case overrides that select it and the solver keys of the
+    other integrators to remove from the case (a case may not carry another integrator's parameters)."""
 
     label: str
     overrides: list
+    drop: list = field(default_factory=list)
+
+
+# the solver keys of each integrator's parameters
+INTEGRATOR_KEYS = {"newmark": ("beta", "gamma"), "hht": ("hht_alpha",), "generalized-alpha": ("rho_inf",)}
+
+
+def _apply(raw: dict, it) -> dict:
+    """The raw case with an integrator's overrides applied and the other integrators' keys removed."""
+    out = apply_overrides(raw, it.overrides)
+    for key in it.drop:
+        out.get("solver", {}).pop(key, None)
+    return out
 
 
 def _has_integrator_key(raw: dict) -> bool:
@@ -82,7 +96,7 @@ def parse_integrators(spec, raw: dict) -> list[Integrator]:
     """Integrators from a list such as ``["newmark", "hht:-0.1", "generalized-alpha:0.8"]``.
 
     ``case`` (or an empty spec) is the case's own integrator.  ``hht:A`` sets
-    ``solver.hht_alpha = A``, ``generalized-alpha:R`` sets ``solver.rho_inf = R``,
+    ``solver.hht_alpha = A`` (0 <= A <= 1/3), ``generalized-alpha:R`` sets ``solver.rho_inf = R``,
     ``newmark:B,G`` sets ``solver.beta, solver.gamma``; without a value the case's (or
     --set's) parameter is used.  The labels name the parameters in effect.
     """
@@ -93,6 +107,7 @@ def parse_integrators(spec, raw: dict) -> list[Integrator]:
         name, _, arg = item.partition(":")
         name = name.strip().lower()
         ov: list[str] = []
+        drop: list[str] = []
         if name == "case":
             ov = []
         elif name not in INTEGRATORS:
@@ -103,6 +118,7 @@ def parse_integrators(spec, raw: dict) -> list[Integrator]:
         else:
             if known:
                 ov.append(f"solver.integrator={name}")
+                drop = [k for other, keys in INTEGRATOR_KEYS.items() if other != name for k in keys]
             if arg:
                 vals = [v.strip() for v in arg.split(",")]
                 try:
@@ -118,13 +134,14 @@ def parse_integrators(spec, raw: dict) -> list[Integrator]:
                 else:
                     raise CaseError("--integrators", f"{item!r}: use hht:ALPHA, generalized-alpha:RHO_INF or "
                                                      "newmark:BETA,GAMMA")
-        sol = validate_case(apply_overrides(raw, ov))["solver"]
-        if ov and sol == validate_case(raw)["solver"]:
-            ov = []                      # the case's own integrator: the same runs (and cache entries)
-        label = _integrator_label(sol)
-        if label not in seen:
-            seen.add(label)
-            out.append(Integrator(label, ov))
+        it = Integrator("", ov, drop)
+        sol = validate_case(_apply(raw, it))["solver"]
+        if (ov or drop) and sol == validate_case(raw)["solver"]:
+            it = Integrator("", [], [])  # the case's own integrator: the same runs (and cache entries)
+        it.label = _integrator_label(sol)
+        if it.label not in seen:
+            seen.add(it.label)
+            out.append(it)
     return out
 
 
@@ -150,7 +167,8 @@ def run_point(task: dict) -> dict:
     """
     from .simulate import Prepared
 
-    case = validate_case(apply_overrides(task["raw"], task["overrides"]), source=task["source"])
+    case = validate_case(_apply(task["raw"], Integrator("", task["overrides"], task.get("drop", []))),
+                         source=task["source"])
     t_end = case["solver"]["t_end"]
     prep = Prepared(case, dt=t_end / task["nsteps"], elements_per_link=task["elements"], out_every=task["out_every"])
     if prep.nsteps != task["nsteps"]:  # pragma: no cover - the grid is chosen so that it cannot happen
@@ -338,7 +356,8 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
     from . import __version__
 
     def task(model, it: Integrator, nsteps, n_el, reps=1):
-        return {"raw": raw_run, "source": source, "overrides": it.overrides, "model": model, "nsteps": int(nsteps),
+        return {"raw": raw_run, "source": source, "overrides": it.overrides, **({"drop": it.drop} if it.drop else {}),
+                "model": model, "nsteps": int(nsteps),
                 "out_every": int(nsteps // n_coarse), "elements": n_el, "repeat": int(reps), "version": __version__,
                 "timing": f"wall and cpu, min of >= repeat, short runs up to {MAX_REPEAT} within {SHORT_RUN_BUDGET_S} s"}
 

@@ -211,12 +211,12 @@ def test_integrators(spin_case, tmp_path):
            "speed": 0.0}, "solver": {"t_end": 0.01, "dt": 1e-4},
            "outputs": {"x": {"kind": "displacement", "at": "a.end", "component": "transverse"}}}
     try:
-        its = parse_integrators(["newmark", "hht:-0.1", "generalized-alpha:0.8"], raw)
+        its = parse_integrators(["newmark", "hht:0.1", "generalized-alpha:0.8"], raw)
     except CaseError as exc:
         assert "only newmark" in str(exc)                      # this build predates solver.integrator
         its = parse_integrators(["newmark"], raw)
     labels = [i.label for i in its]
-    st = accuracy_study(spin_case, integrators=[{"newmark": "newmark", "hht": "hht:-0.1",
+    st = accuracy_study(spin_case, integrators=[{"newmark": "newmark", "hht": "hht:0.1",
                                                  "generalized-alpha": "generalized-alpha:0.8"}[lb.split("(")[0]]
                                                 for lb in labels],
                         dt_levels=4, elements=(2, 4), ref_elements=8, columns=["tip"], jobs=1,
