@@ -189,7 +189,7 @@ def run_point(task: dict) -> dict:
     if task["model"] in ("coupled", "nonlinear"):
         from .coupled import CoupledModel
 
-        cm = CoupledModel.from_case(case, prep.fe, split=(task["model"] == "nonlinear"))
+        cm = CoupledModel.from_case(prep.case, prep.fe, split=(task["model"] == "nonlinear"))
         cm.run = timed(cm.run)
         prep.coupled[task["model"]] = cm
     kernel, total, cpu, kernel_cpu = [], [], [], []
@@ -640,6 +640,17 @@ def _plot_panels(study: Study, points, keys, ladders) -> list:
                               "color": ci, "style": "-" if direction == "time" else "--",
                               "marker": "o" if direction == "time" else "s"})
             if s["grid"]:
+                allr = [row_of[k] for k in keys if (points[k]["model"], points[k]["integrator"]) == (m, il)
+                        and set(points[k]["roles"]) != {"reference"} and row_of[k]["status"] == "ok"
+                        and math.isfinite(row_of[k].get(ecol, float("nan")))]
+                front, best = [], float("inf")
+                for rw in sorted(allr, key=lambda rw: rw["time_s"]):   # cheapest run for each accuracy
+                    if rw[ecol] < best:
+                        best = rw[ecol]
+                        front.append(rw)
+                lines.append({"label": f"{m}, {il}: cheapest for each accuracy (grid)",
+                              "x": [rw["time_s"] for rw in front], "y": [rw[ecol] for rw in front],
+                              "color": ci, "style": ":", "marker": "", "alpha": 0.9})
                 gr = [row_of[k] for k in keys if (points[k]["model"], points[k]["integrator"]) == (m, il)
                       and "grid" in points[k]["roles"] and row_of[k]["status"] == "ok"]
                 lines.append({"label": "dots: the other (dt, n) pairs of --grid" if ci == 0 else None,

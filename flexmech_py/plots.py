@@ -100,7 +100,7 @@ def work_precision_figure(path, panels, *, title=None):
     n = len(panels)
     ncol = 2 if n > 1 else 1
     nrow = (n + ncol - 1) // ncol
-    fig, axes = plt.subplots(nrow, ncol, figsize=(7.2 * ncol + 3.2, 4.6 * nrow + 0.6), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(7.2 * ncol + 4.2, 4.6 * nrow + 0.6), squeeze=False)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     handles = {}
     for ax, p in zip(axes.flat, panels):
@@ -109,7 +109,7 @@ def work_precision_figure(path, panels, *, title=None):
             if not pts:
                 continue
             xs, ys = zip(*pts)          # ladder order (timings need not be monotone)
-            h, = ax.plot(xs, ys, linestyle=ln["style"] or "none", marker=ln.get("marker", "o"), ms=4,
+            h, = ax.plot(xs, ys, linestyle=ln["style"] or "none", marker=ln.get("marker", "o") or None, ms=4,
                          color=colors[ln["color"] % len(colors)], alpha=ln.get("alpha", 1.0))
             if ln["label"]:
                 handles.setdefault(ln["label"], h)
@@ -127,10 +127,10 @@ def work_precision_figure(path, panels, *, title=None):
         ax.axis("off")
     if handles:
         fig.legend(list(handles.values()), list(handles.keys()), fontsize=7, loc="upper left",
-                   bbox_to_anchor=(0.0 + (7.2 * ncol) / (7.2 * ncol + 3.2), 0.93), borderaxespad=0.0)
+                   bbox_to_anchor=((7.2 * ncol) / (7.2 * ncol + 4.2), 0.93), borderaxespad=0.0)
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.tight_layout(rect=(0, 0, (7.2 * ncol) / (7.2 * ncol + 3.2), 0.97))
+    fig.tight_layout(rect=(0, 0, (7.2 * ncol) / (7.2 * ncol + 4.2), 0.97))
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return Path(path)

@@ -225,3 +225,15 @@ def test_integrators(spin_case, tmp_path):
     for lb in labels:
         p = _orders(st, integrator=lb, direction="time", source="successive differences", column="tip")
         assert 1.75 < p[0] < 2.3, (lb, p)
+
+
+def test_coupled_model_on_a_refined_mesh_is_timed(spin_case, tmp_path):
+    """The one-pass coupled model over a mesh ladder: every run succeeds and its kernel CPU time is
+    measured (inside the compiled Newton-Newmark loop, so at most the run's whole CPU time)."""
+    st = accuracy_study(spin_case, models=["coupled"], dt_levels=2, elements=(2, 4), ref_elements=8, columns=["tip"],
+                        jobs=1, out_dir=tmp_path / "acc", progress=False, plots=False)
+    assert st.batch["failed"] == 0
+    for r in st.rows:
+        assert 0 < r["kernel_cpu_s"] <= r["run_cpu_s"] * 1.001 + 1e-4
+    e = {r["elements_per_link"]: r["err_tip"] for r in st.rows if "space" in r["ladders"]}
+    assert e[4] < e[2]
