@@ -20,11 +20,18 @@ try:  # Python >= 3.11
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["load_case", "validate_case", "apply_overrides", "MODELS", "SUPERPOSITION_MODELS", "JOINTS_OF", "OUTPUT_KINDS"]
+__all__ = ["load_case", "validate_case", "apply_overrides", "MODELS", "SUPERPOSITION_MODELS", "JOINTS_OF", "OUTPUT_KINDS",
+           "INTEGRATORS", "integrator_coefficients", "DIVERGENCE_FACTOR"]
 
 SUPERPOSITION_MODELS = ("hac", "classic", "classic-translational")
 MODELS = SUPERPOSITION_MODELS + ("coupled", "nonlinear")
 MECHANISMS = ("fourbar", "serial")
+INTEGRATORS = ("newmark", "hht", "generalized-alpha")
+# the parameter key of each integrator (solver.<key>), its default and its range
+INTEGRATOR_PARAMS = {"newmark": ("beta", "gamma"), "hht": ("hht_alpha",), "generalized-alpha": ("rho_inf",)}
+HHT_ALPHA_DEFAULT, HHT_ALPHA_MAX = 0.05, 1.0 / 3.0
+RHO_INF_DEFAULT = 0.8
+DIVERGENCE_FACTOR = 1.0   # default solver.divergence_limit = DIVERGENCE_FACTOR x the longest link length
 OUTPUT_KINDS = {
     # kind: (required keys, optional keys with defaults)
     "joint_angle": ({"joint"}, {}),
@@ -128,6 +135,67 @@ def _keys(d, allowed, where: str):
             raise CaseError(f"{where}.{k}", f"unknown key; allowed keys here: {', '.join(sorted(allowed))}")
 
 
+# ----------------------------------------------------------------------------- integrators
+def integrator_coefficients(integrator: str, params: dict | None = None) -> tuple[float, float, float, float]:
+    """(alpha_m, alpha_f, beta, gamma) of the generalized-alpha time loop (docs/theory.md section 15).
+
+    ``integrator``: ``newmark`` (params ``beta`` 0.25, ``gamma`` 0.5: alpha_m = alpha_f = 0),
+    ``hht`` (``hht_alpha`` in [0, 1/3], default 0.05: alpha_m = 0, alpha_f = alpha,
+    gamma = 1/2 + alpha, beta = (1 + alpha)^2 / 4) or ``generalized-alpha`` (Chung-Hulbert,
+    ``rho_inf`` in [0, 1], default 0.8: alpha_m = (2 rho - 1)/(rho + 1), alpha_f = rho/(rho + 1),
+    gamma = 1/2 - alpha_m + alpha_f, beta = (1 - alpha_m + alpha_f)^2 / 4).  ``params`` is any
+    mapping holding those keys (e.g. a resolved ``case["solver"]``); missing ones take the defaults.
+    The one place the integrators are mapped onto the kernels' parameters, for every model.
+    """
+    params = {} if params is None else params
+    if integrator == "newmark":
+        return 0.0, 0.0, float(params.get("beta", 0.25)), float(params.get("gamma", 0.5))
+    if integrator == "hht":
+        al = float(params.get("hht_alpha", HHT_ALPHA_DEFAULT))
+        if not 0.0 <= al <= HHT_ALPHA_MAX + 1e-15:
+            raise CaseError("solver.hht_alpha", f"must lie in [0, 1/3], got {al}")
+        return 0.0, al, 0.25 * (1.0 + al) ** 2, 0.5 + al
+    if integrator == "generalized-alpha":
+        rho = float(params.get("rho_inf", RHO_INF_DEFAULT))
+        if not 0.0 <= rho <= 1.0:
+            raise CaseError("solver.rho_inf", f"must lie in [0, 1], got {rho}")
+        am, af = (2.0 * rho - 1.0) / (rho + 1.0), rho / (rho + 1.0)
+        return am, af, 0.25 * (1.0 - am + af) ** 2, 0.5 - am + af
+    raise CaseError("solver.integrator", f"must be one of {', '.join(map(repr, INTEGRATORS))}, got {integrator!r}")
+
+
+def _integrator(sol: dict) -> dict:
+    """Validate solver.integrator and its parameters; the resolved entries (only the keys that apply)."""
+    name = _str(sol, "integrator", "solver", default="newmark", choices=INTEGRATORS)
+    for other, keys in INTEGRATOR_PARAMS.items():
+        if other == name:
+            continue
+        for key in keys:
+            if key in sol:
+                raise CaseError(f"solver.{key}", f"applies to integrator = {other!r}, not {name!r}; remove it, or "
+                                                 f"set solver.integrator = {other!r}")
+    if name == "newmark":
+        beta = _num(sol, "beta", "solver", default=0.25, positive=True)
+        gamma = _num(sol, "gamma", "solver", default=0.5)
+        if gamma < 0.5:
+            raise CaseError("solver.gamma", f"must be >= 0.5 (gamma < 1/2 adds negative damping), got {gamma}")
+        if beta < 0.25 * (gamma + 0.5) ** 2 - 1e-15:
+            raise CaseError("solver.beta", f"beta = {beta} with gamma = {gamma} is only conditionally stable; "
+                                           f"use beta >= (gamma + 1/2)^2 / 4 = {0.25 * (gamma + 0.5) ** 2:g}")
+        return {"integrator": name, "beta": beta, "gamma": gamma}
+    if name == "hht":
+        al = _num(sol, "hht_alpha", "solver", default=HHT_ALPHA_DEFAULT)
+        if not 0.0 <= al <= HHT_ALPHA_MAX + 1e-15:
+            raise CaseError("solver.hht_alpha", f"must lie in [0, 1/3] (0: average acceleration, 1/3: the most "
+                                                f"numerical damping), got {al}; use e.g. 0.05")
+        return {"integrator": name, "hht_alpha": al}
+    rho = _num(sol, "rho_inf", "solver", default=RHO_INF_DEFAULT)
+    if not 0.0 <= rho <= 1.0:
+        raise CaseError("solver.rho_inf", f"must lie in [0, 1] (1: no numerical damping, 0: the most), got {rho}; "
+                                          "use e.g. 0.8")
+    return {"integrator": name, "rho_inf": rho}
+
+
 # ----------------------------------------------------------------------------- sections
 def _links(raw) -> list[dict]:
     if not isinstance(raw, list) or not raw:
@@ -151,7 +219,8 @@ def _links(raw) -> list[dict]:
         if d["half_depth"] is None:  # rectangular section: h = sqrt(12 I / A)
             d["half_depth"] = 0.5 * math.sqrt(12.0 * d["second_moment"] / d["area"])
         d["elements"] = _int(ln, "elements", w)
-        d["yield_strain"] = _num(ln, "yield_strain", w, positive=True)   # None: no yield check (guards.py)
+        if "yield_strain" in ln:   # absent: no yield check (guards.py)
+            d["yield_strain"] = _num(ln, "yield_strain", w, positive=True)
         out.append(d)
     return out
 
@@ -359,22 +428,19 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
     r["loads"] = {"gravity": _vec(loads, "gravity", "loads", 2, default=[0.0, 0.0])}
 
     sol = raw.get("solver", {})
-    _keys(sol, {"t_end", "dt", "output_every", "beta", "gamma", "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit",
+    _keys(sol, {"t_end", "dt", "output_every", "integrator", "beta", "gamma", "hht_alpha", "rho_inf", "divergence_limit",
+                "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit",
                 "geometric_stiffness", "geometric_tol", "geometric_maxit", "error_estimate"}, "solver")
     t_end = _num(sol, "t_end", "solver", positive=True, required=True)
     dt = _num(sol, "dt", "solver", positive=True, required=True)
     if dt > t_end:
         raise CaseError("solver.dt", f"({dt} s) is longer than the run (t_end = {t_end} s); choose dt <= t_end")
-    beta = _num(sol, "beta", "solver", default=0.25, positive=True)
-    gamma = _num(sol, "gamma", "solver", default=0.5)
-    if gamma < 0.5:
-        raise CaseError("solver.gamma", f"must be >= 0.5 (gamma < 1/2 adds negative damping), got {gamma}")
-    if beta < 0.25 * (gamma + 0.5) ** 2 - 1e-15:
-        raise CaseError("solver.beta", f"beta = {beta} with gamma = {gamma} is only conditionally stable; "
-                                       f"use beta >= (gamma + 1/2)^2 / 4 = {0.25 * (gamma + 0.5) ** 2:g}")
+    integ = _integrator(sol)
+    div_limit = _num(sol, "divergence_limit", "solver", positive=True,
+                     default=DIVERGENCE_FACTOR * max(ln["length"] for ln in links))
     r["solver"] = {"t_end": t_end, "dt": dt,
                    "output_every": _int(sol, "output_every", "solver", default=1),
-                   "beta": beta, "gamma": gamma,
+                   **integ, "divergence_limit": div_limit,
                    "rayleigh": _vec(sol, "rayleigh", "solver", 2, default=[0.0, 0.0], nonneg=True),
                    "model": _str(sol, "model", "solver", default="hac", choices=MODELS),
                    "rigid_rtol": _num(sol, "rigid_rtol", "solver", default=1e-10, positive=True),

@@ -1,6 +1,7 @@
 """The ``flexmech`` command line.
 
-    flexmech run CASE.toml [--model M] [--dt S] [--elements-per-link N] [--set KEY.PATH=VALUE ...] [--out DIR]
+    flexmech run CASE.toml [--model M] [--dt S] [--elements-per-link N] [--integrator I] [--rho-inf X]
+                 [--hht-alpha A] [--set KEY.PATH=VALUE ...] [--out DIR]
     flexmech reproduce [--out DIR]
     flexmech compare RESULT_DIR --reference FILE.csv [--x t|crank_angle] [--columns C ...] [--out DIR]
     flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
@@ -47,6 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
     from . import __version__
     from .case import MODELS
 
+    from .case import INTEGRATORS
+
     p = argparse.ArgumentParser(prog="flexmech", description="Finite-element dynamics of flexible planar mechanisms.")
     p.add_argument("--version", action="version", version=f"flexmech {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -56,6 +59,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--model", choices=MODELS, help="rigid-inertia load model (default: the case's solver.model)")
     r.add_argument("--dt", type=_positive_float, help="time step [s] (default: the case's solver.dt)")
     r.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (default: the case's mesh)")
+    r.add_argument("--integrator", choices=INTEGRATORS,
+                   help="time integrator (alias of --set solver.integrator=...; default: the case's, newmark)")
+    r.add_argument("--rho-inf", type=float, metavar="X",
+                   help="generalized-alpha spectral radius at infinite frequency, 0..1 (alias of --set "
+                        "solver.rho_inf=X; implies --integrator generalized-alpha)")
+    r.add_argument("--hht-alpha", type=float, metavar="A",
+                   help="HHT alpha, 0..1/3 (alias of --set solver.hht_alpha=A; implies --integrator hht)")
     r.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                    help="override a case value, e.g. --set solver.t_end=0.1 --set links.coupler.area=5e-5")
     r.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>)")
@@ -194,11 +204,28 @@ def _cmd_compare(args) -> int:
     return 0
 
 
+def integrator_overrides(args) -> list[str]:
+    """The ``--set`` overrides that ``--integrator``, ``--rho-inf`` and ``--hht-alpha`` stand for."""
+    out = []
+    integrator = args.integrator
+    if integrator is None and args.rho_inf is not None:
+        integrator = "generalized-alpha"
+    elif integrator is None and args.hht_alpha is not None:
+        integrator = "hht"
+    if integrator is not None:
+        out.append(f'solver.integrator="{integrator}"')
+    if args.rho_inf is not None:
+        out.append(f"solver.rho_inf={args.rho_inf!r}")
+    if args.hht_alpha is not None:
+        out.append(f"solver.hht_alpha={args.hht_alpha!r}")
+    return out
+
+
 def _cmd_run(args) -> int:
     from .case import load_case
     from .simulate import simulate
 
-    case = load_case(args.case, overrides=args.set)
+    case = load_case(args.case, overrides=args.set + integrator_overrides(args))
     try:
         res = simulate(case, model=args.model, dt=args.dt, elements_per_link=args.elements_per_link)
     except SolverError as exc:   # the solver stopped: keep and mark the frames before the failure

@@ -43,6 +43,7 @@ class CoupledModel:
     ri: tuple
     tq: tuple
     constraints: list        # rotation constraints: ([seg b, seg a], [end b, end a], kind, value or joint)
+    last_run: dict | None = None   # the last run's frames and final state (run())
 
     @classmethod
     def from_case(cls, case: dict, fe: FEModel | None = None, split: bool = False) -> "CoupledModel":
@@ -194,9 +195,17 @@ class CoupledModel:
                 out[0, i] = km0.phi[0, j.outboard] - (km0.phi[0, j.inboard] if j.inboard is not None else 0.0)
         return np.asfortranarray(out)
 
-    def run(self, q0, v0, t, cval, dt, *, beta=0.25, gamma=0.5, out_every=1, tol=1e-8, maxit=25,
-            gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)):
-        """Newmark-Newton run; returns (qf, vf, af, lf, ef, iterations).  cval: constraint_values()."""
+    def run(self, q0, v0, t, cval, dt, *, beta=0.25, gamma=0.5, alpha_m=0.0, alpha_f=0.0, out_every=1, tol=1e-8,
+            maxit=25, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), p0=None, div_limit=None, t0=0.0):
+        """Generalized-alpha-Newton run (Newmark (beta, gamma) for ``alpha_m = alpha_f = 0``; see
+        :func:`flexmech_py.case.integrator_coefficients`); returns (qf, vf, af, lf, ef, iterations).
+        cval: constraint_values().  ``p0`` (ndof): the pseudo-acceleration of a run being continued
+        (None: a fresh start, p0 = the consistent initial acceleration).  ``div_limit`` [m]: the
+        divergence guard (default DIVERGENCE_FACTOR x the longest link length).  After the call
+        ``self.last_run`` holds the frames, ``frames_valid``, the final state ``q, v, a, p``,
+        ``status`` and ``fail_step`` (also when the run failed)."""
+        from .case import DIVERGENCE_FACTOR
+
         nsteps = t.size - 1
         nframes = nsteps // out_every + 1
         # f2py cannot pass empty arrays: with no prescribed DOF, a fixed DOF is prescribed to its own value
@@ -208,13 +217,19 @@ class CoupledModel:
         con_link = np.array([c[0] for c in self.constraints] or [[1, 0]], np.int32).T
         con_end = np.array([c[1] for c in self.constraints] or [[0, 0]], np.int32).T
         q, v, a = np.array(q0, float), np.array(v0, float), np.zeros(self.ndof)
-        qf, vf, af, lf, ef, status, fail, iters = kernels.api.cpl_run(
+        p = np.zeros(self.ndof) if p0 is None else np.array(p0, float)
+        if div_limit is None:
+            div_limit = DIVERGENCE_FACTOR * max(ln["length"] for ln in self.case["links"])
+        seg_link = np.array([li + 1 for li, _, _ in self.segments], np.int32)
+        qf, vf, af, lf, ef, status, fail, iters, nvalid = kernels.api.cpl_run(
             nframes, nc, *self._args(), np.asfortranarray(con_link), np.asfortranarray(con_end), cval,
-            np.asarray(gravity, float), np.asarray(rayleigh, float), presc_dof, presc, dt, beta, gamma, out_every,
-            tol, maxit, q, v, a)
-        kernels.check_status(status, "coupled Newmark-Newton integration", time=fail * dt if fail else 0.0,
+            np.asarray(gravity, float), np.asarray(rayleigh, float), presc_dof, presc, dt, alpha_m, alpha_f, beta,
+            gamma, out_every, tol, maxit, int(p0 is None), float(div_limit), seg_link, q, v, a, p)
+        self.last_run = {"qf": qf, "vf": vf, "af": af, "lf": lf[:nc], "ef": ef, "frames_valid": int(nvalid),
+                         "q": q, "v": v, "a": a, "p": p, "status": int(status), "fail_step": int(fail)}
+        kernels.check_status(status, "coupled time integration", time=t0 + fail * dt if fail else t0,
                              step=int(fail), data={"qf": qf, "vf": vf, "af": af, "lf": lf[:nc], "ef": ef, "iters": iters,
-                                                   "q": q, "v": v, "a": a})
+                                                   "q": q, "v": v, "a": a, "p": p})
         return qf, vf, af, lf[:nc], ef, iters
 
     def dense(self, q, v, a, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)):

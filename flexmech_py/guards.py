@@ -42,7 +42,7 @@ def _first(t, mask) -> float | None:
 
 
 def _fmt_t(x) -> str:
-    return f"{x:.4g}"
+    return f"{x:.6g}"
 
 
 # ----------------------------------------------------------------------------- validity

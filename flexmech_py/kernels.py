@@ -35,7 +35,9 @@ STATUS_MESSAGES = {
     4: "invalid input to a compiled routine (sizes, indices or coefficients)",
     5: "Newton iterations did not converge (reduce solver.dt, raise solver.newton_maxit, or the motion "
        "left the model's range of validity)",
-    6: "the elastic state grew beyond solver.divergence_limit (the solution is diverging)",
+    6: "the elastic displacement exceeded the divergence limit (solver.divergence_limit, default the longest link "
+       "length): the step is too large for the integrator, the motion is physically unstable, or the deflection "
+       "left the model's range of validity",
 }
 #: what stopped, in a few words (the diagnosis in flexmech_py.guards adds quantity and likely cause)
 STATUS_WHAT = {

@@ -124,6 +124,7 @@ class FEModel:
     ri_prop: np.ndarray
     bandwidth: int = 0
     dof_names: list = field(default_factory=list)
+    last_run: dict | None = field(default=None, repr=False)   # the last run's frames and final state (run())
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -300,30 +301,48 @@ class FEModel:
         kernels.check_status(status, "ked_loads")
         return f
 
-    def run(self, rig, model, dt, *, beta=0.25, gamma=0.5, out_every=1, rayleigh=(0.0, 0.0),
-            q_free=None, q_val=None, u0=None, v0=None, t0=0.0, geometric="none", geo_tol=1e-8, geo_maxit=50,
-            full=False):
-        """Newmark run over rig (5, nlinks, nsteps+1); returns (uf, vf, af) frames over the free DOFs
-        (with ``full=True`` also the element axial forces nf (nel, nframes) [N] and the number of
-        axial-force iterations).  ``geometric``: none | current | lagged | quasi_static.
+    def run(self, rig, model, dt, *, beta=0.25, gamma=0.5, alpha_m=0.0, alpha_f=0.0, out_every=1,
+            rayleigh=(0.0, 0.0), q_free=None, q_val=None, u0=None, v0=None, a0=None, p0=None, t0=0.0,
+            geometric="none", geo_tol=1e-8, geo_maxit=50, div_limit=None, full=False):
+        """Generalized-alpha run over rig (5, nlinks, nsteps+1) (``alpha_m = alpha_f = 0``: Newmark
+        (beta, gamma); :func:`flexmech_py.case.integrator_coefficients` maps the integrators onto
+        these four numbers); returns (uf, vf, af) frames over the free DOFs (with ``full=True``
+        also the element axial forces nf (nel, nframes) [N] and the number of axial-force
+        iterations).  ``geometric``: none | current | lagged | quasi_static.
+
+        State (free DOFs): ``u0, v0`` (default 0); ``a0`` the true and ``p0`` the pseudo-acceleration
+        of a run being continued (``a0=None``: a fresh start, the acceleration from the equations of
+        motion and ``p0 = a0``; ``p0=None`` with ``a0`` given: ``p0 = a0``).  ``div_limit`` [m]:
+        the divergence guard on the free translations (default DIVERGENCE_FACTOR x the longest
+        link length).  After the call ``self.last_run`` holds the frames, the number of valid
+        frames ``frames_valid``, the final state ``u, v, a, p``, ``status`` and ``fail_step``
+        (also when the run failed).
 
         Raises SolverError (naming the time) if the compiled loop stops.
         """
+        from .case import DIVERGENCE_FACTOR
+
         rig = np.asfortranarray(rig, float)
         nsteps = rig.shape[2] - 1
         nframes = nsteps // out_every + 1
         nf = self.nfree
         u = np.zeros(nf) if u0 is None else np.array(u0, float)
         v = np.zeros(nf) if v0 is None else np.array(v0, float)
-        a = np.zeros(nf)
+        a = np.zeros(nf) if a0 is None else np.array(a0, float)
+        p = a.copy() if p0 is None else np.array(p0, float)
+        if div_limit is None:
+            div_limit = DIVERGENCE_FACTOR * float(self.link_lengths().max())
         if q_free is None:  # no applied elastic loads: one zero entry (f2py cannot pass empty arrays)
             q_free = np.ones(1, np.int32)
             q_val = np.zeros((1, nsteps + 1), order="F")
-        uf, vf, af, nf, status, fail, geo_iters = kernels.api.ked_run(
+        uf, vf, af, nf, status, fail, geo_iters, nvalid = kernels.api.ked_run(
             nframes, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
-            np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, beta, gamma, out_every, 1,
-            GEOMETRIC_CODE[geometric], geo_tol, geo_maxit, u, v, a)
-        kernels.check_status(status, "Newmark integration", time=t0 + fail * dt if fail else t0, iteration="geometric",
-                             step=int(fail), data={"uf": uf, "vf": vf, "af": af, "nf": nf, "geo_iters": geo_iters,
-                                                   "u": u, "v": v, "a": a})
+            np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, alpha_m, alpha_f, beta, gamma,
+            out_every, int(a0 is None), GEOMETRIC_CODE[geometric], geo_tol, geo_maxit, float(div_limit), u, v, a, p)
+        self.last_run = {"uf": uf, "vf": vf, "af": af, "nf": nf, "frames_valid": int(nvalid), "u": u, "v": v,
+                         "a": a, "p": p, "status": int(status), "fail_step": int(fail)}
+        kernels.check_status(status, "Newmark integration" if alpha_m == alpha_f == 0.0 else "generalized-alpha integration",
+                             time=t0 + fail * dt if fail else t0, iteration="geometric", step=int(fail),
+                             data={"uf": uf, "vf": vf, "af": af, "nf": nf, "geo_iters": geo_iters,
+                                   "u": u, "v": v, "a": a, "p": p})
         return (uf, vf, af, nf, geo_iters) if full else (uf, vf, af)

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from . import rigid
-from .case import MODELS, SUPERPOSITION_MODELS
+from .case import MODELS, SUPERPOSITION_MODELS, integrator_coefficients
 from .errors import CaseError, SolverError
 from . import coupled, guards
 from .coupled import CoupledModel
@@ -216,12 +216,14 @@ class Prepared:
         if geometric is not None:
             sol["geometric_stiffness"] = geometric
         t0 = time.perf_counter()
+        am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
         failure = None
         try:
-            uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, beta=sol["beta"], gamma=sol["gamma"],
-                                               out_every=self.out_every, rayleigh=sol["rayleigh"], q_free=self.q_free,
-                                               q_val=self.q_val, geometric=sol["geometric_stiffness"],
-                                               geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"], full=True)
+            uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, alpha_m=am, alpha_f=af_, beta=beta,
+                                               gamma=gamma, out_every=self.out_every, rayleigh=sol["rayleigh"],
+                                               q_free=self.q_free, q_val=self.q_val, geometric=sol["geometric_stiffness"],
+                                               geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"],
+                                               div_limit=sol.get("divergence_limit"), full=True)
         except SolverError as exc:   # keep the frames before the failed step
             if exc.data is None or exc.step is None or exc.step < 1:
                 raise
@@ -241,7 +243,7 @@ class Prepared:
         units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
-        extra = {"validity": coupled.validity(fe, nf, u_all)}
+        extra = {"integrator": integrator_summary(sol), "validity": coupled.validity(fe, nf, u_all)}
         if sol["geometric_stiffness"] != "none":
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": int(geo_iters),
                                             "mean_per_step": geo_iters / self.nsteps}
@@ -262,12 +264,14 @@ class Prepared:
         cm = self.coupled[model]
         q0, v0 = cm.initial_state(self.rm.q[0], self.rm.qd[0], self.mech)
         cval = cm.constraint_values(self.t, self.rm.q, self.rm.qd, self.rm.qdd, self.mech)
+        am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
         t0 = time.perf_counter()
         failure = None
         try:
-            qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, beta=sol["beta"], gamma=sol["gamma"],
-                                               out_every=self.out_every, tol=sol["newton_tol"],
-                                               maxit=sol["newton_maxit"], gravity=self.gravity, rayleigh=sol["rayleigh"])
+            qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, alpha_m=am, alpha_f=af_, beta=beta,
+                                               gamma=gamma, out_every=self.out_every, tol=sol["newton_tol"],
+                                               maxit=sol["newton_maxit"], gravity=self.gravity, rayleigh=sol["rayleigh"],
+                                               div_limit=sol.get("divergence_limit"))
         except SolverError as exc:   # keep the frames before the failed step
             if exc.data is None or exc.step is None or exc.step < 1:
                 raise
@@ -295,7 +299,8 @@ class Prepared:
                 columns["drive_torque"], units["drive_torque"] = -lam, "N m"
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
-        extra = {"coupled": coupled.diagnostics(cm, qf, ef, chord, ref, iters, self.nsteps),
+        extra = {"integrator": integrator_summary(sol),
+                 "coupled": coupled.diagnostics(cm, qf, ef, chord, ref, iters, self.nsteps),
                  "validity": coupled.validity(fe, axial, u_dev)}
         res = Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
                      q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_dev, v=np.zeros_like(u_dev),
@@ -303,6 +308,16 @@ class Prepared:
                      axial=axial)
         res.curvature = lambda li, frac: coupled.curvature(cm, qf, li, frac)
         return guards.partial_or(res, failure, "coupled", cm=cm)
+
+
+def integrator_summary(sol: dict) -> dict:
+    """summary.json's ``integrator`` entry: the name, its case parameter(s) and the kernel's
+    (am, af, beta, gamma), and the divergence limit [m]."""
+    name = sol.get("integrator", "newmark")
+    am, af, beta, gamma = integrator_coefficients(name, sol)
+    params = {k: sol[k] for k in ("hht_alpha", "rho_inf") if k in sol}
+    return {"name": name, **params, "am": am, "af": af, "beta": beta, "gamma": gamma,
+            "divergence_limit_m": sol.get("divergence_limit")}
 
 
 def _axial_stretch(fe, u_all, motion) -> np.ndarray:

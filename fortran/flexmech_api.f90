@@ -12,7 +12,7 @@
 !>   load_model        1 hac (case I), 2 classic (case II), 3 classic-translational
 !>   rayleigh(2)       Rayleigh damping [a_M 1/s, a_K s]
 !> Rigid samples rig(5,nlinks,...) : [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] per link.
-!> Every routine returns `status` (codes in flexmech_lapack; 5 = Newton failure, flexmech_coupled).
+!> Every routine returns `status` (codes in flexmech_lapack; 5 = Newton failure, 6 = divergence limit).
 !>
 !> Coupled (one-pass) model, cpl_* routines (docs/theory.md, "Coupled model"):
 !>   free_of(ndof)          free-DOF number of each DOF, 0 = constrained or prescribed
@@ -114,18 +114,22 @@ contains
     end do
   end subroutine ked_bandwidth
 
-  !> Run the superposition KED model with Newmark(beta, gamma) over nsteps steps.
-  !> On entry u0, v0 are the initial state (free DOFs); if init_accel /= 0 the
-  !> initial acceleration is computed from the equations of motion, else a0 is used.
-  !> Outputs frames (nfree, nframes) at steps 0, out_every, ...; the final
-  !> state in u0, v0, a0 (so a long run can be continued chunk by chunk).
+  !> Run the superposition KED model with the generalized-alpha family (alpha_m, alpha_f, beta, gamma;
+  !> Newmark: alpha_m = alpha_f = 0) over nsteps steps (flexmech_newmark, docs/theory.md section 15).
+  !> On entry u0, v0 are the initial state (free DOFs); if init_accel /= 0 the initial acceleration
+  !> a0 is computed from the equations of motion and the pseudo-acceleration p0 set to it (a fresh
+  !> start), else a0 and p0 are used as given.  Outputs frames (nfree, nframes) at steps 0,
+  !> out_every, ...; nvalid of them are valid (all unless status /= 0); the final state in u0, v0,
+  !> a0, p0 (so a long run can be continued chunk by chunk).
   !> geo_mode: 0 no geometric stiffness; 1 axial forces of the current state, iterated in each step
   !> (geo_tol, geo_maxit); 2 axial forces lagged one step; 3 quasi-static axial forces from
   !> K u = -F_rigid at each step.  nf (nel, nframes) returns the axial forces used [N].
+  !> div_limit [m] > 0: the run stops with status 6 when a free translational DOF exceeds it.
   subroutine ked_run(nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes, &
                      free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, ri_prop, &
-                     load_model, rayleigh, rig, q_free, q_val, dt, beta, gamma, out_every, init_accel, &
-                     geo_mode, geo_tol, geo_maxit, u0, v0, a0, uf, vf, af, nf, status, fail_step, geo_iters)
+                     load_model, rayleigh, rig, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, &
+                     init_accel, geo_mode, geo_tol, geo_maxit, div_limit, u0, v0, a0, p0, uf, vf, af, nf, &
+                     status, fail_step, geo_iters, nvalid)
     integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes
     integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
     real(dp), intent(in) :: el_prop(5, nel)
@@ -138,15 +142,17 @@ contains
     real(dp), intent(in) :: rig(5, nlinks, nsteps + 1)
     integer, intent(in) :: q_free(nq)
     real(dp), intent(in) :: q_val(nq, nsteps + 1)
-    real(dp), intent(in) :: dt, beta, gamma
+    real(dp), intent(in) :: dt, alpha_m, alpha_f, beta, gamma, div_limit
     integer, intent(in) :: out_every, init_accel, geo_mode, geo_maxit
     real(dp), intent(in) :: geo_tol
-    real(dp), intent(inout) :: u0(nfree), v0(nfree), a0(nfree)
+    real(dp), intent(inout) :: u0(nfree), v0(nfree), a0(nfree), p0(nfree)
     real(dp), intent(out) :: uf(nfree, nframes), vf(nfree, nframes), af(nfree, nframes), nf(nel, nframes)
-    integer, intent(out) :: status, fail_step, geo_iters
+    integer, intent(out) :: status, fail_step, geo_iters, nvalid
     type(ked_system) :: sys
+    logical :: trans(nfree)
+    integer :: e, i
     uf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; nf = 0.0_dp; geo_iters = 0
-    fail_step = 0
+    fail_step = 0; nvalid = 0
     call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
                ri_link, ri_dof, ri_prop, load_model, rayleigh, status)
     if (status /= STATUS_OK) return
@@ -154,16 +160,25 @@ contains
       status = STATUS_BAD_INPUT
       return
     end if
-    if (init_accel /= 0) then
-      call consistent_acceleration(sys, rig(:, :, 1), q_free, q_val(:, 1), u0, v0, a0, status)
-      if (status /= STATUS_OK) return
-    end if
     if (geo_mode < 0 .or. geo_mode > 3) then
       status = STATUS_BAD_INPUT
       return
     end if
-    call newmark_run(sys, rig, q_free, q_val, dt, beta, gamma, out_every, u0, v0, a0, uf, vf, af, &
-                     status, fail_step, geo_mode, geo_tol, geo_maxit, nf, geo_iters)
+    trans = .false.    ! the translational DOFs [u1 w1 . u2 w2 .] of the elements watched by the guard
+    do e = 1, nel
+      do i = 1, 6
+        if (i == 3 .or. i == 6) cycle
+        if (free_of(el_dof(i, e)) > 0) trans(free_of(el_dof(i, e))) = .true.
+      end do
+    end do
+    if (init_accel /= 0) then
+      call consistent_acceleration(sys, rig(:, :, 1), q_free, q_val(:, 1), u0, v0, a0, status)
+      if (status /= STATUS_OK) return
+      p0 = a0
+    end if
+    call newmark_run(sys, rig, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, u0, v0, a0, p0, &
+                     uf, vf, af, status, fail_step, nvalid, geo_mode, geo_tol, geo_maxit, nf, geo_iters, &
+                     trans, div_limit)
   end subroutine ked_run
 
   !> Dense system matrices over the free DOFs at one rigid sample:
@@ -230,12 +245,18 @@ contains
     end do
   end subroutine ked_loads
 
-  !> Run the coupled model (Newmark-Newton).  q, v, a (ndof): on entry the initial state (constrained
-  !> entries hold their fixed values; the free accelerations are made consistent), on exit the last state.
+  !> Run the coupled model (generalized-alpha-Newton; Newmark for alpha_m = alpha_f = 0).  q, v, a, pa
+  !> (ndof): on entry the initial state (constrained entries hold their fixed values; the free
+  !> accelerations a are made consistent; pa is the pseudo-acceleration, set to a when init_pseudo /= 0
+  !> (a fresh start), else used as given (continuing a run)), on exit the last state reached.
+  !> div_limit [m] > 0: the run stops with status 6 when coupled_elastic_measure (flexmech_coupled)
+  !> exceeds it; seg_link(nlinks) is the mechanism link of each segment (segments of a link listed
+  !> consecutively from its start).  nvalid: number of valid frames.
   subroutine cpl_run(ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes, nc, ncon, &
                      free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, tq_link, tq_end, tq_coef, &
-                     con_link, con_end, cval, grav, ray, presc_dof, presc, dt, beta, gamma, out_every, tol, maxit, &
-                     q, v, a, qf, vf, af, lf, ef, status, fail_step, iters)
+                     con_link, con_end, cval, grav, ray, presc_dof, presc, dt, alpha_m, alpha_f, beta, gamma, &
+                     out_every, tol, maxit, init_pseudo, div_limit, seg_link, &
+                     q, v, a, pa, qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
     integer, intent(in) :: ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes
     integer, intent(in) :: nc      !< size of the constraint arrays (>= 1; f2py cannot pass empty arrays)
     integer, intent(in) :: ncon    !< number of active rotation constraints (0..nc)
@@ -251,14 +272,15 @@ contains
     real(dp), intent(in) :: tq_coef(nh2, ntq), grav(2), ray(2)
     integer, intent(in) :: presc_dof(np)
     real(dp), intent(in) :: presc(3, np, nsteps + 1)
-    real(dp), intent(in) :: dt, beta, gamma, tol
-    integer, intent(in) :: out_every, maxit
-    real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof)
+    real(dp), intent(in) :: dt, alpha_m, alpha_f, beta, gamma, tol, div_limit
+    integer, intent(in) :: out_every, maxit, init_pseudo
+    integer, intent(in) :: seg_link(nlinks)
+    real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof), pa(ndof)
     real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
     real(dp), intent(out) :: lf(nc, nframes)   !< constraint multipliers (the constraint torque is -lf) [N m]
-    integer, intent(out) :: status, fail_step, iters
+    integer, intent(out) :: status, fail_step, iters, nvalid
     type(coupled_system) :: sys
-    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; fail_step = 0; iters = 0
+    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
     call coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
                        tq_link, tq_end, tq_coef, ncon, con_link, con_end, grav, ray, status)
     if (status /= STATUS_OK) return
@@ -266,8 +288,8 @@ contains
       status = STATUS_BAD_INPUT
       return
     end if
-    call coupled_run(sys, presc_dof, presc, cval, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
-                     qf, vf, af, lf, ef, status, fail_step, iters)
+    call coupled_run(sys, presc_dof, presc, cval, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
+                     init_pseudo, div_limit, seg_link, q, v, a, pa, qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
   end subroutine cpl_run
 
   !> Residual (all DOFs), M, C_v, K_t (dense, free DOFs) and [kinetic, potential] energy at one state.

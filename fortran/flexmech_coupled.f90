@@ -12,20 +12,22 @@
 !> with delta_e the element's local elastic DOFs (end-node translations are zero by definition).
 !> Gibbs-Appell: dG/da + dU/dq = Q with G = 1/2 int |r''|^2 dm, i.e. int J^T r'' dm + dU/dq = Q,
 !> J = dr'/dq' = dr''/dq''.  Strain energy: 1/2 (EA/L)(|c| - L)^2 + 1/2 delta^T k delta.
-!> Integration: Newmark (beta, gamma) in acceleration form with Newton iterations; the
-!> iteration matrix S = M + gamma dt C_v + beta dt^2 K_t is built once per step (modified Newton):
+!> Integration: generalized-alpha (Arnold & Bruls 2007; Newmark (beta, gamma) for am = af = 0) in
+!> acceleration form with Newton iterations on the true acceleration a_{n+1}, the equations and the
+!> constraints holding exactly at t_{n+1} (see flexmech_newmark and docs/theory.md section 15); the
+!> iteration matrix S = M + gamma' dt C_v + beta' dt^2 K_t is built once per step (modified Newton):
 !> M and C_v exact, K_t = elastic + chord + elastic inertial terms (the configuration
 !> dependence of the inertia through the chord is left out of S; it is in the residual).
 module flexmech_coupled
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
-                             STATUS_BAD_INPUT, STATUS_NEWTON
+                             STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
   use flexmech_beam, only: beam_mass, beam_stiffness
   use flexmech_assembly, only: band_rows, band_add_element, band_to_dense
   implicit none
   private
-  public :: coupled_system, coupled_build, coupled_run, coupled_dense, STATUS_NEWTON
+  public :: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_elastic_measure, STATUS_NEWTON
 
   real(dp), parameter :: gx(4) = [ &
     0.5_dp - 0.5_dp*0.8611363115940526_dp, 0.5_dp - 0.5_dp*0.3399810435848563_dp, &
@@ -449,41 +451,106 @@ contains
     end do
   end subroutine constraint_eval
 
-  !> Newmark-Newton integration of the coupled model.
+  !> Elastic deformation measure of the divergence guard [m]: over the links (seg_link(s) = link of
+  !> segment s; a link's segments listed consecutively from its start), the largest of
+  !>   | |c| - L |                         change of the length of the link chord c (first segment's
+  !>                                       start node to last segment's end node), L = sum of the
+  !>                                       segment lengths;
+  !>   |r_k - (r_start + w_k c)|           offset of every segment-end node from its place on the
+  !>                                       straight chord (w_k = fraction of L up to node k);
+  !>   sqrt(p_k^2 + v_k^2)                 interior elastic chord-frame translations of each segment.
+  !> Elastic rotations (radians) are not included.  For the coupled model (one segment per link)
+  !> this is the largest elastic chord-frame translation or chord stretch; for the nonlinear model
+  !> (one segment per element) the largest node offset from the link's chord.
+  function coupled_elastic_measure(sys, seg_link, q) result(dmax)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: seg_link(:)   !< (number of segments) link of each segment, 1-based
+    real(dp), intent(in) :: q(:)         !< (ndof) all-DOF positions
+    real(dp) :: dmax
+    integer :: l, s, s0, s1, k, n
+    real(dp) :: r0(2), c(2), ltot, acc, w0
+    dmax = 0.0_dp
+    s0 = 1
+    do while (s0 <= sys%nlinks)
+      l = seg_link(s0)
+      s1 = s0
+      do while (s1 < sys%nlinks)
+        if (seg_link(s1 + 1) /= l) exit
+        s1 = s1 + 1
+      end do
+      ltot = sum(sys%prop(1, s0:s1))
+      r0 = q(sys%ld(1:2, s0))
+      c = q(sys%ld(3:4, s1)) - r0
+      dmax = max(dmax, abs(norm2(c) - ltot))
+      acc = 0.0_dp
+      do s = s0, s1
+        n = sys%n_el(s)
+        w0 = acc/ltot
+        acc = acc + sys%prop(1, s)
+        dmax = max(dmax, norm2(q(sys%ld(1:2, s)) - (r0 + w0*c)), norm2(q(sys%ld(3:4, s)) - (r0 + (acc/ltot)*c)))
+        do k = 1, n - 1
+          dmax = max(dmax, hypot(q(sys%ld(3*k + 3, s)), q(sys%ld(3*k + 4, s))))
+        end do
+      end do
+      s0 = s1 + 1
+    end do
+  end function coupled_elastic_measure
+
+  !> Generalized-alpha-Newton integration of the coupled model (Newmark for alpha_m = alpha_f = 0).
   !> q, v, a: (ndof) all-DOF state, constrained entries hold their values (prescribed ones are
   !> overwritten from presc each step).  Rotation constraints (sys%ncon): sum_s sign psi_s = cval(1,i,k),
   !> enforced at the position level with Lagrange multipliers lam (the constraint torques).
+  !> a is the true acceleration (made consistent with the equations and constraints at the start),
+  !> p the pseudo-acceleration (init_pseudo /= 0: p = a at the start, a fresh run; else p as given,
+  !> continuing a run).  On return (q, v, a, p) is the last state reached.
   !> Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes), lf (ncon, nframes) multipliers,
   !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the inputs (torques and
-  !> prescribed rotations), max Newton iterations since the last frame].
-  subroutine coupled_run(sys, presc_dof, presc, cval, dt, beta, gamma, out_every, tol, maxit, q, v, a, &
-                         qf, vf, af, lf, ef, status, fail_step, iters)
+  !> prescribed rotations), max Newton iterations since the last frame]; nvalid frames are valid.
+  !> Divergence guard: coupled_elastic_measure > div_limit [m] after a step stops the run with
+  !> STATUS_DIVERGED (fail_step = that step).
+  subroutine coupled_run(sys, presc_dof, presc, cval, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
+                         init_pseudo, div_limit, seg_link, q, v, a, p, qf, vf, af, lf, ef, status, fail_step, &
+                         iters, nvalid)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: presc_dof(:)          !< (np) prescribed DOFs (all-DOF numbers)
     real(dp), intent(in) :: presc(:, :, :)       !< (3, np, nsteps+1) [q, v, a] of prescribed DOFs
     real(dp), intent(in) :: cval(:, :, :)        !< (3, ncon, nsteps+1) [angle, rate, acceleration] of constraints
-    real(dp), intent(in) :: dt, beta, gamma, tol
-    integer, intent(in) :: out_every, maxit
-    real(dp), intent(inout) :: q(:), v(:), a(:)
+    real(dp), intent(in) :: dt, tol
+    real(dp), intent(in) :: alpha_m, alpha_f, beta, gamma   !< generalized-alpha parameters
+    integer, intent(in) :: out_every, maxit, init_pseudo
+    real(dp), intent(in) :: div_limit              !< divergence limit [m]
+    integer, intent(in) :: seg_link(:)             !< (number of segments) link of each segment
+    real(dp), intent(inout) :: q(:), v(:), a(:), p(:)
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
-    integer, intent(out) :: status, fail_step, iters
-    real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), theta0(:), theta1(:)
+    integer, intent(out) :: status, fail_step, iters, nvalid
+    real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), theta0(:), theta1(:), w(:)
     real(dp), allocatable :: gt(:, :), x(:, :), amat(:, :), lam(:), dlam(:), gval(:), acc0(:), ang0(:), ang1(:), lam0(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
-    real(dp) :: energy(2), work, da_norm, a_norm, da_prev
+    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap
     logical :: converged, refactor
-    status = STATUS_OK; fail_step = 0; iters = 0
+    status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0
     nsteps = size(presc, 3) - 1
     nf = sys%nfree
     nc = sys%ncon
     refactor = .false.
     if (out_every < 1 .or. dt <= 0.0_dp .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
-        (nc > 0 .and. size(cval, 3) /= nsteps + 1)) then
+        (nc > 0 .and. size(cval, 3) /= nsteps + 1) .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
+        alpha_m >= 1.0_dp .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. &
+        size(seg_link) /= sys%nlinks .or. size(p) /= sys%ndof) then
       status = STATUS_BAD_INPUT
       return
     end if
+    if (any(seg_link < 1)) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    c1 = 1.0_dp/(1.0_dp - alpha_m)
+    betap = beta*(1.0_dp - alpha_f)*c1
+    gammap = gamma*(1.0_dp - alpha_f)*c1
     allocate (ab(band_rows(sys%kl, sys%ku), nf), res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf))
+    allocate (w(sys%ndof))
+    w = 0.0_dp
     allocate (theta0(max(1, sys%ntq)), theta1(max(1, sys%ntq)), freeidx(nf))
     allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
               dlam(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), ang0(max(1, nc)), ang1(max(1, nc)), ipc(max(1, nc)), &
@@ -510,6 +577,7 @@ contains
     end if
     if (status /= STATUS_OK) return
     a(freeidx) = rf
+    if (init_pseudo /= 0) p = a
     work = 0.0_dp
     call joint_angles(sys, q, theta0)
     call con_angles(ang0)
@@ -517,17 +585,19 @@ contains
     frame = 1
     qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; lf(:, 1) = lam(1:size(lf, 1))
     ef(:, 1) = [energy(1), energy(2), 0.0_dp, 0.0_dp]
+    nvalid = 1
     itmax_frame = 0
     do n = 1, nsteps
-      qs = q + dt*v + (dt*dt*(0.5_dp - beta))*a
-      vs = v + (dt*(1.0_dp - gamma))*a
+      w(freeidx) = alpha_f*a(freeidx) - alpha_m*p(freeidx)     ! zero for Newmark
+      qs = q + dt*v + (dt*dt*(0.5_dp - beta))*p + (dt*dt*beta*c1)*w
+      vs = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
       call set_prescribed(n + 1)
       converged = .false.
       da_prev = huge(1.0_dp)
       do it = 1, maxit
-        q(freeidx) = qs(freeidx) + (beta*dt*dt)*a(freeidx)
-        v(freeidx) = vs(freeidx) + (gamma*dt)*a(freeidx)
-        call assemble(sys, q, v, a, it == 1, gamma*dt, beta*dt*dt, res, ab, energy)
+        q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
+        v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
+        call assemble(sys, q, v, a, it == 1, gammap*dt, betap*dt*dt, res, ab, energy)
         if (it == 1) then
           call factor()
           if (status /= STATUS_OK) exit
@@ -538,7 +608,7 @@ contains
         call band_solve_rhs(rf)
         if (status /= STATUS_OK) exit
         if (nc > 0) then   ! Schur complement on the multipliers
-          dlam(1:nc) = matmul(transpose(gt(:, 1:nc)), rf) + gval(1:nc)/(beta*dt*dt)
+          dlam(1:nc) = matmul(transpose(gt(:, 1:nc)), rf) + gval(1:nc)/(betap*dt*dt)
           call small_solve(dlam)
           if (status /= STATUS_OK) exit
           rf = rf - matmul(x(:, 1:nc), dlam(1:nc))
@@ -561,9 +631,15 @@ contains
         fail_step = n
         return
       end if
-      q(freeidx) = qs(freeidx) + (beta*dt*dt)*a(freeidx)
-      v(freeidx) = vs(freeidx) + (gamma*dt)*a(freeidx)
+      q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
+      v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
+      p(freeidx) = c1*((1.0_dp - alpha_f)*a(freeidx) + w(freeidx))
       itmax_frame = max(itmax_frame, it)
+      if (coupled_elastic_measure(sys, seg_link, q) > div_limit) then
+        status = STATUS_DIVERGED
+        fail_step = n
+        return
+      end if
       call joint_angles(sys, q, theta1)
       do i = 1, sys%ntq    ! work of the torques, trapezoidal in the joint angle
         work = work + 0.5_dp*(torque(sys, i, theta0(i)) + torque(sys, i, theta1(i)))*wrap(theta1(i) - theta0(i))
@@ -580,6 +656,7 @@ contains
         frame = frame + 1
         qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a; lf(:, frame) = lam(1:size(lf, 1))
         ef(:, frame) = [energy(1), energy(2), work, real(itmax_frame, dp)]
+        nvalid = frame
         itmax_frame = 0
       end if
     end do

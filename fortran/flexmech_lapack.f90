@@ -10,16 +10,22 @@
 !>   4  invalid input to a compiled routine (sizes, indices, coefficients)
 !>   5  iterations inside a step did not converge (Newton in the coupled and nonlinear models,
 !>      the axial forces of the geometric stiffness)
+!>   6  the elastic state exceeded the divergence limit `div_limit` given to the time loop
+!>      (flexmech_newmark: max |u| over the free translational DOFs; flexmech_coupled: the largest
+!>      node offset from the straight link chord or change of the chord length); the step that
+!>      crossed it is returned in fail_step
 module flexmech_lapack
   use flexmech_kinds, only: dp
   implicit none
   private
   public :: dgbtrf, dgbtrs, dgetrf, dgetrs
-  public :: STATUS_OK, STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON
+  public :: STATUS_OK, STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON, &
+            STATUS_DIVERGED
   public :: lapack_status
 
   integer, parameter :: STATUS_OK = 0, STATUS_SINGULAR = 1, STATUS_NONFINITE = 2, &
-                        STATUS_LAPACK_ARG = 3, STATUS_BAD_INPUT = 4, STATUS_NEWTON = 5
+                        STATUS_LAPACK_ARG = 3, STATUS_BAD_INPUT = 4, STATUS_NEWTON = 5, &
+                        STATUS_DIVERGED = 6
 
   interface
     subroutine dgbtrf(m, n, kl, ku, ab, ldab, ipiv, info)

@@ -1,16 +1,23 @@
-!> Newmark time integration of the superposition KED equations
-!> (time-varying matrices, one banded LU per step, no allocation in the loop).
+!> Time integration of the superposition KED equations with the generalized-alpha family in the
+!> form of Arnold & Bruls (Multibody Syst. Dyn. 18 (2007) 185-202); time-varying matrices, one
+!> banded LU per step, no allocation in the loop.  docs/theory.md section 15.
 !>
-!> Acceleration form of the Newmark family (beta, gamma): with the predictors
-!>   u* = u_n + dt v_n + dt^2 (1/2 - beta) a_n,   v* = v_n + dt (1 - gamma) a_n
-!> solve (M + gamma dt C + beta dt^2 K)_{n+1} a_{n+1} = Q_{n+1} - F_{n+1} - C v* - K u*
-!> and correct u_{n+1} = u* + beta dt^2 a_{n+1}, v_{n+1} = v* + gamma dt a_{n+1}.
-!> beta = 1/4, gamma = 1/2 is the average-acceleration rule.
+!> State (u, v, a, p): displacement, velocity, true acceleration a_n (the equations of motion hold
+!> exactly at every t_n) and the pseudo-acceleration p_n of the recurrence
+!>   (1 - am) p_{n+1} + am p_n = (1 - af) a_{n+1} + af a_n,
+!>   u_{n+1} = u_n + dt v_n + dt^2 (1/2 - beta) p_n + dt^2 beta p_{n+1},
+!>   v_{n+1} = v_n + dt (1 - gamma) p_n + dt gamma p_{n+1}.
+!> Eliminating p_{n+1} leaves Newmark's structure with w = af a_n - am p_n, c1 = 1/(1 - am):
+!>   u* = u_n + dt v_n + dt^2 (1/2 - beta) p_n + dt^2 beta c1 w,   v* = v_n + dt (1 - gamma) p_n + dt gamma c1 w
+!>   (M + gamma' dt C + beta' dt^2 K)_{n+1} a_{n+1} = Q_{n+1} - F_{n+1} - C v* - K u*
+!>   u_{n+1} = u* + beta' dt^2 a_{n+1},  v_{n+1} = v* + gamma' dt a_{n+1},  p_{n+1} = c1 ((1 - af) a_{n+1} + w)
+!> with beta' = beta (1 - af) c1, gamma' = gamma (1 - af) c1.  am = af = 0 is Newmark (beta, gamma)
+!> (then p = a exactly); beta = 1/4, gamma = 1/2 the average-acceleration rule.
 module flexmech_newmark
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE, STATUS_BAD_INPUT, &
-                             STATUS_GEO => STATUS_NEWTON
+                             STATUS_GEO => STATUS_NEWTON, STATUS_DIVERGED
 
   use flexmech_assembly, only: band_rows
   use flexmech_ked, only: ked_system
@@ -58,12 +65,16 @@ contains
     call band_solve(sys, ab, ipiv, a, status)
   end subroutine consistent_acceleration
 
-  !> Integrate nsteps = size(rig,3) - 1 steps of size dt from the state (u, v, a)
-  !> at rig(:,:,1).  Frames are stored at steps 0, out_every, 2*out_every, ...
-  !> On return (u, v, a) is the last state reached; on failure status /= 0 and
-  !> fail_step is the step (1-based) that failed, frames after it untouched.
-  subroutine newmark_run(sys, rig, q_free, q_val, dt, beta, gamma, out_every, u, v, a, &
-                         uf, vf, af, status, fail_step, geo_mode, geo_tol, geo_maxit, nf, geo_iters)
+  !> Integrate nsteps = size(rig,3) - 1 steps of size dt from the state (u, v, a, p) at rig(:,:,1)
+  !> (a the true and p the pseudo-acceleration; a fresh start has p = a).  Frames are stored at
+  !> steps 0, out_every, 2*out_every, ...; nvalid is the number of frames stored.
+  !> On return (u, v, a, p) is the last state reached; on failure status /= 0 and fail_step is the
+  !> step (1-based) that failed, frames after the last valid one untouched.
+  !> Divergence guard: after every step, max |u| over the DOFs marked in trans (the translations,
+  !> metres) above div_limit [m] stops the run with STATUS_DIVERGED.
+  subroutine newmark_run(sys, rig, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, u, v, a, p, &
+                         uf, vf, af, status, fail_step, nvalid, geo_mode, geo_tol, geo_maxit, nf, geo_iters, &
+                         trans, div_limit)
     type(ked_system), intent(inout) :: sys
     integer, intent(in) :: geo_mode                !< GEO_* source of the axial forces
     real(dp), intent(in) :: geo_tol                !< GEO_CURRENT: relative tolerance on the axial forces
@@ -73,27 +84,35 @@ contains
     real(dp), intent(in) :: rig(:, :, :)   !< (5, nlinks, nsteps+1) rigid samples on the time grid
     integer, intent(in) :: q_free(:)       !< (nq) free DOFs loaded by applied generalized forces
     real(dp), intent(in) :: q_val(:, :)    !< (nq, nsteps+1) their values
-    real(dp), intent(in) :: dt, beta, gamma
+    real(dp), intent(in) :: dt             !< step [s]
+    real(dp), intent(in) :: alpha_m, alpha_f, beta, gamma   !< generalized-alpha parameters (Newmark: am = af = 0)
     integer, intent(in) :: out_every
-    real(dp), intent(inout) :: u(:), v(:), a(:)      !< (nfree) state
+    real(dp), intent(inout) :: u(:), v(:), a(:), p(:)   !< (nfree) state [m or rad, /s, /s^2, /s^2]
     real(dp), intent(inout) :: uf(:, :), vf(:, :), af(:, :)  !< (nfree, nframes)
-    integer, intent(out) :: status, fail_step
-    real(dp), allocatable :: ab(:, :), up(:), vp(:), nnew(:), us(:), z(:)
+    integer, intent(out) :: status, fail_step, nvalid
+    logical, intent(in) :: trans(:)       !< (nfree) DOFs watched by the divergence guard
+    real(dp), intent(in) :: div_limit     !< divergence limit on |u| [m]
+    real(dp), allocatable :: ab(:, :), up(:), vp(:), nnew(:), us(:), z(:), w(:)
     logical, allocatable :: locked(:)
     integer, allocatable :: ipiv(:)
     integer :: n, i, nsteps, frame, it
     logical :: done
-    real(dp) :: penalty
+    real(dp) :: penalty, c1, betap, gammap
     status = STATUS_OK
     fail_step = 0
+    nvalid = 0
     nsteps = size(rig, 3) - 1
-    if (out_every < 1 .or. dt <= 0.0_dp .or. beta <= 0.0_dp .or. gamma < 0.5_dp &
+    if (out_every < 1 .or. dt <= 0.0_dp .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. alpha_m >= 1.0_dp &
+        .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. size(trans) /= sys%nfree &
         .or. size(uf, 2) /= nsteps/out_every + 1) then
       status = STATUS_BAD_INPUT
       return
     end if
+    c1 = 1.0_dp/(1.0_dp - alpha_m)
+    betap = beta*(1.0_dp - alpha_f)*c1
+    gammap = gamma*(1.0_dp - alpha_f)*c1
     allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree), ipiv(sys%nfree), up(sys%nfree), vp(sys%nfree))
-    allocate (nnew(sys%nel), us(sys%nfree), z(sys%nfree), locked(size(q_free)))
+    allocate (nnew(sys%nel), us(sys%nfree), z(sys%nfree), w(sys%nfree), locked(size(q_free)))
     z = 0.0_dp
     do i = 1, size(q_free)   ! DOFs an applied torque ever acts on (locked in the quasi-static solve)
       locked(i) = any(q_val(i, :) /= 0.0_dp)
@@ -103,9 +122,11 @@ contains
     if (sys%geo) call sys%axial_forces(rig(:, :, 1), u, sys%nax)
     uf(:, 1) = u; vf(:, 1) = v; af(:, 1) = a; nf(:, 1) = sys%nax
     frame = 1
+    nvalid = 1
     do n = 1, nsteps
-      up = u + dt*v + (dt*dt*(0.5_dp - beta))*a
-      vp = v + (dt*(1.0_dp - gamma))*a
+      w = alpha_f*a - alpha_m*p            ! zero for Newmark
+      up = u + dt*v + (dt*dt*(0.5_dp - beta))*p + (dt*dt*beta*c1)*w
+      vp = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
       if (geo_mode == GEO_QUASI_STATIC) then   ! N from K u = -F_rigid at this configuration
         sys%geo = .false.
         call sys%assemble(rig(:, :, n + 1), 0.0_dp, 1.0_dp, z, z, ab, us, static=.true.)
@@ -126,7 +147,7 @@ contains
       end if
       done = .false.
       do it = 1, merge(geo_maxit, 1, geo_mode == GEO_CURRENT)
-        call sys%assemble(rig(:, :, n + 1), gamma*dt, beta*dt*dt, up, vp, ab, a)
+        call sys%assemble(rig(:, :, n + 1), gammap*dt, betap*dt*dt, up, vp, ab, a)
         do i = 1, size(q_free)
           a(q_free(i)) = a(q_free(i)) + q_val(i, n + 1)
         end do
@@ -141,7 +162,7 @@ contains
         end if
         ! GEO_CURRENT: axial forces of the new state; iterate until they stop changing
         geo_iters = geo_iters + 1
-        call sys%axial_forces(rig(:, :, n + 1), up + (beta*dt*dt)*a, nnew)
+        call sys%axial_forces(rig(:, :, n + 1), up + (betap*dt*dt)*a, nnew)
         if (maxval(abs(nnew - sys%nax)) <= geo_tol*max(maxval(abs(nnew)), tiny(1.0_dp))) then
           sys%nax = nnew
           done = .true.
@@ -160,12 +181,19 @@ contains
         fail_step = n
         return
       end if
-      u = up + (beta*dt*dt)*a
-      v = vp + (gamma*dt)*a
+      u = up + (betap*dt*dt)*a
+      v = vp + (gammap*dt)*a
+      p = c1*((1.0_dp - alpha_f)*a + w)
       if (geo_mode == GEO_LAGGED) call sys%axial_forces(rig(:, :, n + 1), u, sys%nax)
+      if (maxval(abs(u), mask=trans, dim=1) > div_limit) then
+        status = STATUS_DIVERGED
+        fail_step = n
+        return
+      end if
       if (mod(n, out_every) == 0) then
         frame = frame + 1
         uf(:, frame) = u; vf(:, frame) = v; af(:, frame) = a; nf(:, frame) = sys%nax
+        nvalid = frame
       end if
     end do
   end subroutine newmark_run

@@ -100,7 +100,8 @@ def test_cases_md_documents_every_kind_model_and_key():
             "elements_per_link", "crank_pivot", "crank_coupler", "coupler_follower", "follower_pivot",
             "joint_k", "constant_speed", "spinup", "final_speed", "spinup_time", "turns_with", "gravity",
             "output_every", "rayleigh", "rigid_rtol", "rigid_atol", "beta", "gamma", "newton_tol", "newton_maxit",
-                "geometric_stiffness", "geometric_tol", "geometric_maxit"]:
+                "geometric_stiffness", "geometric_tol", "geometric_maxit", "integrator", "hht_alpha", "rho_inf",
+                "divergence_limit", "generalized-alpha"]:
         assert f"`{word}`" in text, word
 
 
