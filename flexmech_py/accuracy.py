@@ -33,6 +33,7 @@ process and keeps the minimum, and runs of a few milliseconds are repeated up to
 from __future__ import annotations
 
 import csv
+import inspect
 import io
 import json
 import math
@@ -192,6 +193,9 @@ def run_point(task: dict) -> dict:
         cm = CoupledModel.from_case(prep.case, prep.fe, split=(task["model"] == "nonlinear"))
         cm.run = timed(cm.run)
         prep.coupled[task["model"]] = cm
+    # the per-run error estimate (step doubling, guards.error_estimate) is computed once after the
+    # timed runs, not inside them: it is one more run at 2 dt
+    no_estimate = {"estimate": False} if "estimate" in inspect.signature(prep.run).parameters else {}
     kernel, total, cpu, kernel_cpu = [], [], [], []
     reps = max(1, int(task.get("repeat", 1)))
     # at least `repeat` timings; short runs (a few ms, where a single preemption by another process
@@ -199,12 +203,20 @@ def run_point(task: dict) -> dict:
     while len(kernel) < reps or (len(kernel) < MAX_REPEAT and sum(cpu) < SHORT_RUN_BUDGET_S):
         kcpu.clear()
         c0 = time.process_time()
-        res = prep.run(task["model"])
+        res = prep.run(task["model"], **no_estimate)
         cpu.append(time.process_time() - c0)
         kernel.append(res.timing["kernel_s"])
         total.append(res.timing["total_s"])
         kernel_cpu.append(sum(kcpu) if kcpu else float("nan"))
+    estimate = None
+    if no_estimate:
+        from . import guards
+
+        est = guards.error_estimate(prep, res)
+        if est.get("columns"):
+            estimate = {k: est["columns"][k]["relative"] for k in case["outputs"] if k in est["columns"]}
     return {"columns": {k: res.columns[k].tolist() for k in case["outputs"]}, "nsteps": int(res.nsteps),
+            "estimate_rel": estimate,
             "dt": float(res.dt), "frames": int(res.t.size), "nfree": int(prep.fe.nfree),
             "elements": [int(n) for n in prep.fe.n_el], "kernel_s": min(kernel), "kernel_s_all": kernel,
             "kernel_cpu_s": min(kernel_cpu), "kernel_cpu_s_all": kernel_cpu,
@@ -359,7 +371,8 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
         return {"raw": raw_run, "source": source, "overrides": it.overrides, **({"drop": it.drop} if it.drop else {}),
                 "model": model, "nsteps": int(nsteps),
                 "out_every": int(nsteps // n_coarse), "elements": n_el, "repeat": int(reps), "version": __version__,
-                "timing": f"wall and cpu, min of >= repeat, short runs up to {MAX_REPEAT} within {SHORT_RUN_BUDGET_S} s"}
+                "timing": f"wall and cpu, min of >= repeat, short runs up to {MAX_REPEAT} within {SHORT_RUN_BUDGET_S} s",
+                "estimate": "once, after the timed runs"}
 
     points: dict = {}     # key -> {"task", "roles": set, ...}
 
@@ -473,6 +486,9 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
                     errs[c] = float("nan")
             for c in columns:
                 row[f"err_{c}"] = errs[c]
+            est = rr.get("estimate_rel") or {}
+            ests = [est[c] for c in columns if c in est and math.isfinite(est[c])]
+            row["est_time_worst"] = max(ests) if ests else float("nan")
             finite = {c: e for c, e in errs.items() if math.isfinite(e)}
             row["err_worst"] = max(finite.values()) if finite else float("nan")
             row["worst_column"] = max(finite, key=finite.get) if finite else ""
@@ -592,7 +608,7 @@ ROW_FIELDS = ["model", "integrator", "ladders", "dt", "dt_over_case_dt", "nsteps
 
 def _write(study: Study, out_dir: Path, plots: bool, points, keys, ladders) -> list:
     cols = study.columns
-    fields = ROW_FIELDS + [f"err_{c}" for c in cols] + ["err_worst", "worst_column", "error_message"]
+    fields = ROW_FIELDS + [f"err_{c}" for c in cols] + ["err_worst", "worst_column", "est_time_worst", "error_message"]
     paths = []
     p = out_dir / "accuracy.csv"
     _atomic_write(p, _csv_text(study.rows, fields))
