@@ -640,7 +640,8 @@ def _plot_panels(study: Study, points, keys, ladders) -> list:
     s = study.settings
     metrics = (["worst"] if len(study.columns) > 1 else []) + study.columns
     metrics = metrics[:4]
-    methods = sorted({(k[0], k[1]) for k in ladders}, key=lambda mi: (s["models"].index(mi[0]), mi[1]))
+    methods = sorted({(k[0], k[1]) for k in ladders},
+                     key=lambda mi: (s["models"].index(mi[0]), s["integrators"].index(mi[1])))
     panels = []
     for met in metrics:
         ecol = f"err_{met}"
