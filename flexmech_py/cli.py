@@ -5,6 +5,9 @@
     flexmech reproduce [--out DIR]
     flexmech compare RESULT_DIR --reference FILE.csv [--x t|crank_angle] [--columns C ...] [--out DIR]
     flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
+    flexmech stability CASE.toml --speed START:STOP:N [--model M] [--geometric G] [--jobs N] [--out DIR]
+    flexmech steady CASE.toml [--model M] [--geometric G] [--out DIR]
+    flexmech sweep CASE.toml --param KEY.PATH=START:STOP:N [--param ...] [--model M] [--jobs N] [--out DIR]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
 
 Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2; a run whose
@@ -91,8 +94,113 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value (--models)")
     c.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (--models)")
     c.add_argument("--out", default=None, help="output folder (default: RESULT_DIR/compare, or ./compare)")
+
+    st = sub.add_parser("stability", help="Floquet stability chart of a constant-speed case over crank speeds")
+    st.add_argument("case", help="TOML case file with a constant-speed kinematic drive")
+    st.add_argument("--speed", required=True, metavar="START:STOP:N", help="crank speeds [rad/s]: START:STOP:N or a,b,c")
+    st.add_argument("--model", choices=MODELS, help="superposition model (default: the case's solver.model)")
+    st.add_argument("--geometric", choices=("none", "quasi_static"),
+                    help="geometric stiffness (default: the case's solver.geometric_stiffness)")
+    st.add_argument("--modes", type=_positive_int, default=4, help="frozen natural frequencies reported (default 4)")
+    st.add_argument("--jobs", type=_positive_int, default=None, help="worker processes (default: every core)")
+    st.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
+    st.add_argument("--out", default=None, help="output folder (default: results/<case name>-stability); "
+                                                "finished speeds are cached in OUT/cache")
+    st.add_argument("--no-plots", action="store_true", help="do not write stability.png")
+
+    sd = sub.add_parser("steady", help="periodic steady state of a constant-speed case (shooting with the monodromy matrix)")
+    sd.add_argument("case", help="TOML case file with a constant-speed kinematic drive")
+    sd.add_argument("--model", choices=MODELS, help="superposition model (default: the case's solver.model)")
+    sd.add_argument("--geometric", choices=("none", "quasi_static"),
+                    help="geometric stiffness (default: the case's solver.geometric_stiffness)")
+    sd.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
+    sd.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>-steady)")
+    sd.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+
+    sw = sub.add_parser("sweep", help="run a case over a parameter grid in parallel (resumable) and tabulate it")
+    sw.add_argument("case", help="TOML case file")
+    sw.add_argument("--param", action="append", required=True, metavar="KEY.PATH=START:STOP:N",
+                    help="a grid axis: KEY.PATH=START:STOP:N or KEY.PATH=a,b,c (repeat for a cartesian grid)")
+    sw.add_argument("--model", choices=MODELS, help="model (default: the case's solver.model)")
+    sw.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value (all points)")
+    sw.add_argument("--jobs", type=_positive_int, default=None, help="worker processes (default: every core)")
+    sw.add_argument("--out", default=None, help="output folder (default: results/<case name>-sweep); "
+                                                "finished runs are cached in OUT/cache")
     _add_accuracy_parser(sub)
     return p
+
+
+def _warn(messages) -> None:
+    for m in messages:
+        print(f"flexmech: warning: {m}", file=sys.stderr)
+
+
+def _cmd_stability(args) -> int:
+    from .case import load_case
+    from .floquet import parse_range, stability_chart, write_stability_csv
+
+    case = load_case(args.case, overrides=args.set)
+    speeds = parse_range(args.speed, "--speed")
+    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-stability"
+    out.mkdir(parents=True, exist_ok=True)
+    model = args.model or case["solver"]["model"]
+    geometric = args.geometric or case["solver"]["geometric_stiffness"]
+    rows, batch = stability_chart(case, speeds, model=model, geometric=geometric, nmodes=args.modes, jobs=args.jobs,
+                                  cache_dir=out / "cache")
+    head = (f"case {case['case']['title']!r}; model {model}; geometric_stiffness {geometric}; "
+            f"rayleigh {list(case['solver']['rayleigh'])}; dt <= {case['solver']['dt']:g} s; average acceleration")
+    paths = [out / "stability.csv"]
+    write_stability_csv(rows, paths[0], head)
+    if not args.no_plots:
+        from .plots import plot_stability
+
+        p = plot_stability(rows, out / "stability.png", title=f"{case['case']['title']}\nmodel {model}, geometric "
+                           f"stiffness {geometric}, Rayleigh {list(case['solver']['rayleigh'])}")
+        paths += [p] if p else []
+    bad = [r for r in rows if "error" in r]
+    unst = [r["speed"] for r in rows if "error" not in r and not r["stable"]]
+    print(f"{len(rows)} speeds ({batch.computed} computed, {batch.cached} cached) in {batch.wall_s:.1f} s on "
+          f"{batch.jobs} process(es); {len(unst)} unstable" + (f", {len(bad)} failed" if bad else ""))
+    for r in bad:
+        print(f"  speed {r['speed']:g} rad/s failed: {r['error']}")
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _cmd_steady(args) -> int:
+    from .case import load_case
+    from .floquet import PeriodicCase, floquet, steady_state
+
+    case = load_case(args.case, overrides=args.set)
+    pc = PeriodicCase(case, args.model, geometric=args.geometric)
+    fr = floquet(pc)
+    res = steady_state(pc, fr)
+    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{res.model}-steady"
+    paths = res.write(out)
+    if not args.no_plots:
+        from .plots import plot_result
+
+        paths += plot_result(res, out)
+    print(res.table())
+    f = res.extra["floquet"]
+    print(f"period {pc.period:.6g} s in {pc.nsteps} steps; largest Floquet multiplier |mu| = {f['max_abs_multiplier']:.8g} "
+          f"({'stable' if f['stable'] else 'UNSTABLE'}); cond(I - Phi) = {f['cond_I_minus_Phi']:.3g}; "
+          f"periodicity residual {f['periodicity_residual']:.2g}")
+    _warn(f["warnings"])
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _cmd_sweep(args) -> int:
+    from .sweep import sweep
+
+    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-sweep"
+    sw = sweep(args.case, args.param, model=args.model, overrides=args.set, jobs=args.jobs, out_dir=out)
+    b = sw["batch"]
+    print(f"{len(b.results)} runs ({b.computed} computed, {b.cached} cached, {len(b.failed)} failed) in "
+          f"{b.wall_s:.1f} s on {b.jobs} process(es)")
+    print("wrote " + ", ".join(str(p) for p in sw["paths"]))
+    return 0
 
 
 def _csv_list(kind):
@@ -266,8 +374,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare,
-                "accuracy": _cmd_accuracy}[args.command](args)
+        return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
+                "steady": _cmd_steady, "sweep": _cmd_sweep, "accuracy": _cmd_accuracy}[args.command](args)
     except FlexmechError as exc:
         print(f"flexmech: error: {exc}", file=sys.stderr)
         return 2

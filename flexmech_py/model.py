@@ -293,6 +293,14 @@ class FEModel:
         kernels.check_status(status, "ked_matrices")
         return mm, cm, km, f
 
+    def geometric_matrix(self, rig: np.ndarray, nax: np.ndarray) -> np.ndarray:
+        """Dense geometric stiffness over the free DOFs at one rigid sample for element axial forces
+        ``nax`` (nel,) [N], tension > 0 (the term ``solver.geometric_stiffness`` adds to K)."""
+        kgm, status = kernels.api.ked_geometric_matrix(self.nfree, *self._system_args(), np.asfortranarray(rig, float),
+                                                       np.asarray(nax, float))
+        kernels.check_status(status, "ked_geometric_matrix")
+        return kgm
+
     def loads(self, rig: np.ndarray, model: str) -> np.ndarray:
         """Rigid-inertia loads F_rigid over all DOFs, (ndof, ns), at rigid samples rig (5, nlinks, ns)."""
         if model not in SUPERPOSITION_MODELS:

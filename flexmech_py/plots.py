@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_result", "line_figure", "have_matplotlib", "work_precision_figure"]
+__all__ = ["plot_result", "line_figure", "have_matplotlib", "plot_stability", "work_precision_figure"]
 
 _warned = False
 
@@ -82,6 +82,77 @@ def plot_result(res, out_dir) -> list[Path]:
                       for n in strains]
             paths.append(line_figure(out_dir / "strain_vs_crank_angle.png", panels, title=title))
     return [p for p in paths if p is not None]
+
+
+def plot_stability(rows: list, path, *, title: str = "", nmodes: int = 3, kmax: int = 4, span_modes: int = 2):
+    """Stability chart: top, max|mu| - 1 (log) against crank speed with the intervals where a
+    parametric-resonance condition omega_i + omega_j = k Omega holds somewhere along the cycle shaded
+    and labelled; bottom, the frozen natural-frequency bands along the cycle against speed with the
+    lines k Omega / 2 (a band crossing k Omega / 2 at Omega means 2 omega_i = k Omega there).
+    Returns the path, or None without matplotlib."""
+    if not have_matplotlib():
+        return None
+    import matplotlib.pyplot as plt
+
+    ok = [r for r in rows if "error" not in r]
+    if not ok:
+        return None
+    sp = np.array([r["speed"] for r in ok])
+    mu1 = np.array([r["max_abs_mu"] for r in ok]) - 1.0
+    stable = np.array([bool(r["stable"]) for r in ok])
+    nm = min(nmodes, sum(1 for k in ok[0] if k.startswith("omega") and k.endswith("_min")))
+    lo = np.array([[r[f"omega{k}_min"] for k in range(1, nm + 1)] for r in ok])
+    hi = np.array([[r[f"omega{k}_max"] for k in range(1, nm + 1)] for r in ok])
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 8.5), sharex=True, gridspec_kw={"height_ratios": [1, 1.3]})
+    floor = 1e-8
+    ax1.semilogy(sp, np.maximum(mu1, floor), "k-", lw=0.8)
+    ax1.semilogy(sp[~stable], np.maximum(mu1[~stable], floor), "r.", ms=4, label="unstable")
+    ax1.semilogy(sp[stable], np.maximum(mu1[stable], floor), "b.", ms=2, label="stable")
+    ax1.set_ylabel("max |mu| - 1")
+    ax1.grid(True, which="both", alpha=0.25)
+    # predicted resonance intervals: omega_i + omega_j = k Omega somewhere along the cycle, at the speed itself
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    spans, ci = [], 0
+    for k in range(1, kmax + 1):
+        for i in range(min(nm, span_modes)):
+            for j in range(i, min(nm, span_modes)):
+                inside = ((lo[:, i] + lo[:, j]) <= k * sp) & (k * sp <= (hi[:, i] + hi[:, j]))
+                if not inside.any():
+                    continue
+                a, b = sp[inside].min(), sp[inside].max()
+                name = (f"2ω{i + 1}" if i == j else f"ω{i + 1}+ω{j + 1}") + f" = {k}Ω"
+                spans.append((a, b, name, colors[ci % len(colors)]))
+                ci += 1
+    ymax = max(1.0, float(np.nanmax(np.maximum(mu1, floor))))
+    ax1.set_ylim(floor if mu1.min() < 1e-6 else 0.3 * mu1.min(), ymax * 10)
+    for n, (a, b, name, col) in enumerate(spans):
+        ax1.axvspan(a, max(b, a + 1e-9), color=col, alpha=0.15)
+        ax1.text(0.5 * (a + b), ymax * 10 ** (0.3 - 0.55 * (n % 6)), name, color=col, fontsize=7, ha="center")
+    ax1.legend(fontsize=8, loc="lower right")
+    for m in range(nm):
+        ax2.fill_between(sp, lo[:, m], hi[:, m], alpha=0.35, label=f"ω{m + 1} along the cycle")
+    for i in range(nm):
+        for j in range(i + 1, nm):
+            ax2.plot(sp, 0.5 * (lo[:, i] + lo[:, j]), "k--", lw=0.6)
+            ax2.plot(sp, 0.5 * (hi[:, i] + hi[:, j]), "k--", lw=0.6)
+            ax2.text(sp[-1], 0.5 * (hi[-1, i] + hi[-1, j]), f" (ω{i + 1}+ω{j + 1})/2", fontsize=7, va="center")
+    top = 1.15 * float(np.max(hi[:, nm - 1]))
+    for k in range(1, 2 * kmax + 1):
+        ax2.plot(sp, k * sp / 2, color="gray", lw=0.8, ls="-" if k % 2 == 0 else ":")
+        xk = min(sp[-1], 2 * top / k * 0.97)
+        if xk > sp[0]:
+            ax2.text(xk, k * xk / 2, f"{k}Ω/2" if k % 2 else (f"{k // 2}Ω" if k > 2 else "Ω"), fontsize=7, color="gray")
+    ax2.set_ylim(0, top)
+    ax2.set_xlabel("crank speed Ω [rad/s]")
+    ax2.set_ylabel("frequency [rad/s]")
+    ax2.grid(True, alpha=0.25)
+    ax2.legend(fontsize=8, loc="upper left")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.subplots_adjust(left=0.08, right=0.88, top=0.92, bottom=0.07, hspace=0.08)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
 
 
 def work_precision_figure(path, panels, *, title=None):

@@ -180,9 +180,10 @@ class Prepared:
         self.t_prepare = time.perf_counter() - t_start
 
     def run(self, model: str | None = None, geometric: str | None = None, *, estimate: bool | None = None,
-            diagnose: bool = True) -> Result:
+            diagnose: bool = True, u0=None, v0=None) -> Result:
         """Integrate the elastic equations with one model (``geometric`` overrides
-        ``solver.geometric_stiffness`` for a superposition model).
+        ``solver.geometric_stiffness`` for a superposition model; ``u0``, ``v0`` (nfree,) an
+        initial elastic state other than rest, superposition models only).
 
         Every run gets the validity report and warnings (:mod:`flexmech_py.guards`);
         ``estimate`` (default: ``solver.error_estimate != "none"``) adds the step-doubling error
@@ -192,7 +193,7 @@ class Prepared:
         if model not in MODELS:
             raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
         try:
-            res = self._run_raw(model, geometric)
+            res = self._run_raw(model, geometric, u0=u0, v0=v0)
         except SolverError as exc:
             if exc.partial is None:
                 raise
@@ -204,10 +205,12 @@ class Prepared:
         res.extra["error_estimate"] = guards.error_estimate(self, res, geometric) if estimate else {"method": "none"}
         return res
 
-    def _run_raw(self, model: str, geometric: str | None) -> Result:
+    def _run_raw(self, model: str, geometric: str | None, u0=None, v0=None) -> Result:
         t_start = time.perf_counter()
         case, fe = self.case, self.fe
         if model in ("coupled", "nonlinear"):
+            if u0 is not None or v0 is not None:
+                raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
             return self._run_coupled(t_start, model)
         if not self._checked:
             check_elastic_problem(fe, self.rig)
@@ -223,7 +226,8 @@ class Prepared:
                                                gamma=gamma, out_every=self.out_every, rayleigh=sol["rayleigh"],
                                                q_free=self.q_free, q_val=self.q_val, geometric=sol["geometric_stiffness"],
                                                geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"],
-                                               div_limit=sol.get("divergence_limit"), full=True)
+                                               div_limit=sol.get("divergence_limit"), full=True,
+                                               u0=u0, v0=v0)
         except SolverError as exc:   # keep the frames before the failed step
             if exc.data is None or exc.step is None or exc.step < 1:
                 raise

@@ -34,11 +34,12 @@ module flexmech_api
                            beam_hac_coupling, beam_curvature, vec_to_local, beam_geometric
   use flexmech_assembly, only: band_rows, band_to_dense
   use flexmech_ked, only: ked_system
-  use flexmech_newmark, only: newmark_run, consistent_acceleration
+  use flexmech_newmark, only: newmark_run, consistent_acceleration, initial_axial_forces
   use flexmech_coupled, only: coupled_system, coupled_build, coupled_run, coupled_dense
   implicit none
   private
   public :: element_matrices, element_curvatures, ked_run, ked_matrices, ked_loads, ked_bandwidth
+  public :: ked_geometric_matrix
   public :: cpl_run, cpl_dense
 
 contains
@@ -171,7 +172,9 @@ contains
         if (free_of(el_dof(i, e)) > 0) trans(free_of(el_dof(i, e))) = .true.
       end do
     end do
-    if (init_accel /= 0) then
+    if (init_accel /= 0) then   ! with the geometric stiffness of the first sample (starts away from rest)
+      call initial_axial_forces(sys, geo_mode, rig(:, :, 1), q_free, q_val, u0, status)
+      if (status /= STATUS_OK) return
       call consistent_acceleration(sys, rig(:, :, 1), q_free, q_val(:, 1), u0, v0, a0, status)
       if (status /= STATUS_OK) return
       p0 = a0
@@ -244,6 +247,42 @@ contains
       call sys%rigid_load(rig(:, :, i), f(:, i))
     end do
   end subroutine ked_loads
+
+  !> Dense geometric stiffness over the free DOFs at one rigid sample for given element axial
+  !> forces nax [N] (tension > 0): kgm = sum_e nax(e) Kg_e rotated to the link angle.
+  subroutine ked_geometric_matrix(nlinks, ndof, nel, nlm, nri, nfree, &
+                                  free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, &
+                                  ri_prop, rig, nax, kgm, status)
+    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nfree
+    integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
+    real(dp), intent(in) :: el_prop(5, nel)
+    integer, intent(in) :: lm_link(nlm), lm_dof(2, nlm)
+    real(dp), intent(in) :: lm_prop(2, nlm)
+    integer, intent(in) :: ri_link(nri), ri_dof(nri)
+    real(dp), intent(in) :: ri_prop(nri)
+    real(dp), intent(in) :: rig(5, nlinks), nax(nel)
+    real(dp), intent(out) :: kgm(nfree, nfree)
+    integer, intent(out) :: status
+    type(ked_system) :: sys
+    real(dp), allocatable :: ab(:, :), r(:), z(:)
+    kgm = 0.0_dp
+    call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
+               ri_link, ri_dof, ri_prop, 1, [0.0_dp, 0.0_dp], status)
+    if (status /= STATUS_OK) return
+    if (sys%nfree /= nfree) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    allocate (ab(band_rows(sys%kl, sys%ku), nfree), r(nfree), z(nfree))
+    z = 0.0_dp
+    sys%nax = nax
+    sys%geo = .true.
+    call sys%assemble(rig, 0.0_dp, 1.0_dp, z, z, ab, r, static=.true.)
+    kgm = band_to_dense(ab, sys%kl, sys%ku, nfree)
+    sys%geo = .false.
+    call sys%assemble(rig, 0.0_dp, 1.0_dp, z, z, ab, r, static=.true.)
+    kgm = kgm - band_to_dense(ab, sys%kl, sys%ku, nfree)
+  end subroutine ked_geometric_matrix
 
   !> Run the coupled model (generalized-alpha-Newton; Newmark for alpha_m = alpha_f = 0).  q, v, a, pa
   !> (ndof): on entry the initial state (constrained entries hold their fixed values; the free

@@ -23,7 +23,7 @@ module flexmech_newmark
   use flexmech_ked, only: ked_system
   implicit none
   private
-  public :: newmark_run, consistent_acceleration
+  public :: newmark_run, consistent_acceleration, initial_axial_forces
   public :: GEO_NONE, GEO_CURRENT, GEO_LAGGED, GEO_QUASI_STATIC
 
   !> Source of the axial forces of the geometric stiffness
@@ -97,7 +97,7 @@ contains
     integer, allocatable :: ipiv(:)
     integer :: n, i, nsteps, frame, it
     logical :: done
-    real(dp) :: penalty, c1, betap, gammap
+    real(dp) :: c1, betap, gammap
     status = STATUS_OK
     fail_step = 0
     nvalid = 0
@@ -114,12 +114,13 @@ contains
     allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree), ipiv(sys%nfree), up(sys%nfree), vp(sys%nfree))
     allocate (nnew(sys%nel), us(sys%nfree), z(sys%nfree), w(sys%nfree), locked(size(q_free)))
     z = 0.0_dp
-    do i = 1, size(q_free)   ! DOFs an applied torque ever acts on (locked in the quasi-static solve)
-      locked(i) = any(q_val(i, :) /= 0.0_dp)
-    end do
+    locked = any(q_val /= 0.0_dp, dim=2)   ! DOFs an applied torque ever acts on (locked in the quasi-static solve)
     geo_iters = 0
-    sys%geo = geo_mode /= GEO_NONE
-    if (sys%geo) call sys%axial_forces(rig(:, :, 1), u, sys%nax)
+    call initial_axial_forces(sys, geo_mode, rig(:, :, 1), q_free, q_val, u, status)
+    if (status /= STATUS_OK) then
+      fail_step = 1
+      return
+    end if
     uf(:, 1) = u; vf(:, 1) = v; af(:, 1) = a; nf(:, 1) = sys%nax
     frame = 1
     nvalid = 1
@@ -128,22 +129,11 @@ contains
       up = u + dt*v + (dt*dt*(0.5_dp - beta))*p + (dt*dt*beta*c1)*w
       vp = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
       if (geo_mode == GEO_QUASI_STATIC) then   ! N from K u = -F_rigid at this configuration
-        sys%geo = .false.
-        call sys%assemble(rig(:, :, n + 1), 0.0_dp, 1.0_dp, z, z, ab, us, static=.true.)
-        ! driven joints locked: a stiff spring on every DOF an applied torque acts on (joints left
-        ! free with 'torque' are otherwise zero-stiffness modes of K)
-        penalty = 1.0e8_dp*maxval(abs(ab(sys%kl + sys%ku + 1, :)))
-        do i = 1, size(q_free)
-          us(q_free(i)) = us(q_free(i)) + q_val(i, n + 1)
-          if (locked(i)) ab(sys%kl + sys%ku + 1, q_free(i)) = ab(sys%kl + sys%ku + 1, q_free(i)) + penalty
-        end do
-        call band_solve(sys, ab, ipiv, us, status)
+        call quasi_static_axial(sys, rig(:, :, n + 1), q_free, q_val(:, n + 1), locked, ab, ipiv, us, z, status)
         if (status /= STATUS_OK) then
           fail_step = n
           return
         end if
-        call sys%axial_forces(rig(:, :, n + 1), us, sys%nax)
-        sys%geo = .true.
       end if
       done = .false.
       do it = 1, merge(geo_maxit, 1, geo_mode == GEO_CURRENT)
@@ -197,5 +187,57 @@ contains
       end if
     end do
   end subroutine newmark_run
+
+  !> Axial forces of the geometric stiffness at the first sample (sys%geo, sys%nax), so that the
+  !> consistent initial acceleration and the first step see the same stiffness as every later step:
+  !> GEO_QUASI_STATIC from the quasi-static solution at rig1, the other sources from u.
+  !> (Matters for a start away from rest, e.g. the monodromy runs of flexmech_py/floquet.py.)
+  subroutine initial_axial_forces(sys, geo_mode, rig1, q_free, q_val, u, status)
+    type(ked_system), intent(inout) :: sys
+    integer, intent(in) :: geo_mode
+    real(dp), intent(in) :: rig1(:, :)     !< (5, nlinks) first rigid sample
+    integer, intent(in) :: q_free(:)       !< (nq)
+    real(dp), intent(in) :: q_val(:, :)    !< (nq, nsteps+1) applied generalized forces
+    real(dp), intent(in) :: u(:)           !< (nfree) initial displacements
+    integer, intent(out) :: status
+    real(dp), allocatable :: ab(:, :), us(:), z(:)
+    integer, allocatable :: ipiv(:)
+    status = STATUS_OK
+    sys%geo = geo_mode /= GEO_NONE
+    if (geo_mode == GEO_QUASI_STATIC) then
+      allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree), ipiv(sys%nfree), us(sys%nfree), z(sys%nfree))
+      z = 0.0_dp
+      call quasi_static_axial(sys, rig1, q_free, q_val(:, 1), any(q_val /= 0.0_dp, dim=2), ab, ipiv, us, z, status)
+    else if (sys%geo) then
+      call sys%axial_forces(rig1, u, sys%nax)
+    end if
+  end subroutine initial_axial_forces
+
+  !> Quasi-static axial forces: sys%nax from K us = Q - F_rigid at one rigid sample (sys%geo = .true. on
+  !> return).  Driven joints locked: a stiff spring on every DOF an applied torque ever acts on (joints
+  !> left free with 'torque' are otherwise zero-stiffness modes of K).  ab, ipiv, us, z: work arrays.
+  subroutine quasi_static_axial(sys, rig, q_free, qv, locked, ab, ipiv, us, z, status)
+    type(ked_system), intent(inout) :: sys
+    real(dp), intent(in) :: rig(:, :)      !< (5, nlinks)
+    integer, intent(in) :: q_free(:)       !< (nq)
+    real(dp), intent(in) :: qv(:)          !< (nq) applied generalized forces at this sample
+    logical, intent(in) :: locked(:)       !< (nq)
+    real(dp), intent(inout) :: ab(:, :), us(:), z(:)
+    integer, intent(inout) :: ipiv(:)
+    integer, intent(out) :: status
+    integer :: i
+    real(dp) :: penalty
+    sys%geo = .false.
+    call sys%assemble(rig, 0.0_dp, 1.0_dp, z, z, ab, us, static=.true.)
+    penalty = 1.0e8_dp*maxval(abs(ab(sys%kl + sys%ku + 1, :)))
+    do i = 1, size(q_free)
+      us(q_free(i)) = us(q_free(i)) + qv(i)
+      if (locked(i)) ab(sys%kl + sys%ku + 1, q_free(i)) = ab(sys%kl + sys%ku + 1, q_free(i)) + penalty
+    end do
+    call band_solve(sys, ab, ipiv, us, status)
+    if (status /= STATUS_OK) return
+    call sys%axial_forces(rig, us, sys%nax)
+    sys%geo = .true.
+  end subroutine quasi_static_axial
 
 end module flexmech_newmark

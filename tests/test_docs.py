@@ -167,8 +167,8 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
     if argv[0] == "compare":
         assert list(tmp_path.rglob("compare.json"))
         return
-    if argv[0] == "accuracy":
-        assert list(tmp_path.rglob("accuracy.csv"))
+    if argv[0] in ("stability", "sweep", "accuracy"):   # their tables: stability.csv, sweep.csv, accuracy.csv
+        assert list(tmp_path.rglob(f"{argv[0]}.csv"))
         return
     csvs = list(tmp_path.rglob("timeseries.csv"))
     assert csvs
