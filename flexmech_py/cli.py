@@ -9,6 +9,7 @@
     flexmech steady CASE.toml [--model M] [--geometric G] [--out DIR]
     flexmech sweep CASE.toml --param KEY.PATH=START:STOP:N [--param ...] [--model M] [--jobs N] [--out DIR]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
+    flexmech bench [--quick] [--out DIR] [--cases DIR]
 
 Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2; a run whose
 solver stopped writes its partial results, prints the diagnosis that way and exits with code 3.
@@ -126,6 +127,10 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--jobs", type=_positive_int, default=None, help="worker processes (default: every core)")
     sw.add_argument("--out", default=None, help="output folder (default: results/<case name>-sweep); "
                                                 "finished runs are cached in OUT/cache")
+    b = sub.add_parser("bench", help="measure kernel, start-up, memory and solver costs (docs/performance.md)")
+    b.add_argument("--quick", action="store_true", help="a reduced ladder (1..8 elements per link, fewer steps)")
+    b.add_argument("--out", default="bench", help="output folder for the CSV files and bench.png (default: ./bench)")
+    b.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
     _add_accuracy_parser(sub)
     return p
 
@@ -281,6 +286,15 @@ def _cmd_accuracy(args) -> int:
     return 0
 
 
+def _cmd_bench(args) -> int:
+    from .bench import report, run_bench
+
+    res = run_bench(args.out, quick=args.quick, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True))
+    print(report(res))
+    print("wrote " + ", ".join(str(p) for p in res["paths"]))
+    return 0
+
+
 def _cmd_compare(args) -> int:
     from .compare import compare_models, compare_result_dir, table
 
@@ -375,7 +389,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
-                "steady": _cmd_steady, "sweep": _cmd_sweep, "accuracy": _cmd_accuracy}[args.command](args)
+                "steady": _cmd_steady, "sweep": _cmd_sweep, "bench": _cmd_bench,
+                "accuracy": _cmd_accuracy}[args.command](args)
     except FlexmechError as exc:
         print(f"flexmech: error: {exc}", file=sys.stderr)
         return 2

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from . import coupled, kernels, rigid
+from . import coupled, kernels
 from .errors import SolverError
 
 __all__ = ["check_validity", "failed", "error_estimate", "frames_before", "partial_or", "ORDER"]
@@ -347,28 +347,8 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
 
 # ----------------------------------------------------------------------------- error estimate
 def coarsened(prep):
-    """A copy of a Prepared run on every second step of its grid (the same rigid motion, sampled),
-    with output frames on the fine run's frames (every frame when out_every is even, every second
-    frame when it is odd).  None when the grid has fewer than two coarse frames."""
-    from .simulate import RigidMotion
-
-    oe, n = prep.out_every, prep.nsteps
-    if oe % 2 == 0:
-        oc, nc = oe // 2, n // 2
-    else:
-        oc, nc = oe, oe * (n // (2 * oe))
-    if nc < oc or nc < 1:
-        return None
-    sel = slice(0, 2 * nc + 1, 2)
-    pc = copy.copy(prep)
-    m = prep.rm.motion
-    pc.t, pc.nsteps, pc.dt, pc.out_every = prep.t[sel], nc, 2 * prep.dt, oc
-    pc.rm = RigidMotion(pc.t, prep.rm.q[sel], prep.rm.qd[sel], prep.rm.qdd[sel],
-                        rigid.LinkMotion(**{k: getattr(m, k)[sel] for k in rigid.LinkMotion.__dataclass_fields__}))
-    pc.rig = pc.rm.kernel_samples(prep.gravity)
-    if prep.q_val is not None:
-        pc.q_val = np.asfortranarray(prep.q_val[:, sel])
-    return pc
+    """A Prepared run on every second step of ``prep``'s grid (:meth:`Prepared.coarsened`)."""
+    return prep.coarsened()
 
 
 SKIP_COLUMNS = ("newton_iterations",)   # solver statistics, not outputs

@@ -18,17 +18,18 @@ Dynamics (inertial wrench / virtual power):  M(q) qdd + h(q, qd) = Q, where
 h = (inertial bias forces, qdd = 0) - (generalized gravity forces) and Q holds
 the applied generalized forces (see joint_torque_generalized_force).
 """
+import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
+from flexmech_py.dop853 import dop853
 from flexmech_py.errors import MechanismError, SolverError
 
 __all__ = [
     "LinkMotion", "LinkMass", "FourBar", "SerialChain",
     "mass_matrix", "bias_forces", "kinetic_energy", "potential_energy",
-    "joint_torque_generalized_force", "integrate",
+    "joint_torque_generalized_force", "integrate", "integrate_dense",
     "constant_speed", "spinup", "check_motion",
 ]
 
@@ -228,6 +229,46 @@ class FourBar(_Mechanism):
         q, qd, _ = self._state(q, qd, None)
         return self._kin(q[:, 0], qd[:, 0], np.zeros(len(q)), 2 if strict else 0)
 
+    def _dynamics1(self, mk, q, w2, gravity):
+        """One-sample generalized mass M, bias h (qdd = 0, gravity included) and link angles phi and
+        d(phi)/dq of the ODE right-hand side: the formulas of _geometry(check=0), _kin and _dynamics
+        written with floats (math), about 30x cheaper than the vectorised path for N = 1."""
+        a, b, c, d = self.a, self.b, self.c, self.d
+        cq, sq = math.cos(q), math.sin(q)
+        r2 = a * a + d * d - 2 * a * d * cq
+        s2 = (4 * r2 * b * b - (b * b - c * c + r2) ** 2) / (4 * b * b * c * c)
+        Ax, Ay = a * cq, a * sq
+        dx, dy = d - Ax, -Ay
+        r2 = dx * dx + dy * dy
+        r = math.sqrt(r2)
+        l = (b * b - c * c + r2) / (2 * r)
+        bh = self.branch * math.sqrt(max(b * b - l * l, 0.0)) / r
+        Bx, By = Ax + (l / r) * dx - bh * dy, Ay + (l / r) * dy + bh * dx
+        s = self.branch * math.sqrt(max(s2, TOGGLE_TOL ** 2))
+        e3x, e3y, e4x, e4y = (Bx - Ax) / b, (By - Ay) / b, (Bx - d) / c, By / c
+        K3 = -a * (cq * e4y - sq * e4x) / (b * s)
+        K4 = -a * (cq * e3y - sq * e3x) / (c * s)
+        w3, w4 = K3 * w2, K4 * w2
+        Rx = a * w2 * w2 * cq + b * w3 * w3 * e3x - c * w4 * w4 * e4x
+        Ry = a * w2 * w2 * sq + b * w3 * w3 * e3y - c * w4 * w4 * e4y
+        phi = (q, math.atan2(e3y, e3x), math.atan2(e4y, e4x))
+        om = (w2, w3, w4)
+        al = (0.0, (Rx * e4x + Ry * e4y) / (b * s), (Rx * e3x + Ry * e3y) / (c * s))
+        acc = ((0.0, 0.0), (-a * w2 * w2 * cq, -a * w2 * w2 * sq), (0.0, 0.0))
+        jac = ((0.0, 0.0, 1.0), (-a * sq, a * cq, K3), (0.0, 0.0, K4))
+        gx, gy = gravity
+        M = h = 0.0
+        for k in range(3):
+            m, sk, jk = mk[0][k], mk[1][k], mk[2][k]
+            ck, sn = math.cos(phi[k]), math.sin(phi[k])
+            Jx, Jy, Jp = jac[k]
+            M += Jx * (m * Jx - sk * Jp * sn) + Jy * (m * Jy + sk * Jp * ck) + Jp * (jk * Jp + sk * (ck * Jy - sn * Jx))
+            w, alk, (ax, ay) = om[k], al[k], acc[k]
+            h += (Jx * (m * ax - sk * (alk * sn + w * w * ck) - m * gx)
+                  + Jy * (m * ay + sk * (alk * ck - w * w * sn) - m * gy)
+                  + Jp * (jk * alk + sk * (ck * ay - sn * ax) - sk * (ck * gy - sn * gx)))
+        return M, h, phi, (1.0, K3, K4)
+
     def crank_range(self, q0=None):
         """None if the crank can turn fully, else the admissible crank interval
         (qmin, qmax) [rad] containing q0 (default: the assembly angle, or 0); its
@@ -391,14 +432,42 @@ def joint_torque_generalized_force(mech, q, link_b, link_a, tau):
     return np.reshape(np.asarray(tau, dtype=float), (-1, 1)) * dphi
 
 
+def _torque_force(phi, J, joint_torques):
+    """Generalized force (N, ndof) of joint torques [(tau(theta), link_b, link_a), ...] for link
+    angles phi (N, nlinks) and the Jacobian J (N, nlinks, 3, ndof)."""
+    Q = 0.0
+    for tau, b, a in joint_torques:
+        theta = phi[:, b] - (phi[:, a] if a is not None else 0.0)
+        dphi = J[:, b, 2, :] - (J[:, a, 2, :] if a is not None else 0.0)
+        Q = Q + np.asarray(tau(theta), dtype=float)[:, None] * dphi
+    return Q
+
+
 def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.0),
-              rtol=1e-10, atol=1e-12):
+              rtol=1e-10, atol=1e-12, joint_torques=()):
+    """Torque-driven forward dynamics sampled on the grid t: (q, qd, qdd), each (N, ndof);
+    see :func:`integrate_dense` for the arguments."""
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or len(t) < 2 or np.any(np.diff(t) <= 0):
+        raise ValueError("t must be an increasing 1-D time grid with at least 2 samples")
+    return integrate_dense(mech, masses, q0, qd0, (t[0], t[-1]), generalized_force, gravity, rtol, atol,
+                           joint_torques)(t)
+
+
+def integrate_dense(mech, masses, q0, qd0, t_span, generalized_force=None, gravity=(0.0, 0.0),
+                    rtol=1e-10, atol=1e-12, joint_torques=()):
     """Torque-driven forward dynamics M qdd + h = Q from (q0, qd0) at t[0].
 
-    t: increasing output times [s]; generalized_force(t, q, qd) -> Q, vectorised: t (N,),
+    t_span: (t0, t1) [s]; generalized_force(t, q, qd) -> Q, vectorised: t (N,),
     q and qd (N, ndof) -> Q (N, ndof) (None: 0; the ODE calls it with N = 1);
-    gravity (g_x, g_y) [m/s^2].  Solved with DOP853 (scipy solve_ivp), sampled at t.
-    Returns (q, qd, qdd), each (N, ndof), qdd from the equations of motion.  A
+    joint_torques: [(tau, link_b, link_a), ...], a torque tau(theta) [N m] (vectorised over
+    theta = phi_b - phi_a [rad]) on link_b with the reaction on link_a (None = ground), added to Q
+    (a FourBar driven only by joint torques uses a float right-hand side, about 30x cheaper);
+    gravity (g_x, g_y) [m/s^2].  Solved with DOP853 (flexmech_py.dop853: scipy's solve_ivp DOP853
+    transcribed, without scipy.integrate's import cost), sampled at t.
+    Returns sample(t) -> (q, qd, qdd), each (N, ndof), for times t (N,) in t_span: the solver's dense
+    output (its memory grows with the solver's steps, not with len(t)), qdd from the equations of
+    motion; chunks of a long grid can be sampled one after the other.  A
     FourBar approaching a toggle or assembly limit stops with a MechanismError
     naming the time and the crank angle, at |sin(theta4 - theta3)| = 1e-6 or, when
     the crank angle cannot resolve the motion that close to the limit to rtol, earlier
@@ -406,11 +475,12 @@ def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.
     """
     nd = mech.ndof
     mk = _mass_arrays(mech, masses)
-    t = np.asarray(t, dtype=float)
-    if t.ndim != 1 or len(t) < 2 or np.any(np.diff(t) <= 0):
-        raise ValueError("t must be an increasing 1-D time grid with at least 2 samples")
+    t = np.asarray(t_span, dtype=float)
+    if t.shape != (2,) or not t[1] > t[0]:
+        raise ValueError("t_span must be (t0, t1) with t1 > t0")
     y0 = np.concatenate([_as2d(q0, nd)[0], _as2d(qd0, nd, "qd0")[0]])
     force = generalized_force or (lambda ti, q, qd: np.zeros_like(q))
+    joint_torques = list(joint_torques)
     events = None
     if isinstance(mech, FourBar):
         if not mech._stop_margin(y0[0], rtol) > 0:
@@ -419,25 +489,50 @@ def integrate(mech, masses, q0, qd0, t, generalized_force=None, gravity=(0.0, 0.
         event.terminal, event.direction = True, -1
         events = [event]
 
-    def rhs(ti, y):
-        M, h = _dynamics(mech, mk, y[None, :nd], y[None, nd:], gravity, strict=False)
-        Q = np.asarray(force(np.array([ti]), y[None, :nd], y[None, nd:]), dtype=float).reshape(nd)
-        return np.concatenate([y[nd:], np.linalg.solve(M[0], Q - h[0])])
+    if isinstance(mech, FourBar) and generalized_force is None:
+        mkl = mk.tolist()
 
-    sol = solve_ivp(rhs, (t[0], t[-1]), y0, method="DOP853", t_eval=t, events=events,
-                    rtol=rtol, atol=atol)
-    if sol.status == 1:
-        te, qe = sol.t_events[0][0], sol.y_events[0][0][0]
+        def rhs(ti, y):
+            qs, ws = float(y[0]), float(y[1])
+            M, h, phi, dphi = mech._dynamics1(mkl, qs, ws, gravity)
+            Q = 0.0
+            for tau, b, a in joint_torques:
+                theta = phi[b] - (phi[a] if a is not None else 0.0)
+                Q += float(tau(theta)) * (dphi[b] - (dphi[a] if a is not None else 0.0))
+            return np.array([ws, (Q - h) / M])
+    else:
+        def rhs(ti, y):
+            M, h = _dynamics(mech, mk, y[None, :nd], y[None, nd:], gravity, strict=False)
+            Q = np.asarray(force(np.array([ti]), y[None, :nd], y[None, nd:]), dtype=float).reshape(nd)
+            if joint_torques:
+                km, jac = motion_and_jacobian(mech, y[None, :nd], y[None, nd:], strict=False)   # cached
+                Q = Q + _torque_force(km.phi, jac, joint_torques).reshape(nd)
+            return np.concatenate([y[nd:], np.linalg.solve(M[0], Q - h[0])])
+
+    status, sol, te, ye, message = dop853(rhs, t[0], y0, t[-1], rtol, atol, events[0] if events else None)
+    if status == 1:
+        qe = ye[0]
         raise MechanismError(
             f"four-bar reaches a toggle or assembly limit at t = {te:.6g} s, crank angle {qe:.6g} "
             f"rad (|sin(theta4-theta3)| = {np.sqrt(max(mech._sin2(qe), 0.0)):.2g}); the crank "
             f"cannot be driven past it")
-    if sol.status != 0:
-        raise SolverError(f"rigid-body integration failed: {sol.message}", time=float(sol.t[-1]))
-    q, qd = sol.y[:nd].T, sol.y[nd:].T
-    M, h = _dynamics(mech, mk, q, qd, gravity)
-    Q = np.broadcast_to(np.asarray(force(t, q, qd), dtype=float), q.shape)
-    return q, qd, np.linalg.solve(M, (Q - h)[..., None])[..., 0]
+    if status != 0:
+        raise SolverError(f"rigid-body integration failed: {message}", time=float(te))
+    dense, t0, t1 = sol, t[0], t[-1]
+
+    def sample(ts):
+        ts = np.asarray(ts, dtype=float)
+        if ts.ndim != 1 or ts.size < 1 or ts.min() < t0 - 1e-12 * abs(t1) or ts.max() > t1 + 1e-12 * abs(t1):
+            raise ValueError(f"sample times must be a 1-D array within [{t0}, {t1}] s")
+        y = dense(ts).reshape(2 * nd, ts.size)
+        q, qd = y[:nd].T, y[nd:].T
+        M, h = _dynamics(mech, mk, q, qd, gravity)
+        Q = np.broadcast_to(np.asarray(force(ts, q, qd), dtype=float), q.shape)
+        if joint_torques:
+            Q = Q + _torque_force(mech.kinematics(q).phi, mech.jacobian(q), joint_torques)
+        return q, qd, np.linalg.solve(M, (Q - h)[..., None])[..., 0]
+
+    return sample
 
 
 def constant_speed(t, q0, speed):

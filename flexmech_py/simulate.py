@@ -17,7 +17,7 @@ from .model import FEModel
 from .outputs import evaluate_outputs, link_curvature, output_unit
 from .results import Result
 
-__all__ = ["simulate", "simulate_models", "Prepared", "build_mechanism", "link_masses", "rigid_motion", "time_grid", "RigidMotion"]
+__all__ = ["simulate", "simulate_models", "Prepared", "RigidSource", "build_mechanism", "link_masses", "rigid_motion", "time_grid", "RigidMotion"]
 
 
 def build_mechanism(case: dict):
@@ -79,35 +79,46 @@ class RigidMotion:
         return np.asfortranarray(rig.transpose(0, 2, 1))
 
 
+class RigidSource:
+    """The rigid-body motion of a case as a function of time: ``source(t)`` is the RigidMotion on any
+    increasing grid t inside [0, t_end] (kinematic drives in closed form; torque drives from the
+    dense output of one forward-dynamics integration), so a long run can sample it chunk by chunk."""
+
+    def __init__(self, case: dict, fe: FEModel, t_end: float, mech=None):
+        self.case = case
+        self.mech = build_mechanism(case) if mech is None else mech
+        drive = case["drive"]
+        self.q0 = np.array(case["initial"]["angles"], float)
+        qd0 = np.array(case["initial"]["speeds"], float)
+        self._dense = None
+        if drive["type"] != "kinematic":
+            masses = link_masses(case, fe)
+            joint_torques = []
+            for tq in drive["torques"]:
+                j = fe.joint(tq["joint"])
+                joint_torques.append((lambda theta, tq=tq: torque_value(tq, theta), j.outboard, j.inboard))
+            self._dense = rigid.integrate_dense(self.mech, masses, self.q0, qd0, (0.0, t_end), None,
+                                                gravity=tuple(case["loads"]["gravity"]), joint_torques=joint_torques,
+                                                rtol=case["solver"]["rigid_rtol"], atol=case["solver"]["rigid_atol"])
+
+    def __call__(self, t: np.ndarray) -> RigidMotion:
+        drive, mech = self.case["drive"], self.mech
+        if self._dense is None:
+            if drive["law"] == "constant_speed":
+                q, qd, qdd = rigid.constant_speed(t, self.q0[0], drive["speed"])
+            else:
+                q, qd, qdd = rigid.spinup(t, drive["final_speed"], drive["spinup_time"], q0=self.q0[0])
+            if isinstance(mech, rigid.FourBar):
+                rigid.check_motion(mech, q, t)
+        else:
+            q, qd, qdd = self._dense(t)
+        return RigidMotion(t, q, qd, qdd, mech.kinematics(q, qd, qdd))
+
+
 def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMotion:
     """Rigid-body motion on the grid t: kinematic drive, or torque-driven forward dynamics."""
-    mech = build_mechanism(case) if mech is None else mech
-    drive = case["drive"]
-    q0 = np.array(case["initial"]["angles"], float)
-    qd0 = np.array(case["initial"]["speeds"], float)
-    if drive["type"] == "kinematic":
-        if drive["law"] == "constant_speed":
-            q, qd, qdd = rigid.constant_speed(t, q0[0], drive["speed"])
-        else:
-            q, qd, qdd = rigid.spinup(t, drive["final_speed"], drive["spinup_time"], q0=q0[0])
-        if isinstance(mech, rigid.FourBar):
-            rigid.check_motion(mech, q, t)
-    else:
-        masses = link_masses(case, fe)
-        torques = [(tq, fe.joint(tq["joint"])) for tq in drive["torques"]]
-
-        def gen_force(_t, q, qd):
-            km, jac = rigid.motion_and_jacobian(mech, q, qd, strict=False)  # angles and d(phi)/dq (cached)
-            Q = np.zeros_like(q)
-            for tq, j in torques:
-                theta = km.phi[:, j.outboard] - (km.phi[:, j.inboard] if j.inboard is not None else 0.0)
-                dphi = jac[:, j.outboard, 2, :] - (jac[:, j.inboard, 2, :] if j.inboard is not None else 0.0)
-                Q += torque_value(tq, theta)[:, None] * dphi
-            return Q
-
-        q, qd, qdd = rigid.integrate(mech, masses, q0, qd0, t, gen_force, gravity=tuple(case["loads"]["gravity"]),
-                                     rtol=case["solver"]["rigid_rtol"], atol=case["solver"]["rigid_atol"])
-    return RigidMotion(t, q, qd, qdd, mech.kinematics(q, qd, qdd))
+    t = np.asarray(t, float)
+    return RigidSource(case, fe, float(t[-1]), mech)(t)
 
 
 def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion):
@@ -140,10 +151,18 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray) -> None:
     """Reject an elastic problem with zero-stiffness modes (an unconstrained mechanism motion)."""
     if fe.nfree > 1500:  # a dense eigenvalue check would cost more than the run; skipped
         return
-    _, _, k, _ = fe.matrices(rig0[:, :, 0] * np.array([1, 0, 0, 0, 0])[:, None])  # elastic K only
-    ev = np.linalg.eigvalsh(0.5 * (k + k.T))
+    m, _, k, _ = fe.matrices(rig0[:, :, 0] * np.array([1, 0, 0, 0, 0])[:, None])  # M and the elastic K only
+    # squared natural frequencies (K x = w^2 M x, via the Cholesky factor of M): a zero-stiffness mode
+    # sits at round-off (~1e-16 of the largest), a real mode above (w_1/w_max)^2 ~ 1e-10 even at 256
+    # elements per link; K's own eigenvalues spread far more (axial vs bending) and are no test
+    try:
+        lc = np.linalg.cholesky(0.5 * (m + m.T))
+    except np.linalg.LinAlgError:
+        raise CaseError("links", "the mass matrix is not positive definite: every link needs density > 0 and area > 0") from None
+    a = np.linalg.solve(lc, np.linalg.solve(lc, 0.5 * (k + k.T)).T)
+    ev = np.linalg.eigvalsh(0.5 * (a + a.T))
     scale = np.max(np.abs(ev))
-    nzero = int(np.sum(np.abs(ev) < 1e-10 * scale))
+    nzero = int(np.sum(np.abs(ev) < 1e-13 * scale))
     # a joint left free with 'torque' turns the mechanism's own degree of freedom into a zero-stiffness
     # mode of the elastic problem, on purpose (theory.md section 14)
     allowed = min(sum(1 for j in fe.joints if j.elastic == "torque"), len(fe.case["initial"]["angles"]))
@@ -154,30 +173,125 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray) -> None:
 
 
 class Prepared:
-    """A case made ready to run: FE model, time grid and rigid motion (shared by every model)."""
+    """A case made ready to run: FE model, time grid and rigid motion (shared by every model).
+
+    The superposition models run in chunks of ``chunk_steps`` steps (rounded up to a multiple of the
+    output decimation): the rigid motion is sampled and the kernel called per chunk, continuing from
+    the last state, so memory is O(frames), not O(steps).  ``rm``, ``rig``, ``q_free`` and ``q_val``
+    (the rigid motion on the whole grid) are computed when first used (the coupled models use them)."""
+
+    CHUNK_STEPS = 10_000
 
     def __init__(self, case: dict, *, dt: float | None = None, elements_per_link: int | None = None,
-                 out_every: int | None = None):
+                 out_every: int | None = None, chunk_steps: int | None = None):
         t_start = time.perf_counter()
         if elements_per_link is not None:
             case = _with_elements(case, elements_per_link)
         self.case = case
         self.nsteps, self.dt, self.out_every = time_grid(case, dt, out_every)
-        self.t = np.linspace(0.0, case["solver"]["t_end"], self.nsteps + 1)
+        self._t = None
+        chunk = self.CHUNK_STEPS if chunk_steps is None else int(chunk_steps)
+        self.chunk_steps = self.out_every * max(1, math.ceil(chunk / self.out_every))
         self.fe = FEModel.from_case(case)
         for name, sp in case["outputs"].items():  # node references must fall on the mesh: check before running
             if isinstance(sp.get("at"), str):
                 self.fe.node_ref(sp["at"], f"outputs.{name}.at")
-        t0 = time.perf_counter()
-        self.rm = rigid_motion(case, self.fe, self.t)
-        self.t_rigid = time.perf_counter() - t0
-        self.gravity = case["loads"]["gravity"]
-        self.rig = self.rm.kernel_samples(self.gravity)
-        self._checked = False
-        self.q_free, self.q_val = elastic_torque_loads(case, self.fe, self.rm)
-        self.coupled = {}
         self.mech = build_mechanism(case)
+        t0, c0 = time.perf_counter(), time.thread_time()
+        self.source = RigidSource(case, self.fe, float(case["solver"]["t_end"]), self.mech)
+        self.rm_frames = self.source(self.times(0, self.nsteps, self.out_every))   # the motion at the output frames
+        self.t_rigid, self.t_rigid_cpu = time.perf_counter() - t0, time.thread_time() - c0
+        self.gravity = case["loads"]["gravity"]
+        self._checked = False
+        self._full = None
+        self.coupled = {}
         self.t_prepare = time.perf_counter() - t_start
+
+    def times(self, i0: int, i1: int, every: int = 1) -> np.ndarray:
+        """Step times t_i = i t_end/N [s] for i = i0, i0 + every, ..., i1 (bit-equal to
+        linspace(0, t_end, N + 1)[i0:i1 + 1:every]) without holding the whole grid."""
+        t_end = float(self.case["solver"]["t_end"])
+        i = np.arange(i0, i1 + 1, every)
+        t = i * (t_end / self.nsteps)
+        if i.size and i[-1] == self.nsteps:
+            t[-1] = t_end
+        return t
+
+    @property
+    def t(self) -> np.ndarray:
+        """(N+1,) step times [s] (computed on first use)."""
+        if self._t is None:
+            self._t = np.linspace(0.0, self.case["solver"]["t_end"], self.nsteps + 1)
+        return self._t
+
+    def _full_grid(self):
+        if self._full is None:
+            rm = self.source(self.t)
+            self._full = (rm, rm.kernel_samples(self.gravity)) + elastic_torque_loads(self.case, self.fe, rm)
+        return self._full
+
+    @property
+    def rm(self) -> RigidMotion:
+        """Rigid motion on the whole time grid (computed on first use)."""
+        return self._full_grid()[0]
+
+    @property
+    def rig(self) -> np.ndarray:
+        """Kernel samples (5, nlinks, nsteps+1) on the whole grid (computed on first use)."""
+        return self._full_grid()[1]
+
+    @rig.setter
+    def rig(self, value) -> None:
+        """Replace the kernel samples on the whole grid (e.g. a frozen configuration in a test);
+        every later superposition run uses them."""
+        rm, _, qf, qv = self._full_grid()
+        self._full = (rm, np.asfortranarray(value, float), qf, qv)
+
+    @property
+    def q_free(self):
+        return self._full_grid()[2]
+
+    @property
+    def q_val(self):
+        return self._full_grid()[3]
+
+    def _chunk(self, i0: int, i1: int):
+        """(rig, q_free, q_val) of steps i0..i1 (grid samples i0..i1 inclusive)."""
+        if self._full is not None or (i0 == 0 and i1 == self.nsteps):
+            _, rig, qf, qv = self._full_grid()
+            if qv is not None:
+                qv = np.asfortranarray(qv[:, i0:i1 + 1])
+            return np.asfortranarray(rig[:, :, i0:i1 + 1]), qf, qv
+        rm = self.source(self.times(i0, i1))
+        return (rm.kernel_samples(self.gravity),) + elastic_torque_loads(self.case, self.fe, rm)
+
+    def coarsened(self):
+        """This case on every second step of its grid (the same rigid solution), for the step-doubling
+        error estimate: output frames on this run's frames (every frame when out_every is even, every
+        second one when it is odd; the grid then ends at the last frame both share).  None when the
+        coarse grid would have fewer than two frames."""
+        oe, n = self.out_every, self.nsteps
+        if oe % 2 == 0:
+            oc, nc = oe // 2, n // 2
+        else:
+            oc, nc = oe, oe * (n // (2 * oe))
+        if nc < oc or nc < 1:
+            return None
+        pc = copy.copy(self)
+        if 2 * nc != n:   # the grid ends earlier: at the fine grid's step 2 nc
+            pc.case = dict(self.case, solver=dict(self.case["solver"], t_end=float(self.times(2 * nc, 2 * nc)[0])))
+        pc.nsteps, pc.dt, pc.out_every = nc, 2.0 * self.dt, oc
+        pc.chunk_steps = oc * max(1, math.ceil(self.chunk_steps / 2 / oc))
+        pc._t, pc._full = None, None
+        if oe % 2 == 0:
+            pc.rm_frames = self.rm_frames
+        else:
+            sel = slice(0, 2 * (nc // oc) + 1, 2)   # coarse frame k is fine frame 2 k
+            r = self.rm_frames
+            pc.rm_frames = RigidMotion(r.t[sel], r.q[sel], r.qd[sel], r.qdd[sel],
+                                       rigid.LinkMotion(**{k: getattr(r.motion, k)[sel]
+                                                           for k in rigid.LinkMotion.__dataclass_fields__}))
+        return pc
 
     def run(self, model: str | None = None, geometric: str | None = None, *, estimate: bool | None = None,
             diagnose: bool = True, u0=None, v0=None) -> Result:
@@ -213,46 +327,69 @@ class Prepared:
                 raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
             return self._run_coupled(t_start, model)
         if not self._checked:
-            check_elastic_problem(fe, self.rig)
+            check_elastic_problem(fe, self.rm_frames.kernel_samples(self.gravity)[:, :, :1])
             self._checked = True
         sol = dict(case["solver"])
         if geometric is not None:
             sol["geometric_stiffness"] = geometric
-        t0 = time.perf_counter()
         am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
-        failure = None
-        try:
-            uf, vf, af, nf, geo_iters = fe.run(self.rig, model, self.dt, alpha_m=am, alpha_f=af_, beta=beta,
-                                               gamma=gamma, out_every=self.out_every, rayleigh=sol["rayleigh"],
-                                               q_free=self.q_free, q_val=self.q_val, geometric=sol["geometric_stiffness"],
-                                               geo_tol=sol["geometric_tol"], geo_maxit=sol["geometric_maxit"],
-                                               div_limit=sol.get("divergence_limit"), full=True,
-                                               u0=u0, v0=v0)
-        except SolverError as exc:   # keep the frames before the failed step
-            if exc.data is None or exc.step is None or exc.step < 1:
-                raise
-            failure, k = exc, guards.frames_before(exc.step, self.out_every)
-            uf, vf, af, nf = (exc.data[n][:, :k] for n in ("uf", "vf", "af", "nf"))
-            geo_iters = exc.data["geo_iters"]
-        t_kernel = time.perf_counter() - t0
-        idx = slice(0, self.out_every * (uf.shape[1] - 1) + 1, self.out_every)
-        motion_f = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx]
-                                       for k in rigid.LinkMotion.__dataclass_fields__})
-        rig_f = self.rm.kernel_samples(self.gravity, idx)
+        oe, nfr = self.out_every, self.nsteps // self.out_every + 1
+        uf, vf, af = (np.empty((fe.nfree, nfr), order="F") for _ in range(3))
+        nf, geo_iters = np.zeros((fe.nel, nfr), order="F"), 0
+        u, v, a, p = u0, v0, None, None
+        t_kernel = t_samples = c_kernel = 0.0
+        failure, nvalid = None, nfr
+        for i0 in range(0, self.nsteps, self.chunk_steps):
+            i1 = min(i0 + self.chunk_steps, self.nsteps)
+            ts = time.perf_counter()
+            rig, q_free, q_val = self._chunk(i0, i1)
+            t0, c0 = time.perf_counter(), time.thread_time()
+            f0 = i0 // oe                       # a chunk's first frame is the previous chunk's last
+            try:
+                out = fe.run(rig, model, self.dt, alpha_m=am, alpha_f=af_, beta=beta, gamma=gamma, out_every=oe,
+                             rayleigh=sol["rayleigh"], q_free=q_free, q_val=q_val, u0=u, v0=v, a0=a, p0=p,
+                             t0=i0 * self.dt, geometric=sol["geometric_stiffness"], geo_tol=sol["geometric_tol"],
+                             geo_maxit=sol["geometric_maxit"], div_limit=sol.get("divergence_limit"), full=True)
+            except SolverError as exc:   # keep the frames before the failed step
+                if exc.data is None or exc.step is None or exc.step < 1:
+                    raise
+                k = guards.frames_before(exc.step, oe)
+                for arr, name in ((uf, "uf"), (vf, "vf"), (af, "af"), (nf, "nf")):
+                    arr[:, f0:f0 + k] = exc.data[name][:, :k]
+                geo_iters += int(exc.data["geo_iters"])
+                exc.step += i0                  # the chunk's step -> the run's step (exc.time is already global)
+                failure, nvalid = exc, f0 + k
+                break
+            finally:
+                t_kernel += time.perf_counter() - t0
+                c_kernel += time.thread_time() - c0
+                t_samples += t0 - ts
+            f = slice(f0, i1 // oe + 1)
+            uf[:, f], vf[:, f], af[:, f], nf[:, f] = out[:4]
+            geo_iters += int(out[4])
+            lr = fe.last_run                    # the state at step i1: continue from it
+            u, v, a, p = lr["u"], lr["v"], lr["a"], lr["p"]
+        if nvalid < nfr:
+            uf, vf, af, nf = uf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid], nf[:, :nvalid]
+        sel = slice(0, nvalid)
+        rmf = self.rm_frames
+        motion_f = rigid.LinkMotion(**{k: getattr(rmf.motion, k)[sel] for k in rigid.LinkMotion.__dataclass_fields__})
+        rig_f = rmf.kernel_samples(self.gravity, sel)
         u_all = fe.expand(uf)
         if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
             nf = np.array([[fe.el_prop[3, e] / fe.el_prop[0, e]] for e in range(fe.nel)]) * _axial_stretch(fe, u_all, motion_f)
-        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, self.rm.q[idx], self.rm.qd[idx],
-                                   self.rm.qdd[idx], rig_f, model, axial=nf)
+        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rmf.q[sel], rmf.qd[sel], rmf.qdd[sel], rig_f,
+                                   model, axial=nf)
         units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
+        self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": t_samples}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
         extra = {"integrator": integrator_summary(sol), "validity": coupled.validity(fe, nf, u_all)}
         if sol["geometric_stiffness"] != "none":
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": int(geo_iters),
                                             "mean_per_step": geo_iters / self.nsteps}
-        res = Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
-                     q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_all, v=fe.expand(vf),
+        res = Result(case=case, model=model, t=rmf.t[sel], columns=columns, units=units, fe=fe,
+                     q=rmf.q[sel], qd=rmf.qd[sel], qdd=rmf.qdd[sel], u=u_all, v=fe.expand(vf),
                      a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
                      axial=nf)
         res.curvature = lambda li, frac: link_curvature(fe, u_all, motion_f.phi[:, li], li, frac)
@@ -269,7 +406,7 @@ class Prepared:
         q0, v0 = cm.initial_state(self.rm.q[0], self.rm.qd[0], self.mech)
         cval = cm.constraint_values(self.t, self.rm.q, self.rm.qd, self.rm.qdd, self.mech)
         am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         failure = None
         try:
             qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, alpha_m=am, alpha_f=af_, beta=beta,
@@ -282,7 +419,7 @@ class Prepared:
             failure, k = exc, guards.frames_before(exc.step, self.out_every)
             qf, vf, af, lf, ef = (exc.data[n][:, :k] for n in ("qf", "vf", "af", "lf", "ef"))
             iters = exc.data["iters"]
-        t_kernel = time.perf_counter() - t0
+        t_kernel, c_kernel = time.perf_counter() - t0, time.thread_time() - c0
         idx = slice(0, self.out_every * (qf.shape[1] - 1) + 1, self.out_every)
         ref = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx] for k in rigid.LinkMotion.__dataclass_fields__})
         chord = coupled.chord_motion(cm, qf, vf, af)
@@ -301,6 +438,7 @@ class Prepared:
         for (_, _, kind, _), lam in zip(cm.constraints, lf):
             if kind == "drive":   # the torque the kinematic drive applies (the constraint torque is -lambda)
                 columns["drive_torque"], units["drive_torque"] = -lam, "N m"
+        self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": 0.0}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
         extra = {"integrator": integrator_summary(sol),

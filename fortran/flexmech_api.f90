@@ -29,7 +29,7 @@
 !>   grav(2) [m/s^2], ray(2) Rayleigh [1/s, s] on the elastic DOFs
 module flexmech_api
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
+  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status
   use flexmech_beam, only: beam_mass, beam_stiffness, beam_gyroscopic, beam_centrifugal, &
                            beam_hac_coupling, beam_curvature, vec_to_local, beam_geometric
   use flexmech_assembly, only: band_rows, band_to_dense
@@ -41,6 +41,7 @@ module flexmech_api
   public :: element_matrices, element_curvatures, ked_run, ked_matrices, ked_loads, ked_bandwidth
   public :: ked_geometric_matrix
   public :: cpl_run, cpl_dense
+  public :: bench_solve, bench_peak   ! benchmark-only (flexmech bench), at the end of this module
 
 contains
 
@@ -358,5 +359,67 @@ contains
     end if
     call coupled_dense(sys, q, v, a, res, mm, cm, km, energy)
   end subroutine cpl_dense
+
+  ! ---------------------------------------------------------------- benchmark-only routines (flexmech bench)
+
+  !> nrep factorizations and solves of the n x n matrix a with b: mode 1 banded LU (dgbtrf/dgbtrs,
+  !> half bandwidth kb, a copied into band storage each time), mode 2 dense LU (dgetrf/dgetrs, a copied).
+  !> x returns the last solution. For timing the two LAPACK paths against each other (flexmech bench).
+  subroutine bench_solve(n, kb, nrep, mode, a, b, x, status)
+    integer, intent(in) :: n, kb, nrep, mode
+    real(dp), intent(in) :: a(n, n), b(n)
+    real(dp), intent(out) :: x(n)
+    integer, intent(out) :: status
+    real(dp), allocatable :: ab(:, :), ad(:, :)
+    integer, allocatable :: ipiv(:)
+    integer :: rep, i, j, info, ld
+    status = STATUS_BAD_INPUT
+    x = 0.0_dp
+    if (n < 1 .or. kb < 0 .or. kb >= max(n, 1) + 1 .or. nrep < 1 .or. mode < 1 .or. mode > 2) return
+    allocate (ipiv(n))
+    info = 0
+    if (mode == 1) then
+      ld = 3*kb + 1
+      allocate (ab(ld, n))
+      do rep = 1, nrep
+        ab = 0.0_dp
+        do j = 1, n
+          do i = max(1, j - kb), min(n, j + kb)
+            ab(2*kb + 1 + i - j, j) = a(i, j)
+          end do
+        end do
+        x = b
+        call dgbtrf(n, n, kb, kb, ab, ld, ipiv, info)
+        if (info /= 0) exit
+        call dgbtrs('N', n, kb, kb, 1, ab, ld, ipiv, x, n, info)
+      end do
+    else
+      allocate (ad(n, n))
+      do rep = 1, nrep
+        ad = a
+        x = b
+        call dgetrf(n, n, ad, n, ipiv, info)
+        if (info /= 0) exit
+        call dgetrs('N', n, 1, ad, n, ipiv, x, n, info)
+      end do
+    end if
+    status = lapack_status(info)
+  end subroutine bench_solve
+
+  !> A tight scalar multiply-add loop: 8 independent chains s = s*c + d, n iterations, 16*n flops
+  !> (the achievable arithmetic rate of one core with the kernels' compiler flags); s returns their sum.
+  subroutine bench_peak(n, c, d, s)
+    integer, intent(in) :: n
+    real(dp), intent(in) :: c, d
+    real(dp), intent(out) :: s
+    real(dp) :: s1, s2, s3, s4, s5, s6, s7, s8
+    integer :: i
+    s1 = 0.0_dp; s2 = 0.1_dp; s3 = 0.2_dp; s4 = 0.3_dp; s5 = 0.4_dp; s6 = 0.5_dp; s7 = 0.6_dp; s8 = 0.7_dp
+    do i = 1, n
+      s1 = s1*c + d; s2 = s2*c + d; s3 = s3*c + d; s4 = s4*c + d
+      s5 = s5*c + d; s6 = s6*c + d; s7 = s7*c + d; s8 = s8*c + d
+    end do
+    s = s1 + s2 + s3 + s4 + s5 + s6 + s7 + s8
+  end subroutine bench_peak
 
 end module flexmech_api

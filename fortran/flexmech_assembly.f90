@@ -9,7 +9,7 @@ module flexmech_assembly
   use flexmech_kinds, only: dp
   implicit none
   private
-  public :: band_rows, band_add_element, band_add_diagonal, half_bandwidth, band_to_dense
+  public :: band_rows, band_add_element, band_add_element6, band_add_diagonal, half_bandwidth, band_to_dense
 
 contains
 
@@ -50,6 +50,25 @@ contains
       end do
     end do
   end subroutine band_add_element
+
+  !> band_add_element for a 6-DOF element (explicit shapes: the time loop's assembly, no descriptors).
+  pure subroutine band_add_element6(ab, ldab, kl, ku, idx, ke)
+    integer, intent(in) :: ldab, kl, ku
+    real(dp), intent(inout) :: ab(ldab, *)  !< band storage (2kl+ku+1, n)
+    integer, intent(in) :: idx(6)           !< free-DOF numbers of the element DOFs, 0 = constrained
+    real(dp), intent(in) :: ke(6, 6)        !< element matrix
+    integer :: a, b, i, j, d
+    d = kl + ku + 1
+    do b = 1, 6
+      j = idx(b)
+      if (j == 0) cycle
+      do a = 1, 6
+        i = idx(a)
+        if (i == 0) cycle
+        ab(d + i - j, j) = ab(d + i - j, j) + ke(a, b)
+      end do
+    end do
+  end subroutine band_add_element6
 
   !> ab(i,i) += val for a free DOF i (no-op for i = 0).
   pure subroutine band_add_diagonal(ab, kl, ku, i, val)

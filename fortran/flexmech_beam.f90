@@ -189,15 +189,21 @@ contains
     real(dp), intent(in) :: a(6, 6), c, s
     real(dp) :: b(6, 6), w(6, 6)
     integer :: i
-    w = a
-    do i = 1, 4, 3   ! columns: A T
-      w(:, i) = a(:, i)*c - a(:, i + 1)*s
-      w(:, i + 1) = a(:, i)*s + a(:, i + 1)*c
+    do i = 1, 6   ! columns: W = A T
+      w(i, 1) = a(i, 1)*c - a(i, 2)*s
+      w(i, 2) = a(i, 1)*s + a(i, 2)*c
+      w(i, 3) = a(i, 3)
+      w(i, 4) = a(i, 4)*c - a(i, 5)*s
+      w(i, 5) = a(i, 4)*s + a(i, 5)*c
+      w(i, 6) = a(i, 6)
     end do
-    b = w
-    do i = 1, 4, 3   ! rows: T^T (A T)
-      b(i, :) = w(i, :)*c - w(i + 1, :)*s
-      b(i + 1, :) = w(i, :)*s + w(i + 1, :)*c
+    do i = 1, 6   ! rows: B = T^T W
+      b(1, i) = w(1, i)*c - w(2, i)*s
+      b(2, i) = w(1, i)*s + w(2, i)*c
+      b(3, i) = w(3, i)
+      b(4, i) = w(4, i)*c - w(5, i)*s
+      b(5, i) = w(4, i)*s + w(5, i)*c
+      b(6, i) = w(6, i)
     end do
   end function rotate_to_global
 

@@ -19,7 +19,7 @@ module flexmech_ked
   use flexmech_kinds, only: dp
   use flexmech_beam, only: beam_mass, beam_stiffness, beam_gyroscopic, beam_centrifugal, &
                            beam_hac_coupling, beam_geometric, rotate_to_global, vec_to_local, vec_to_global
-  use flexmech_assembly, only: band_add_element, band_add_diagonal, half_bandwidth
+  use flexmech_assembly, only: band_add_element6, band_add_diagonal, half_bandwidth
   implicit none
   private
   public :: ked_system, LOAD_HAC, LOAD_CLASSIC, LOAD_CLASSIC_TRANSLATIONAL
@@ -31,6 +31,9 @@ module flexmech_ked
     integer :: load_model = LOAD_CLASSIC
     real(dp) :: ray_m = 0.0_dp, ray_k = 0.0_dp   !< Rayleigh damping C = ray_m M + ray_k K
     integer, allocatable :: el_link(:), el_dof(:, :), el_free(:, :)
+    !> (nel) element e has the local matrices of element e-1 on the same link (a uniform mesh): its
+    !> rotated effective matrix is reused in assemble (geometric stiffness off)
+    logical, allocatable :: el_same(:)
     real(dp), allocatable :: el_len(:), el_z0(:), el_ea(:)
     logical :: geo = .false.                       !< add the geometric stiffness nax(e) * kg(e)
     real(dp), allocatable :: nax(:)                !< (nel) axial force of each element [N], tension > 0
@@ -117,6 +120,11 @@ contains
     do i = 1, sys%nri
       sys%ri_free(i) = free_of(ri_dof(i))
     end do
+    allocate (sys%el_same(sys%nel))
+    sys%el_same = .false.
+    do e = 2, sys%nel
+      sys%el_same(e) = el_link(e) == el_link(e - 1) .and. all(el_prop([1, 3, 4, 5], e) == el_prop([1, 3, 4, 5], e - 1))
+    end do
     sys%kl = half_bandwidth(sys%el_free)
     sys%ku = sys%kl
   end subroutine ked_init
@@ -135,21 +143,39 @@ contains
     class(ked_system), intent(in) :: sys
     integer, intent(in) :: e
     real(dp), intent(in) :: r(5)   !< rigid sample of the element's link (layout above)
-    real(dp) :: f(6), c, s, ap(2), z1, z2, om2
-    c = cos(r(1)); s = sin(r(1))
+    real(dp) :: f(6)
+    f = element_load_cs(sys, e, r, cos(r(1)), sin(r(1)))
+  end function element_load
+
+  !> element_load with c = cos(phi), s = sin(phi) of the link given.
+  pure function element_load_cs(sys, e, r, c, s) result(f)
+    class(ked_system), intent(in) :: sys
+    integer, intent(in) :: e
+    real(dp), intent(in) :: r(5), c, s
+    real(dp) :: f(6), ap(2), z1, z2, om2, w4(4), w6(6)
+    integer :: k
     z1 = sys%el_z0(e); z2 = z1 + sys%el_len(e)
     om2 = r(2)**2
     ap(1) = c*r(4) + s*r(5)          ! reference-point acceleration in the link frame
     ap(2) = -s*r(4) + c*r(5)
     select case (sys%load_model)
     case (LOAD_HAC)
-      f = matmul(sys%m0(:, :, e), [ap(1) - om2*z1, ap(2) + r(3)*z1, ap(1) - om2*z2, ap(2) + r(3)*z2])
+      w4 = [ap(1) - om2*z1, ap(2) + r(3)*z1, ap(1) - om2*z2, ap(2) + r(3)*z2]
+      f = 0.0_dp
+      do k = 1, 4
+        f = f + sys%m0(:, k, e)*w4(k)
+      end do
+      return
     case (LOAD_CLASSIC)
-      f = matmul(sys%m(:, :, e), [ap(1) - om2*z1, ap(2) + r(3)*z1, r(3), ap(1) - om2*z2, ap(2) + r(3)*z2, r(3)])
+      w6 = [ap(1) - om2*z1, ap(2) + r(3)*z1, r(3), ap(1) - om2*z2, ap(2) + r(3)*z2, r(3)]
     case default
-      f = matmul(sys%m(:, :, e), [ap(1) - om2*z1, ap(2) + r(3)*z1, 0.0_dp, ap(1) - om2*z2, ap(2) + r(3)*z2, 0.0_dp])
+      w6 = [ap(1) - om2*z1, ap(2) + r(3)*z1, 0.0_dp, ap(1) - om2*z2, ap(2) + r(3)*z2, 0.0_dp]
     end select
-  end function element_load
+    f = 0.0_dp
+    do k = 1, 6
+      f = f + sys%m(:, k, e)*w6(k)
+    end do
+  end function element_load_cs
 
   !> Rigid-inertia load F_rigid over ALL DOFs (constrained ones included) for one rigid sample.
   subroutine ked_rigid_load(sys, rig, f)
@@ -206,28 +232,40 @@ contains
     real(dp), intent(out) :: r(:)        !< (nfree) residual
     integer :: e, i, j, n
     integer :: idx(6)
-    real(dp) :: cs, sn, om, al, ce(6, 6), ke(6, 6), se(6, 6), ue(6), ve(6), re(6), a(2), mi, cm
+    real(dp) :: cs, sn, om, al, ce(6, 6), ke(6, 6), se(6, 6), me(6, 6), ue(6), ve(6), re(6), a(2), mi, cm
+    real(dp) :: ul(6), vl(6)
+    integer :: jprev
     logical :: qs
     qs = .false.
     if (present(static)) qs = static
     cm = merge(0.0_dp, 1.0_dp, qs)
     ab = 0.0_dp
     r = 0.0_dp
+    jprev = 0
+    cs = 1.0_dp; sn = 0.0_dp
     do e = 1, sys%nel
       j = sys%el_link(e)
-      cs = cos(rig(1, j)); sn = sin(rig(1, j)); om = rig(2, j); al = rig(3, j)
-      idx = sys%el_free(:, e)
-      ce = (2.0_dp*om)*sys%g(:, :, e)
-      if (qs) then
-        ke = sys%k(:, :, e)
-      else
-        ke = sys%k(:, :, e) + al*sys%g(:, :, e) + (om*om)*sys%c(:, :, e)
+      if (j /= jprev) then   ! elements are grouped by link: one cos/sin per link and sample
+        cs = cos(rig(1, j)); sn = sin(rig(1, j)); jprev = j
       end if
-      if (sys%geo) ke = ke + sys%nax(e)*sys%kg(:, :, e)
-      if (sys%ray_m /= 0.0_dp) ce = ce + sys%ray_m*sys%m(:, :, e)
-      if (sys%ray_k /= 0.0_dp) ce = ce + sys%ray_k*sys%k(:, :, e)
-      se = cm*sys%m(:, :, e) + cc*ce + ck*ke
-      call band_add_element(ab, sys%kl, sys%ku, idx, rotate_to_global(se, cs, sn))
+      om = rig(2, j); al = rig(3, j)
+      idx = sys%el_free(:, e)
+      ! the local matrices of a uniform link's elements are equal: ce, ke and the rotated effective
+      ! matrix se of the previous element are reused (not with the per-element geometric stiffness)
+      if (e == 1 .or. .not. sys%el_same(e) .or. sys%geo) then
+        ce = (2.0_dp*om)*sys%g(:, :, e)
+        if (qs) then
+          ke = sys%k(:, :, e)
+        else
+          ke = sys%k(:, :, e) + al*sys%g(:, :, e) + (om*om)*sys%c(:, :, e)
+        end if
+        if (sys%geo) ke = ke + sys%nax(e)*sys%kg(:, :, e)
+        if (sys%ray_m /= 0.0_dp) ce = ce + sys%ray_m*sys%m(:, :, e)
+        if (sys%ray_k /= 0.0_dp) ce = ce + sys%ray_k*sys%k(:, :, e)
+        me = cm*sys%m(:, :, e) + cc*ce + ck*ke
+        se = rotate_to_global(me, cs, sn)
+      end if
+      call band_add_element6(ab, size(ab, 1), sys%kl, sys%ku, idx, se)
       do i = 1, 6
         n = idx(i)
         if (n > 0) then
@@ -236,8 +274,14 @@ contains
           ue(i) = 0.0_dp; ve(i) = 0.0_dp
         end if
       end do
-      re = -sys%element_load(e, rig(:, j)) - matmul(ce, vec_to_local(ve, cs, sn)) &
-           - matmul(ke, vec_to_local(ue, cs, sn))
+      ul = vec_to_local(ue, cs, sn)
+      vl = vec_to_local(ve, cs, sn)
+      re = -element_load_cs(sys, e, rig(:, j), cs, sn)
+      do n = 1, 6
+        do i = 1, 6
+          re(i) = re(i) - ce(i, n)*vl(n) - ke(i, n)*ul(n)
+        end do
+      end do
       re = vec_to_global(re, cs, sn)
       do i = 1, 6
         if (idx(i) > 0) r(idx(i)) = r(idx(i)) + re(i)

@@ -1,6 +1,6 @@
 """Shared test helpers.  The tests run against the INSTALLED flexmech_py
 (pytest --import-mode=importlib, see pyproject.toml); this folder is put on
-sys.path only so that tests can import their own helpers (numpy_reference)."""
+sys.path only so that tests can import their own helpers."""
 
 import os
 import sys

@@ -77,6 +77,21 @@ def test_zero_stiffness_elastic_problem_is_rejected(cases_dir):
         fm.simulate(case)
 
 
+@pytest.mark.parametrize("n", [32, 96])
+def test_zero_stiffness_check_on_fine_meshes(cases_dir, n):
+    """The check compares squared natural frequencies (K x = w^2 M x), not K's own eigenvalues, whose
+    axial-to-bending spread on short elements once made it reject the seed four-bar at 32 elements
+    per link; a free crank pivot is still caught."""
+    from flexmech_py.simulate import Prepared, check_elastic_problem
+
+    ok = Prepared(fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=1e-4"]), elements_per_link=n)
+    check_elastic_problem(ok.fe, ok.rig)
+    free = Prepared(fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=1e-4", "joints.crank_pivot=pin"]),
+                    elements_per_link=n)
+    with pytest.raises(fm.CaseError, match=r"1 unintended zero-stiffness"):
+        check_elastic_problem(free.fe, free.rig)
+
+
 def test_overrides(raw):
     out = apply_overrides(raw, ["solver.dt=2e-5", "links.coupler.area=5e-5", "links.0.length=0.1",
                                 'joints.follower_pivot="clamp"', "loads.gravity=[0, -9.81]", "case.title=hello world"])

@@ -301,11 +301,16 @@ def test_lagged_geometric_stiffness_diverges_with_status_6(cases_dir):
     are those of a shorter run."""
     case = fm.load_case(cases_dir / "fourbar_hac.toml",
                         overrides=["solver.t_end=0.16", "solver.geometric_stiffness='lagged'"])
-    p = Prepared(case)
+    p = Prepared(case, chunk_steps=10**9)   # one chunk: fe.last_run is the whole run
     with pytest.raises(SolverError) as err:
         p.run()
     assert err.value.code == 6 and "divergence_limit" in str(err.value)
     lr = p.fe.last_run
+    # run in chunks (as by default), the failure and the kept frames are the same
+    with pytest.raises(SolverError) as err_chunked:
+        Prepared(case, chunk_steps=3000).run(diagnose=False)
+    assert err_chunked.value.step == err.value.step and err_chunked.value.time == pytest.approx(err.value.time)
+    np.testing.assert_array_equal(err_chunked.value.partial.u, err.value.partial.u)
     t_fail = lr["fail_step"] * p.dt
     assert err.value.time == pytest.approx(t_fail)
     assert f"t = {t_fail:.6g} s" in str(err.value)

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from numpy_reference import newmark, system
+from flexmech_py.reference import newmark, system
 
 import flexmech_py as fm
 from flexmech_py.simulate import Prepared

@@ -4,7 +4,7 @@ FE mass = rigid mass, and the relations between the three rigid-inertia load mod
 import numpy as np
 import pytest
 from conftest import beam_case
-from numpy_reference import OMEGA, element_matrices, shape_n
+from flexmech_py.reference import OMEGA, element_matrices, shape_n
 
 import flexmech_py as fm
 from flexmech_py import kernels, rigid

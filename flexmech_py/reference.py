@@ -1,9 +1,9 @@
 """A small, straightforward NumPy implementation of the superposition KED equations.
 
-It is the reference the compiled kernels are checked against (tests/test_kernels.py):
-element matrices by Gauss quadrature of the shape functions, dense global
-matrices, and the Newmark average-acceleration loop with ``numpy.linalg.solve``.
-Written for clarity, not speed; it shares no code with the Fortran.
+It is the reference the compiled kernels are checked against (tests/test_kernels.py) and
+the baseline ``flexmech bench`` times them against: element matrices by Gauss quadrature
+of the shape functions, dense global matrices, and the Newmark loop with
+``numpy.linalg.solve``.  Written for clarity, not speed; it shares no code with the Fortran.
 """
 
 from __future__ import annotations

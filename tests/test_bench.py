@@ -1,0 +1,92 @@
+"""flexmech bench (no timing is asserted: the benchmark reports numbers), chunked runs, and the
+NumPy reference the benchmark times against."""
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+import flexmech_py as fm
+from flexmech_py import bench, reference
+from flexmech_py.cli import main
+from flexmech_py.simulate import Prepared
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_bench_quick_writes_wellformed_csv_and_png(tmp_path, cases_dir, capsys):
+    assert main(["bench", "--quick", "--out", str(tmp_path), "--cases", str(cases_dir)]) == 0
+    out = capsys.readouterr().out
+    assert "mesh ladder" in out and "summary" in out
+    ladder = _rows(tmp_path / "bench_ladder.csv")
+    assert {r["model"] for r in ladder} == set(bench.MODELS)
+    for r in ladder:
+        steps, us, dofs = int(r["steps"]), float(r["us_per_step"]), int(r["dofs"])
+        assert steps > 0 and dofs > 0 and us > 0 and math.isfinite(us)
+        assert float(r["ns_per_dof_step"]) == pytest.approx(1e3 * us / dofs, rel=1e-4)
+        assert 0 < float(r["peak_fraction"]) and float(r["flops_per_step"]) > 0
+    # more elements: more DOFs (the ladder really refines the mesh)
+    hac = [r for r in ladder if r["model"] == "hac"]
+    assert [int(r["dofs"]) for r in hac] == sorted(int(r["dofs"]) for r in hac)
+    solves = _rows(tmp_path / "bench_solves.csv")
+    assert all(float(r["banded_us"]) > 0 for r in solves)
+    summary = {r["metric"]: r for r in _rows(tmp_path / "bench_summary.csv")}
+    for key in ("import", "flexmech_run_no_plots", "scalar_peak", "reference.ratio_reference_to_fortran",
+                "reference.max_relative_difference"):
+        assert math.isfinite(float(summary[key]["value"])), key
+    # the reference solved the identical equations
+    assert float(summary["reference.max_relative_difference"]["value"]) < 1e-9
+    assert float(summary["matplotlib_imported_by_import"]["value"]) == 0
+    seeds = _rows(tmp_path / "bench_seed.csv")
+    assert {r["case"] for r in seeds} == {p.stem for p in cases_dir.glob("*.toml")}
+    mem = [r for k, r in summary.items() if k.startswith("memory.") and k.endswith("tracemalloc_peak_MB")]
+    assert len(mem) == 2
+    png = tmp_path / "bench.png"
+    if png.exists():   # matplotlib installed
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("case_name, geometric", [("fourbar_hac.toml", "none"), ("manipulator_bricout.toml", "lagged"),
+                                                  ("fourbar_constant_speed.toml", "none")])
+def test_chunked_run_equals_unchunked(cases_dir, case_name, geometric):
+    case = fm.load_case(cases_dir / case_name, overrides=["solver.t_end=0.02", f"solver.geometric_stiffness='{geometric}'"])
+    whole = Prepared(case, chunk_steps=10 ** 9).run()
+    parts = Prepared(case, chunk_steps=130)   # 130 steps rounded up to a multiple of output_every
+    assert parts.chunk_steps % parts.out_every == 0 and parts.chunk_steps < parts.nsteps
+    chunked = parts.run()
+    for k in whole.columns:
+        scale = max(np.max(np.abs(whole[k])), 1e-300)
+        assert np.max(np.abs(chunked[k] - whole[k])) <= 1e-12 * scale, k
+    assert np.max(np.abs(chunked.u - whole.u)) <= 1e-12 * np.max(np.abs(whole.u))
+
+
+def test_rigid_source_samples_equal_the_whole_grid(cases_dir):
+    """The dense rigid solution sampled chunk by chunk equals it sampled on the whole grid."""
+    p = Prepared(fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=0.01"]))
+    t = p.t
+    a = p.source(t[:400]).q
+    b = p.source(t[399:]).q
+    full = p.source(t).q
+    assert np.array_equal(np.vstack([a, b[1:]]), full)
+
+
+def test_reference_matches_fortran_on_seed(cases_dir):
+    """The NumPy reference the benchmark times solves the same equations: same solution."""
+    p = Prepared(fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=2e-4"]))
+    uf, _, _ = p.fe.run(p.rig, "hac", p.dt)
+    ur = reference.newmark(p.fe, p.rig, "hac", p.dt)
+    assert np.max(np.abs(uf - ur)) <= 1e-9 * np.max(np.abs(ur))
+
+
+def test_flop_model_and_exponent_fit():
+    # banded LU 2 n kl (kl + ku) with kl = ku: doubling n doubles it, doubling kb quadruples it
+    f1 = bench.flops_superposition(6, 3, 100, 5)["factorization"]
+    assert bench.flops_superposition(12, 3, 200, 5)["factorization"] == 2 * f1
+    assert bench.flops_superposition(6, 3, 100, 10)["factorization"] == 4 * f1
+    x = np.array([16, 32, 64, 128.0])
+    assert bench.fit_exponent(x, 3 * x ** 1.5) == pytest.approx(1.5)
+    assert math.isnan(bench.fit_exponent([1.0], [2.0]))
