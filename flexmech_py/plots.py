@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_result", "line_figure", "have_matplotlib", "plot_stability"]
+__all__ = ["plot_result", "line_figure", "have_matplotlib", "plot_stability", "work_precision_figure"]
 
 _warned = False
 
@@ -167,5 +167,57 @@ def plot_stability(rows: list, path, *, title: str = "", nmodes: int = 3, kmax: 
         fig.suptitle(title, fontsize=10)
     fig.subplots_adjust(left=0.08, right=0.88, top=0.92, bottom=0.07, hspace=0.08)
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def work_precision_figure(path, panels, *, title=None):
+    """Write a log-log PNG with one panel per entry of ``panels`` (work-precision diagrams).
+
+    ``panels``: list of dicts with ``title``, ``xlabel``, ``ylabel``, ``lines`` (dicts with
+    ``label`` (None: not in the legend), ``x``, ``y``, ``color`` (an index), ``style``
+    (line style, "" for markers only), ``marker``, optional ``alpha``) and ``hlines``
+    (list of (y, label, "tol" | "ref")).  Non-positive values are left out (log axes).
+    Returns the path, or None without matplotlib.
+    """
+    if not have_matplotlib():
+        return None
+    import matplotlib.pyplot as plt
+
+    n = len(panels)
+    ncol = 2 if n > 1 else 1
+    nrow = (n + ncol - 1) // ncol
+    fig, axes = plt.subplots(nrow, ncol, figsize=(7.2 * ncol + 4.2, 4.6 * nrow + 0.6), squeeze=False)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    handles = {}
+    for ax, p in zip(axes.flat, panels):
+        for ln in p["lines"]:
+            pts = [(x, y) for x, y in zip(ln["x"], ln["y"]) if x > 0 and y > 0 and np.isfinite(x) and np.isfinite(y)]
+            if not pts:
+                continue
+            xs, ys = zip(*pts)          # ladder order (timings need not be monotone)
+            h, = ax.plot(xs, ys, linestyle=ln["style"] or "none", marker=ln.get("marker", "o") or None, ms=4,
+                         color=colors[ln["color"] % len(colors)], alpha=ln.get("alpha", 1.0))
+            if ln["label"]:
+                handles.setdefault(ln["label"], h)
+        for y, label, kind in p.get("hlines", []):
+            ax.axhline(y, color="0.5" if kind == "tol" else "tab:red", lw=0.8, ls=":" if kind == "tol" else "-.")
+            ax.annotate(label, (0.99, y), xycoords=("axes fraction", "data"), ha="right", va="bottom", fontsize=7,
+                        color="0.4" if kind == "tol" else "tab:red")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(p["title"], fontsize=10)
+        ax.set_xlabel(p["xlabel"])
+        ax.set_ylabel(p["ylabel"])
+        ax.grid(True, which="both", alpha=0.25)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    if handles:
+        fig.legend(list(handles.values()), list(handles.keys()), fontsize=7, loc="upper left",
+                   bbox_to_anchor=((7.2 * ncol) / (7.2 * ncol + 4.2), 0.93), borderaxespad=0.0)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout(rect=(0, 0, (7.2 * ncol) / (7.2 * ncol + 4.2), 0.97))
+    fig.savefig(path, dpi=100)
     plt.close(fig)
     return Path(path)

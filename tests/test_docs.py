@@ -146,7 +146,7 @@ def _commands(doc):
     return out
 
 
-CLI_COMMANDS = [c for doc in ("cli.md", "cases.md", "api.md", "compare.md") for c in _commands(doc)]
+CLI_COMMANDS = [c for doc in ("cli.md", "cases.md", "api.md", "compare.md", "accuracy.md") for c in _commands(doc)]
 
 
 def test_cli_md_has_examples():
@@ -167,7 +167,7 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
     if argv[0] == "compare":
         assert list(tmp_path.rglob("compare.json"))
         return
-    if argv[0] in ("stability", "sweep"):   # their tables: stability.csv, sweep.csv
+    if argv[0] in ("stability", "sweep", "accuracy"):   # their tables: stability.csv, sweep.csv, accuracy.csv
         assert list(tmp_path.rglob(f"{argv[0]}.csv"))
         return
     csvs = list(tmp_path.rglob("timeseries.csv"))
