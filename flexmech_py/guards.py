@@ -315,7 +315,8 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
         cause, ctext = "bug_or_input", kernels.STATUS_MESSAGES[code]
     elif code == kernels.STATUS_SINGULAR:
         cause, ctext = "singular", kernels.STATUS_MESSAGES[code]
-    elif _undamped_constraints(prep, model, data) and hs and "error" not in hs and hs["failed_at_s"] is not None:
+    elif (_undamped_constraints(prep, model, data) and t_fail > 100 * dt and hs and "error" not in hs
+          and hs["failed_at_s"] is not None):   # a slow growth over many steps, not a first-step failure
         cause = "undamped_integrator"
         ctext = (f"the average-acceleration rule adds no numerical damping, and the constraint (drive) torques of the "
                  f"{model} model carry a period-2 dt oscillation that it lets grow (at dt/2 the run fails again at "
