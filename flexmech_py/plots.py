@@ -183,11 +183,14 @@ def work_precision_figure(path, panels, *, title=None):
     if not have_matplotlib():
         return None
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     n = len(panels)
     ncol = 2 if n > 1 else 1
     nrow = (n + ncol - 1) // ncol
-    fig, axes = plt.subplots(nrow, ncol, figsize=(7.2 * ncol + 4.2, 4.6 * nrow + 0.6), squeeze=False)
+    spare = nrow * ncol > n          # an empty panel slot takes the legend; otherwise it goes on the right
+    width = 7.2 * ncol + (0.0 if spare else 4.2)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(width, 4.6 * nrow + 0.6), squeeze=False)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     handles = {}
     for ax, p in zip(axes.flat, panels):
@@ -210,14 +213,17 @@ def work_precision_figure(path, panels, *, title=None):
         ax.set_xlabel(p["xlabel"])
         ax.set_ylabel(p["ylabel"])
         ax.grid(True, which="both", alpha=0.25)
+        ax.xaxis.set_minor_formatter(NullFormatter())   # minor labels collide on short decades
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
-    if handles:
+    if handles and spare:
+        list(axes.flat)[n].legend(list(handles.values()), list(handles.keys()), fontsize=8, loc="upper left")
+    elif handles:
         fig.legend(list(handles.values()), list(handles.keys()), fontsize=7, loc="upper left",
-                   bbox_to_anchor=((7.2 * ncol) / (7.2 * ncol + 4.2), 0.93), borderaxespad=0.0)
+                   bbox_to_anchor=((7.2 * ncol) / width, 0.93), borderaxespad=0.0)
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.tight_layout(rect=(0, 0, (7.2 * ncol) / (7.2 * ncol + 4.2), 0.97))
+    fig.tight_layout(rect=(0, 0, (7.2 * ncol) / width, 0.97))
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return Path(path)
