@@ -84,12 +84,17 @@ def _children_cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
+# subprocesses start in a neutral folder: a source checkout in the caller's folder would shadow the
+# installed package (its flexmech_py/ has no compiled extension)
+_NEUTRAL_CWD = tempfile.gettempdir()
+
+
 def _timed_subprocess(args, reps: int, env=None) -> tuple[float, float]:
     """(wall, CPU) seconds of a subprocess, each the minimum over reps runs."""
     wall = cpu = math.inf
     for _ in range(reps):
         t0, c0 = time.perf_counter(), _children_cpu()
-        subprocess.run(args, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+        subprocess.run(args, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=_NEUTRAL_CWD)
         wall, cpu = min(wall, time.perf_counter() - t0), min(cpu, _children_cpu() - c0)
     return wall, cpu
 
@@ -132,11 +137,11 @@ def bench_startup(seed: Path, reps: int) -> dict:
     out["import_s"], out["import_cpu_s"] = w - out["python_startup_s"], c - out["python_startup_cpu_s"]
     chk = subprocess.run([py, "-c", "import sys, flexmech_py, flexmech_py.cli, flexmech_py.simulate; "
                                     "print(int('matplotlib' in sys.modules), int('scipy.integrate' in sys.modules))"],
-                         check=True, capture_output=True, text=True).stdout.split()
+                         check=True, capture_output=True, text=True, cwd=_NEUTRAL_CWD).stdout.split()
     out["matplotlib_imported_by_import"] = int(chk[0])
     out["scipy_integrate_imported_by_import"] = int(chk[1])
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [py, "-m", "flexmech_py", "run", str(seed), "--out", tmp]
+        cmd = [py, "-m", "flexmech_py", "run", str(Path(seed).resolve()), "--out", tmp]
         out["flexmech_run_no_plots_s"], out["flexmech_run_no_plots_cpu_s"] = _timed_subprocess(cmd + ["--no-plots"], reps, env)
         try:
             import matplotlib  # noqa: F401
@@ -339,11 +344,11 @@ def memory_probe(case_path, nsteps: int, out_every: int) -> dict:
 
 
 def bench_memory(cases: Path, quick: bool) -> list[dict]:
-    path = cases / "fourbar_constant_speed.toml"
+    path = (cases / "fourbar_constant_speed.toml").resolve()
     out = []
     for nsteps in ((10_000, 100_000) if quick else (100_000, 1_000_000)):
         r = subprocess.run([sys.executable, "-m", "flexmech_py.bench", "--memory-probe", str(path), str(nsteps), "1000"],
-                           check=True, capture_output=True, text=True)
+                           check=True, capture_output=True, text=True, cwd=_NEUTRAL_CWD)
         out.append(json.loads(r.stdout.strip().splitlines()[-1]))
     return out
 
