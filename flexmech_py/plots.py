@@ -58,11 +58,12 @@ def line_figure(path, panels, *, title=None, xlabel="t [s]"):
         if crowded and len(p["series"]) > 1:
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
         elif len(p["series"]) > 1 or p["series"][0][0]:
-            ax.legend(fontsize=8, loc="upper right")   # 'best' scans every point: slow on long runs
+            npts = sum(np.size(y) for _, y, _ in p["series"])
+            ax.legend(fontsize=8, loc="best" if npts <= 20000 else "upper right")   # 'best' scans every point
     if title:
         fig.suptitle(title, fontsize=11)
     # fixed margins in inches (tight_layout measures every text and doubles the drawing time)
-    top = 1.0 - (0.75 if title else 0.35) / height
+    top = 1.0 - (0.6 if title else 0.3) / height
     fig.subplots_adjust(left=0.8 / fig.get_figwidth() + 0.04, right=0.75 if crowded else 0.97,
                         bottom=0.55 / height, top=top, hspace=0.5)
     fig.savefig(path, dpi=110)
