@@ -34,8 +34,9 @@ module flexmech_coupled
   !> SOLVER_CONDENSED eliminates every segment's elastic DOFs (a band of half width <= 5) onto the
   !> shared end-position DOFs and solves the condensed band system; SOLVER_BAND factorizes the whole
   !> free-DOF band matrix (half bandwidth 3 x elements per segment + 2); SOLVER_AUTO (default) takes
-  !> the condensed solve when the whole band is wider than 8 x the interior band (from about 13
-  !> elements per segment on: below, the per-segment LAPACK calls cost more than they save).
+  !> the condensed solve when the whole band is wider than the interior band + 4, i.e. when the
+  !> segments' arrowheads widen it (2 or more elements per segment); with one element per segment
+  !> (the nonlinear model) the whole band is narrow and its one LAPACK call beats one per segment.
   integer, parameter :: SOLVER_AUTO = -1, SOLVER_BAND = 0, SOLVER_CONDENSED = 1
   integer :: solver_mode = SOLVER_AUTO
 
@@ -799,7 +800,7 @@ contains
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), theta0(:), theta1(:), w(:)
     real(dp), allocatable :: gt(:, :), x(:, :), amat(:, :), lam(:), dlam(:), gval(:), acc0(:), ang0(:), ang1(:), lam0(:)
-    integer, allocatable :: ipiv(:), freeidx(:), ipc(:)
+    integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref
     logical :: converged, refactor, use_cond
@@ -828,7 +829,7 @@ contains
     gammap = gamma*(1.0_dp - alpha_f)*c1
     call lm_setup(sys, nc, lm)
     use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
-                              (solver_mode == SOLVER_AUTO .and. sys%kl > 8*lm%kbi))
+                              (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
     if (use_cond) then
       allocate (ab(1, 1))
     else
@@ -841,9 +842,11 @@ contains
     allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
               dlam(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), ang0(max(1, nc)), ang1(max(1, nc)), ipc(max(1, nc)), &
               lam0(max(1, nc)))
+    allocate (gnz(10, max(1, nc)), ngnz(max(1, nc)))
     do i = 1, sys%ndof
       if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
     end do
+    call gradient_pattern()
     lam = 0.0_dp
     call set_prescribed(1)
     ! consistent initial acceleration: [M G; G^T 0] [a; lam] = [-R(q0, v0, 0); cval'' - acc0]
@@ -857,7 +860,7 @@ contains
     call band_solve_rhs(rf)
     if (nc > 0) then
       do i = 1, nc
-        dlam(i) = dot_product(gt(:, i), rf) - (cval(3, i, 1) - acc0(i))
+        dlam(i) = gdot(i, rf) - (cval(3, i, 1) - acc0(i))
       end do
       call small_solve(dlam)
       do i = 1, nc
@@ -899,7 +902,7 @@ contains
         if (status /= STATUS_OK) exit
         if (nc > 0) then   ! Schur complement on the multipliers
           do i = 1, nc
-            dlam(i) = dot_product(gt(:, i), rf) + gval(i)/(betap*dt*dt)
+            dlam(i) = gdot(i, rf) + gval(i)/(betap*dt*dt)
           end do
           call small_solve(dlam)
           if (status /= STATUS_OK) exit
@@ -958,6 +961,38 @@ contains
 
   contains
 
+    !> Free DOFs on which constraint ic's gradient can be nonzero (the end positions and the
+    !> end rotation of its one or two segments), without repetitions: gnz(1:ngnz(ic), ic).
+    subroutine gradient_pattern()
+      integer :: ic, s, l, k, f, loc(5)
+      ngnz = 0
+      do ic = 1, nc
+        do s = 1, 2
+          l = sys%con_link(s, ic)
+          if (l == 0) cycle
+          loc = [1, 2, 3, 4, th_index(sys%n_el(l), sys%con_end(s, ic)*sys%n_el(l))]
+          do k = 1, 5
+            f = sys%free_of(sys%ld(loc(k), l))
+            if (f == 0) cycle
+            if (any(gnz(1:ngnz(ic), ic) == f)) cycle
+            ngnz(ic) = ngnz(ic) + 1
+            gnz(ngnz(ic), ic) = f
+          end do
+        end do
+      end do
+    end subroutine gradient_pattern
+
+    !> G(:, ic)^T y over the gradient's nonzero pattern.
+    pure real(dp) function gdot(ic, y)
+      integer, intent(in) :: ic
+      real(dp), intent(in) :: y(:)
+      integer :: k
+      gdot = 0.0_dp
+      do k = 1, ngnz(ic)
+        gdot = gdot + gt(gnz(k, ic), ic)*y(gnz(k, ic))
+      end do
+    end function gdot
+
     pure real(dp) function wrap(x)
       real(dp), intent(in) :: x
       wrap = atan2(sin(x), cos(x))
@@ -1010,7 +1045,7 @@ contains
         end if
         do j = 1, nc
           do ic = 1, nc
-            amat(ic, j) = dot_product(gt(:, ic), x(:, j))
+            amat(ic, j) = gdot(ic, x(:, j))
           end do
         end do
         call dgetrf(nc, nc, amat, size(amat, 1), ipc, info)
