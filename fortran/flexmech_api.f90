@@ -35,12 +35,12 @@ module flexmech_api
   use flexmech_assembly, only: band_rows, band_to_dense
   use flexmech_ked, only: ked_system
   use flexmech_newmark, only: newmark_run, consistent_acceleration, initial_axial_forces
-  use flexmech_coupled, only: coupled_system, coupled_build, coupled_run, coupled_dense
+  use flexmech_coupled, only: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_set_solver
   implicit none
   private
   public :: element_matrices, element_curvatures, ked_run, ked_matrices, ked_loads, ked_bandwidth
   public :: ked_geometric_matrix
-  public :: cpl_run, cpl_dense
+  public :: cpl_run, cpl_dense, cpl_set_solver
   public :: bench_solve, bench_peak   ! benchmark-only (flexmech bench), at the end of this module
 
 contains
@@ -331,6 +331,15 @@ contains
     call coupled_run(sys, presc_dof, presc, cval, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
                      init_pseudo, div_limit, seg_link, q, v, a, pa, qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
   end subroutine cpl_run
+
+  !> Linear solver of every later cpl_run in this process: mode -1 (default) automatic, 1 condensed
+  !> onto the segment-end positions, 0 the whole band (docs/theory.md section 11).  status 4 for
+  !> another mode.
+  subroutine cpl_set_solver(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    call coupled_set_solver(mode, status)
+  end subroutine cpl_set_solver
 
   !> Residual (all DOFs), M, C_v, K_t (dense, free DOFs) and [kinetic, potential] energy at one state.
   subroutine cpl_dense(ndof, nlinks, maxld, npm, nri, ntq, nh2, nfree, &

@@ -24,10 +24,21 @@ module flexmech_coupled
   use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
                              STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
   use flexmech_beam, only: beam_mass, beam_stiffness
-  use flexmech_assembly, only: band_rows, band_add_element, band_to_dense
+  use flexmech_assembly, only: band_rows, band_to_dense
   implicit none
   private
   public :: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_elastic_measure, STATUS_NEWTON
+  public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED
+
+  !> Linear solver of the iteration matrix in coupled_run (docs/theory.md section 11, "The solve"):
+  !> SOLVER_CONDENSED eliminates every segment's elastic DOFs (a band of half width <= 5) onto the
+  !> shared end-position DOFs and solves the condensed band system; SOLVER_BAND factorizes the whole
+  !> free-DOF band matrix (half bandwidth 3 x elements per segment + 2); SOLVER_AUTO (default) takes
+  !> the condensed solve when the whole band is wider than the interior band + 4, i.e. when the
+  !> segments' arrowheads widen it (2 or more elements per segment); with one element per segment
+  !> (the nonlinear model) the whole band is narrow and its one LAPACK call beats one per segment.
+  integer, parameter :: SOLVER_AUTO = -1, SOLVER_BAND = 0, SOLVER_CONDENSED = 1
+  integer :: solver_mode = SOLVER_AUTO
 
   real(dp), parameter :: gx(4) = [ &
     0.5_dp - 0.5_dp*0.8611363115940526_dp, 0.5_dp - 0.5_dp*0.3399810435848563_dp, &
@@ -48,6 +59,22 @@ module flexmech_coupled
     integer, allocatable :: con_link(:, :), con_end(:, :)   !< (2, ncon) like the torques
     real(dp) :: grav(2) = 0.0_dp, ray(2) = 0.0_dp
   end type coupled_system
+
+  !> Iteration matrix S = M + cc C_v + ck K_t stored by segment blocks.  Local DOFs of segment l:
+  !> 1..4 the end positions ("boundary", B), 5..nl the elastic DOFs ("interior", I; ni_l = nl - 4),
+  !> numbered off(l)+1..off(l)+ni_l in the interior arrays.
+  !>   bb(4, 4, l)   S_BB block of the segment            bi(4, ni)  S_BI (rows: local 1..4)
+  !>   ib(ni, 4)     S_IB (columns: local 1..4)           ai(ldi, ni) S_II, LAPACK band storage with
+  !>                 kl = ku = kbi (row 2 kbi + 1 + i - j), factorized in place (ipi) by the condensed solve
+  !> Condensed solve (cond = .true.: every interior DOF free and local to one segment):
+  !>   z = S_II^-1 S_IB per segment, Schur complement sb = S_BB - S_BI z over the nb free boundary DOFs
+  !>   (band kbb, LAPACK storage, ipb), workspaces yi(ni, nrhs), yb(nb, nrhs).
+  type :: link_mats
+    integer :: ni = 0, kbi = 0, ldi = 0, nb = 0, kbb = 0, ldb = 0, nrhs = 0
+    logical :: cond = .false.
+    integer, allocatable :: off(:), ifree(:), bfree(:, :), bglob(:), ipi(:), ipb(:)
+    real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :)
+  end type link_mats
 
 contains
 
@@ -112,12 +139,17 @@ contains
     real(dp), intent(in) :: q(:), v(:), a(:)
     real(dp), intent(out) :: res(:), mm(:, :), cm(:, :), km(:, :), energy(2)
     real(dp), allocatable :: ab(:, :)
+    type(link_mats) :: lm
+    call lm_setup(sys, 1, lm)
     allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree))
-    call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, ab, energy)
+    call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
     mm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree)
-    call assemble(sys, q, v, a, .true., 1.0_dp, 0.0_dp, res, ab, energy)
+    call assemble(sys, q, v, a, .true., 1.0_dp, 0.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
     cm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
-    call assemble(sys, q, v, a, .true., 0.0_dp, 1.0_dp, res, ab, energy)
+    call assemble(sys, q, v, a, .true., 0.0_dp, 1.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
     km = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
   end subroutine coupled_dense
 
@@ -166,18 +198,20 @@ contains
   end subroutine chord
 
   !> Contribution of one mass point (weight dm at link fraction w, element e at xi) to the link
-  !> residual and matrices.  Adds dm * J^T (r'' - grav) to r, dm J^T J to m, dm J^T dr''/dv to cv,
-  !> dm J^T dr''/d(elastic q) to kt; returns the kinetic energy 1/2 dm |r'|^2.
-  subroutine mass_point(sys, l, q, v, a, e, xi, w, dm, want, r, m, cv, kt, ekin, epot)
+  !> residual and iteration matrix.  Adds dm * J^T (r'' - grav) to r and, if want, to segment l's
+  !> blocks of S (lm) dm J^T (J + cc dr''/dv + ck dr''/d(elastic q)) (the point's parts of M, C_v,
+  !> K_t); returns the kinetic energy 1/2 dm |r'|^2.
+  subroutine mass_point(sys, l, q, v, a, e, xi, w, dm, want, cc, ck, r, lm, ekin, epot)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l, e
-    real(dp), intent(in) :: q(:), v(:), a(:), xi, w, dm
+    real(dp), intent(in) :: q(:), v(:), a(:), xi, w, dm, cc, ck
     logical, intent(in) :: want
-    real(dp), intent(inout) :: r(:), m(:, :), cv(:, :), kt(:, :), ekin, epot
+    real(dp), intent(inout) :: r(:), ekin, epot
+    type(link_mats), intent(inout) :: lm
     integer :: n, idx(6), i, j, nl, ncl, cl(10)
     real(dp) :: cs, sn, ell, g(2), om, al0, al, le, nm(2, 6), de(6), dv(6), da(6)
     real(dp) :: ul(2), uld(2), uldd(2), rot(2, 2), ru(2), rou(2), roud(2), rd(2), rdd(2)
-    real(dp) :: jac(2, 10), bv(2, 10), bq(2, 10), ac(2, 2), w0(2), cdot(2), c(2), rn(2)
+    real(dp) :: jac(2, 10), bv(2, 10), bq(2, 10), ac(2, 2), w0(2), cdot(2), c(2), rn(2), bc(2), blk(10, 10)
     n = sys%n_el(l); nl = 3*n + 3
     le = sys%prop(1, l)/n
     idx = elem_index(n, e)
@@ -217,9 +251,6 @@ contains
     rdd = rdd - sys%grav
     r(cl(1:ncl)) = r(cl(1:ncl)) + dm*matmul(rdd, jac(:, 1:ncl))
     if (.not. want) return
-    do j = 1, ncl
-      m(cl(1:ncl), cl(j)) = m(cl(1:ncl), cl(j)) + dm*matmul(jac(:, j), jac(:, 1:ncl))
-    end do
     ! dr''/dv: chord velocity through omega and alpha0, elastic velocities through 2 omega R Omega N
     c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
     w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*cdot(1) + c(2)*cdot(2))*g)
@@ -234,30 +265,32 @@ contains
       bq(:, j) = al*[-rn(2), rn(1)] - om*om*rn         ! at fixed chord
     end do
     do j = 1, ncl
-      cv(cl(1:ncl), cl(j)) = cv(cl(1:ncl), cl(j)) + dm*matmul(bv(:, j), jac(:, 1:ncl))
-      kt(cl(1:ncl), cl(j)) = kt(cl(1:ncl), cl(j)) + dm*matmul(bq(:, j), jac(:, 1:ncl))
+      bc = jac(:, j) + cc*bv(:, j) + ck*bq(:, j)
+      do i = 1, ncl
+        blk(i, j) = dm*(jac(1, i)*bc(1) + jac(2, i)*bc(2))
+      end do
     end do
+    call lm_add_block(lm, l, ncl, cl, blk)
   end subroutine mass_point
 
-  !> Residual, matrices and energies of link l (local vectors of length nld).
-  subroutine link_eval(sys, l, q, v, a, want, r, m, cv, kt, ekin, epot)
+  !> Residual (local vector of length nld), energies and, if want, the blocks of segment l of the
+  !> iteration matrix S = M + ccv C_v + ckt K_t (added to lm, which the caller has zeroed).
+  subroutine link_eval(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
-    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
     logical, intent(in) :: want
-    real(dp), intent(out) :: r(:), m(:, :), cv(:, :), kt(:, :), ekin, epot
-    integer :: n, nl, e, k, i, j, idx(6)
+    real(dp), intent(out) :: r(:), ekin, epot
+    type(link_mats), intent(inout) :: lm
+    integer :: n, nl, e, k, i, j, idx(6), cl5(5)
     real(dp) :: len, le, rho_a, ea, c(2), ell, f, cc(2, 2), de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
-    real(dp) :: cs, sn, g(2), om, al0, al, dpsi(sys%maxld), w0(2)
+    real(dp) :: cs, sn, g(2), om, al0, al, dpsi(sys%maxld), w0(2), d5(5), blk(5, 5)
     n = sys%n_el(l); nl = 3*n + 3
     len = sys%prop(1, l); rho_a = sys%prop(2, l); ea = sys%prop(3, l); le = len/n
     r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
-    if (want) then
-      m(1:nl, 1:nl) = 0.0_dp; cv(1:nl, 1:nl) = 0.0_dp; kt(1:nl, 1:nl) = 0.0_dp
-    end if
     do e = 1, n          ! distributed mass
       do k = 1, 4
-        call mass_point(sys, l, q, v, a, e, gx(k), ((e - 1) + gx(k))/n, gw(k)*rho_a*le, want, r, m, cv, kt, &
+        call mass_point(sys, l, q, v, a, e, gx(k), ((e - 1) + gx(k))/n, gw(k)*rho_a*le, want, ccv, ckt, r, lm, &
                         ekin, epot)
       end do
     end do
@@ -266,7 +299,7 @@ contains
       xi = sys%pm_prop(2, i)/le
       e = min(n, max(1, int(xi) + 1))
       call mass_point(sys, l, q, v, a, e, xi - (e - 1), sys%pm_prop(2, i)/len, sys%pm_prop(1, i), want, &
-                      r, m, cv, kt, ekin, epot)
+                      ccv, ckt, r, lm, ekin, epot)
     end do
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     do i = 1, sys%nri    ! rotary inertias turning with this link: psi = phi + th_k
@@ -277,17 +310,20 @@ contains
       psi_dd = al + a(k)
       r(1:nl) = r(1:nl) + sys%ri_j(i)*psi_dd*dpsi(1:nl)
       ekin = ekin + 0.5_dp*sys%ri_j(i)*(om + v(k))**2
-      if (want) then
-        do j = 1, nl
-          m(1:nl, j) = m(1:nl, j) + sys%ri_j(i)*dpsi(j)*dpsi(1:nl)
+      if (want) then     ! dpsi is nonzero on the local DOFs cl5 = [1..4, k] only
+        cl5 = [1, 2, 3, 4, k]
+        d5 = dpsi(cl5)
+        do j = 1, 5
+          blk(:, j) = sys%ri_j(i)*d5(j)*d5
         end do
         ! velocity dependence of psi'' through alpha0: d alpha0 / d c' = w0
         c = q(3:4) - q(1:2)
         w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*(v(3) - v(1)) + c(2)*(v(4) - v(2)))*g)
         do j = 1, 2
-          cv(1:nl, j) = cv(1:nl, j) - sys%ri_j(i)*w0(j)*dpsi(1:nl)
-          cv(1:nl, 2 + j) = cv(1:nl, 2 + j) + sys%ri_j(i)*w0(j)*dpsi(1:nl)
+          blk(:, j) = blk(:, j) - ccv*sys%ri_j(i)*w0(j)*d5
+          blk(:, 2 + j) = blk(:, 2 + j) + ccv*sys%ri_j(i)*w0(j)*d5
         end do
+        call lm_add_block(lm, l, 5, cl5, blk)
       end if
     end do
     ! chord stretch: U = 1/2 EA/L (|c| - L)^2
@@ -298,9 +334,9 @@ contains
     epot = epot + 0.5_dp*ea/len*(ell - len)**2
     if (want) then
       cc(:, 1) = c*c(1)/ell**2; cc(:, 2) = c*c(2)/ell**2
-      cc = ea/len*cc + f/ell*(reshape([1.0_dp, 0.0_dp, 0.0_dp, 1.0_dp], [2, 2]) - cc)
-      kt(1:2, 1:2) = kt(1:2, 1:2) + cc; kt(3:4, 3:4) = kt(3:4, 3:4) + cc
-      kt(1:2, 3:4) = kt(1:2, 3:4) - cc; kt(3:4, 1:2) = kt(3:4, 1:2) - cc
+      cc = ckt*(ea/len*cc + f/ell*(reshape([1.0_dp, 0.0_dp, 0.0_dp, 1.0_dp], [2, 2]) - cc))
+      lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) + cc; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) + cc
+      lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) - cc; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) - cc
     end if
     ! elastic strain energy and Rayleigh damping, element by element (local DOFs)
     do e = 1, n
@@ -324,8 +360,7 @@ contains
           if (idx(j) == 0) cycle
           do i = 1, 6
             if (idx(i) == 0) cycle
-            kt(idx(i), idx(j)) = kt(idx(i), idx(j)) + sys%ke(i, j, l)
-            cv(idx(i), idx(j)) = cv(idx(i), idx(j)) + ce(i, j)
+            call lm_add(lm, l, idx(i), idx(j), ckt*sys%ke(i, j, l) + ccv*ce(i, j))
           end do
         end do
       end if
@@ -389,28 +424,27 @@ contains
 
   !> Assemble the global residual R (all DOFs) and, if want, the band iteration matrix
   !> S = M + cc*C_v + ck*K_t over the free DOFs.  Returns energies [kinetic, strain].
-  subroutine assemble(sys, q, v, a, want, cc, ck, res, ab, energy)
+  subroutine assemble(sys, q, v, a, want, cc, ck, res, lm, energy)
     type(coupled_system), intent(in) :: sys
     real(dp), intent(in) :: q(:), v(:), a(:), cc, ck
     logical, intent(in) :: want
     real(dp), intent(out) :: res(:), energy(2)
-    real(dp), intent(inout) :: ab(:, :)
-    integer :: l, nl, i, s, idx(sys%maxld), fidx(sys%maxld)
-    real(dp) :: rl(sys%maxld), ml(sys%maxld, sys%maxld), cl(sys%maxld, sys%maxld), kl(sys%maxld, sys%maxld)
+    type(link_mats), intent(inout) :: lm
+    integer :: l, nl, i, s, idx(sys%maxld)
+    real(dp) :: rl(sys%maxld), ql(sys%maxld), vl(sys%maxld), al(sys%maxld)
     real(dp) :: ek, ep, psi, dpsi(sys%maxld), theta(max(1, sys%ntq)), tau
     res = 0.0_dp
     energy = 0.0_dp
-    if (want) ab = 0.0_dp
+    if (want) then
+      lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp
+    end if
     do l = 1, sys%nlinks
       nl = 3*sys%n_el(l) + 3
       idx(1:nl) = sys%ld(1:nl, l)
-      call link_eval(sys, l, q(idx(1:nl)), v(idx(1:nl)), a(idx(1:nl)), want, rl, ml, cl, kl, ek, ep)
+      ql(1:nl) = q(idx(1:nl)); vl(1:nl) = v(idx(1:nl)); al(1:nl) = a(idx(1:nl))
+      call link_eval(sys, l, ql(1:nl), vl(1:nl), al(1:nl), want, cc, ck, rl, lm, ek, ep)
       res(idx(1:nl)) = res(idx(1:nl)) + rl(1:nl)
       energy = energy + [ek, ep]
-      if (want) then
-        fidx(1:nl) = sys%free_of(idx(1:nl))
-        call band_add_element(ab, sys%kl, sys%ku, fidx(1:nl), ml(1:nl, 1:nl) + cc*cl(1:nl, 1:nl) + ck*kl(1:nl, 1:nl))
-      end if
     end do
     call joint_angles(sys, q, theta)
     do i = 1, sys%ntq      ! applied torques: generalized forces tau (d psi_b - d psi_a)
@@ -424,6 +458,247 @@ contains
       end do
     end do
   end subroutine assemble
+
+  !> Select the linear solver of coupled_run (SOLVER_AUTO, SOLVER_BAND or SOLVER_CONDENSED;
+  !> module-wide, for tests and benchmarks).  status = STATUS_BAD_INPUT for another value.
+  subroutine coupled_set_solver(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    status = STATUS_BAD_INPUT
+    if (mode < SOLVER_AUTO .or. mode > SOLVER_CONDENSED) return
+    solver_mode = mode
+    status = STATUS_OK
+  end subroutine coupled_set_solver
+
+  !> Allocate the segment-block storage of S (see link_mats) and, when every segment's elastic DOFs
+  !> are free and its own, the condensed solve's arrays for up to nrhs right-hand sides.
+  subroutine lm_setup(sys, nrhs, lm)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: nrhs
+    type(link_mats), intent(out) :: lm
+    integer :: l, n, nl, e, k, f, idx(6), lo, hi
+    integer, allocatable :: cnt(:), bnum(:)
+    logical, allocatable :: isb(:)
+    allocate (lm%off(sys%nlinks), lm%bfree(4, sys%nlinks))
+    lm%ni = 0; lm%kbi = 0
+    do l = 1, sys%nlinks
+      n = sys%n_el(l); nl = 3*n + 3
+      lm%off(l) = lm%ni
+      lm%ni = lm%ni + nl - 4
+      do e = 1, n           ! interior coupling is element by element: half band of the element DOFs
+        idx = elem_index(n, e)
+        lm%kbi = max(lm%kbi, maxval(idx) - minval(idx, mask=idx > 0))
+      end do
+    end do
+    lm%ldi = 3*lm%kbi + 1
+    lm%nrhs = max(1, nrhs)
+    allocate (lm%bb(4, 4, sys%nlinks), lm%bi(4, lm%ni), lm%ib(lm%ni, 4), lm%ai(lm%ldi, lm%ni), lm%ifree(lm%ni))
+    allocate (cnt(sys%nfree), isb(sys%nfree), bnum(sys%nfree))
+    cnt = 0; isb = .false.
+    lm%cond = .true.
+    do l = 1, sys%nlinks
+      nl = 3*sys%n_el(l) + 3
+      do k = 1, 4
+        f = sys%free_of(sys%ld(k, l))
+        if (f > 0) isb(f) = .true.
+      end do
+      do k = 5, nl
+        f = sys%free_of(sys%ld(k, l))
+        lm%ifree(lm%off(l) + k - 4) = f
+        if (f > 0) then
+          cnt(f) = cnt(f) + 1
+        else
+          lm%cond = .false.
+        end if
+      end do
+    end do
+    ! condensation needs: interior DOFs free, in one segment only, never an end position; every free
+    ! DOF interior or boundary
+    if (any(cnt > 1) .or. any(cnt > 0 .and. isb) .or. any(cnt == 0 .and. .not. isb)) lm%cond = .false.
+    lm%nb = count(isb)
+    if (lm%nb == 0) lm%cond = .false.
+    bnum = 0
+    allocate (lm%bglob(lm%nb))
+    k = 0
+    do f = 1, sys%nfree      ! boundary DOFs in the order of the free numbering (its band carries over)
+      if (.not. isb(f)) cycle
+      k = k + 1
+      bnum(f) = k; lm%bglob(k) = f
+    end do
+    lm%kbb = 0
+    do l = 1, sys%nlinks
+      lo = huge(1); hi = 0
+      do k = 1, 4
+        f = sys%free_of(sys%ld(k, l))
+        lm%bfree(k, l) = 0
+        if (f > 0) then
+          lm%bfree(k, l) = bnum(f)
+          lo = min(lo, bnum(f)); hi = max(hi, bnum(f))
+        end if
+      end do
+      if (hi > 0) lm%kbb = max(lm%kbb, hi - lo)
+    end do
+    lm%ldb = 3*lm%kbb + 1
+    if (lm%cond) then
+      allocate (lm%z(lm%ni, 4), lm%sb(lm%ldb, lm%nb), lm%ipi(lm%ni), lm%ipb(lm%nb), lm%yi(lm%ni, lm%nrhs), &
+                lm%yb(lm%nb, lm%nrhs))
+    end if
+  end subroutine lm_setup
+
+  !> S(i, j) += val for the local DOFs i, j of segment l (the entry must lie in the block structure).
+  pure subroutine lm_add(lm, l, i, j, val)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l, i, j
+    real(dp), intent(in) :: val
+    if (i <= 4) then
+      if (j <= 4) then
+        lm%bb(i, j, l) = lm%bb(i, j, l) + val
+      else
+        lm%bi(i, lm%off(l) + j - 4) = lm%bi(i, lm%off(l) + j - 4) + val
+      end if
+    else if (j <= 4) then
+      lm%ib(lm%off(l) + i - 4, j) = lm%ib(lm%off(l) + i - 4, j) + val
+    else
+      lm%ai(2*lm%kbi + 1 + i - j, lm%off(l) + j - 4) = lm%ai(2*lm%kbi + 1 + i - j, lm%off(l) + j - 4) + val
+    end if
+  end subroutine lm_add
+
+  !> S(cl(i), cl(j)) += blk(i, j), i, j = 1..ncl, local DOFs of segment l.
+  pure subroutine lm_add_block(lm, l, ncl, cl, blk)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l, ncl, cl(:)
+    real(dp), intent(in) :: blk(:, :)
+    integer :: i, j
+    do j = 1, ncl
+      do i = 1, ncl
+        call lm_add(lm, l, cl(i), cl(j), blk(i, j))
+      end do
+    end do
+  end subroutine lm_add_block
+
+  !> Scatter the segment blocks into the band matrix ab (LAPACK storage, kl = ku = sys%kl) over the
+  !> free DOFs: the reference solve and coupled_dense.
+  subroutine lm_to_band(sys, lm, ab)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(in) :: lm
+    real(dp), intent(out) :: ab(:, :)
+    integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d, fidx(sys%maxld)
+    ab = 0.0_dp
+    d = sys%kl + sys%ku + 1
+    do l = 1, sys%nlinks
+      nl = 3*sys%n_el(l) + 3; m = nl - 4; o = lm%off(l)
+      fidx(1:nl) = sys%free_of(sys%ld(1:nl, l))
+      do j = 1, 4
+        fj = fidx(j)
+        if (fj == 0) cycle
+        do i = 1, 4
+          fi = fidx(i)
+          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bb(i, j, l)
+        end do
+        do ii = 1, m
+          fi = fidx(4 + ii)
+          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ib(o + ii, j)
+        end do
+      end do
+      do jj = 1, m
+        fj = fidx(4 + jj)
+        if (fj == 0) cycle
+        do i = 1, 4
+          fi = fidx(i)
+          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bi(i, o + jj)
+        end do
+        do ii = max(1, jj - lm%kbi), min(m, jj + lm%kbi)
+          fi = fidx(4 + ii)
+          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ai(2*lm%kbi + 1 + ii - jj, o + jj)
+        end do
+      end do
+    end do
+  end subroutine lm_to_band
+
+  !> Condensed factorization: per segment S_II = LU (in place) and z = S_II^-1 S_IB; the Schur
+  !> complement sb = S_BB - S_BI z on the boundary DOFs, assembled and factorized (band kbb).
+  subroutine lm_factor(sys, lm, status)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer, intent(out) :: status
+    integer :: l, m, o, i, j, ii, bi, bj, info, d
+    real(dp) :: val
+    d = 2*lm%kbb + 1
+    lm%sb = 0.0_dp
+    do l = 1, sys%nlinks
+      m = 3*sys%n_el(l) - 1; o = lm%off(l)
+      call dgbtrf(m, m, lm%kbi, lm%kbi, lm%ai(1, o + 1), lm%ldi, lm%ipi(o + 1), info)
+      status = lapack_status(info)
+      if (status /= STATUS_OK) return
+      lm%z(o + 1:o + m, :) = lm%ib(o + 1:o + m, :)
+      call dgbtrs('N', m, lm%kbi, lm%kbi, 4, lm%ai(1, o + 1), lm%ldi, lm%ipi(o + 1), lm%z(o + 1, 1), lm%ni, info)
+      do j = 1, 4
+        bj = lm%bfree(j, l)
+        if (bj == 0) cycle
+        do i = 1, 4
+          bi = lm%bfree(i, l)
+          if (bi == 0) cycle
+          val = lm%bb(i, j, l)
+          do ii = 1, m
+            val = val - lm%bi(i, o + ii)*lm%z(o + ii, j)
+          end do
+          lm%sb(d + bi - bj, bj) = lm%sb(d + bi - bj, bj) + val
+        end do
+      end do
+    end do
+    call dgbtrf(lm%nb, lm%nb, lm%kbb, lm%kbb, lm%sb, lm%ldb, lm%ipb, info)
+    status = lapack_status(info)
+  end subroutine lm_factor
+
+  !> Solve S x = xx(:, k), k = 1..nrhs (nrhs <= lm%nrhs), with the condensed factorization, in place:
+  !> interior solves y = S_II^-1 r_I, boundary system sb x_B = r_B - S_BI y, back substitution
+  !> x_I = y - z x_B.
+  subroutine lm_solve(sys, lm, nrhs, xx, ldx, status)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: nrhs, ldx
+    real(dp), intent(inout) :: xx(ldx, *)
+    integer, intent(out) :: status
+    integer :: l, m, o, i, j, k, b, info
+    status = STATUS_OK
+    do k = 1, nrhs
+      do i = 1, lm%ni
+        lm%yi(i, k) = xx(lm%ifree(i), k)
+      end do
+      do i = 1, lm%nb
+        lm%yb(i, k) = xx(lm%bglob(i), k)
+      end do
+    end do
+    do l = 1, sys%nlinks
+      m = 3*sys%n_el(l) - 1; o = lm%off(l)
+      call dgbtrs('N', m, lm%kbi, lm%kbi, nrhs, lm%ai(1, o + 1), lm%ldi, lm%ipi(o + 1), lm%yi(o + 1, 1), lm%ni, info)
+      do k = 1, nrhs
+        do i = 1, 4
+          b = lm%bfree(i, l)
+          if (b > 0) lm%yb(b, k) = lm%yb(b, k) - dot_product(lm%bi(i, o + 1:o + m), lm%yi(o + 1:o + m, k))
+        end do
+      end do
+    end do
+    call dgbtrs('N', lm%nb, lm%kbb, lm%kbb, nrhs, lm%sb, lm%ldb, lm%ipb, lm%yb, lm%nb, info)
+    do l = 1, sys%nlinks
+      m = 3*sys%n_el(l) - 1; o = lm%off(l)
+      do k = 1, nrhs
+        do j = 1, 4
+          b = lm%bfree(j, l)
+          if (b > 0) lm%yi(o + 1:o + m, k) = lm%yi(o + 1:o + m, k) - lm%z(o + 1:o + m, j)*lm%yb(b, k)
+        end do
+      end do
+    end do
+    do k = 1, nrhs
+      do i = 1, lm%ni
+        xx(lm%ifree(i), k) = lm%yi(i, k)
+      end do
+      do i = 1, lm%nb
+        xx(lm%bglob(i), k) = lm%yb(i, k)
+      end do
+    end do
+    if (.not. ieee_is_finite(sum(abs(lm%yb(:, 1:nrhs))) + sum(abs(lm%yi(:, 1:nrhs))))) status = STATUS_NONFINITE
+  end subroutine lm_solve
 
   !> Angle sum of constraint ic, sum_s sign_s psi_s (psi = phi + th_end, ground = 0), its gradient
   !> over the free DOFs, and the velocity part of its second time derivative.
@@ -525,10 +800,11 @@ contains
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), theta0(:), theta1(:), w(:)
     real(dp), allocatable :: gt(:, :), x(:, :), amat(:, :), lam(:), dlam(:), gval(:), acc0(:), ang0(:), ang1(:), lam0(:)
-    integer, allocatable :: ipiv(:), freeidx(:), ipc(:)
+    integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref
-    logical :: converged, refactor
+    logical :: converged, refactor, use_cond
+    type(link_mats) :: lm
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0
     nsteps = size(presc, 3) - 1
     nf = sys%nfree
@@ -551,21 +827,31 @@ contains
     ! the Newton test, for steps where the accelerations themselves vanish (a smooth start from rest)
     lref = max(maxval(abs(q)), tiny(1.0_dp))
     gammap = gamma*(1.0_dp - alpha_f)*c1
-    allocate (ab(band_rows(sys%kl, sys%ku), nf), res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf))
+    call lm_setup(sys, nc, lm)
+    use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
+                              (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
+    if (use_cond) then
+      allocate (ab(1, 1))
+    else
+      allocate (ab(band_rows(sys%kl, sys%ku), nf))
+    end if
+    allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf))
     allocate (w(sys%ndof))
     w = 0.0_dp
     allocate (theta0(max(1, sys%ntq)), theta1(max(1, sys%ntq)), freeidx(nf))
     allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
               dlam(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), ang0(max(1, nc)), ang1(max(1, nc)), ipc(max(1, nc)), &
               lam0(max(1, nc)))
+    allocate (gnz(10, max(1, nc)), ngnz(max(1, nc)))
     do i = 1, sys%ndof
       if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
     end do
+    call gradient_pattern()
     lam = 0.0_dp
     call set_prescribed(1)
     ! consistent initial acceleration: [M G; G^T 0] [a; lam] = [-R(q0, v0, 0); cval'' - acc0]
     a(freeidx) = 0.0_dp
-    call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, ab, energy)
+    call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, lm, energy)
     rf = -res(freeidx)
     call factor()
     if (status /= STATUS_OK) return
@@ -573,9 +859,13 @@ contains
     if (status /= STATUS_OK) return
     call band_solve_rhs(rf)
     if (nc > 0) then
-      dlam(1:nc) = matmul(transpose(gt(:, 1:nc)), rf) - (cval(3, 1:nc, 1) - acc0(1:nc))
+      do i = 1, nc
+        dlam(i) = gdot(i, rf) - (cval(3, i, 1) - acc0(i))
+      end do
       call small_solve(dlam)
-      rf = rf - matmul(x(:, 1:nc), dlam(1:nc))
+      do i = 1, nc
+        rf = rf - x(:, i)*dlam(i)
+      end do
       lam(1:nc) = dlam(1:nc)
     end if
     if (status /= STATUS_OK) return
@@ -600,7 +890,7 @@ contains
       do it = 1, maxit
         q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
         v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
-        call assemble(sys, q, v, a, it == 1, gammap*dt, betap*dt*dt, res, ab, energy)
+        call assemble(sys, q, v, a, it == 1, gammap*dt, betap*dt*dt, res, lm, energy)
         if (it == 1) then
           call factor()
           if (status /= STATUS_OK) exit
@@ -611,10 +901,14 @@ contains
         call band_solve_rhs(rf)
         if (status /= STATUS_OK) exit
         if (nc > 0) then   ! Schur complement on the multipliers
-          dlam(1:nc) = matmul(transpose(gt(:, 1:nc)), rf) + gval(1:nc)/(betap*dt*dt)
+          do i = 1, nc
+            dlam(i) = gdot(i, rf) + gval(i)/(betap*dt*dt)
+          end do
           call small_solve(dlam)
           if (status /= STATUS_OK) exit
-          rf = rf - matmul(x(:, 1:nc), dlam(1:nc))
+          do i = 1, nc
+            rf = rf - x(:, i)*dlam(i)
+          end do
           lam(1:nc) = lam(1:nc) + dlam(1:nc)
         end if
         a(freeidx) = a(freeidx) + rf
@@ -656,7 +950,7 @@ contains
       ang0 = ang1
       lam0 = lam
       if (mod(n, out_every) == 0) then
-        call assemble(sys, q, v, a, .false., 0.0_dp, 0.0_dp, res, ab, energy)
+        call assemble(sys, q, v, a, .false., 0.0_dp, 0.0_dp, res, lm, energy)
         frame = frame + 1
         qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a; lf(:, frame) = lam(1:size(lf, 1))
         ef(:, frame) = [energy(1), energy(2), work, real(itmax_frame, dp)]
@@ -666,6 +960,38 @@ contains
     end do
 
   contains
+
+    !> Free DOFs on which constraint ic's gradient can be nonzero (the end positions and the
+    !> end rotation of its one or two segments), without repetitions: gnz(1:ngnz(ic), ic).
+    subroutine gradient_pattern()
+      integer :: ic, s, l, k, f, loc(5)
+      ngnz = 0
+      do ic = 1, nc
+        do s = 1, 2
+          l = sys%con_link(s, ic)
+          if (l == 0) cycle
+          loc = [1, 2, 3, 4, th_index(sys%n_el(l), sys%con_end(s, ic)*sys%n_el(l))]
+          do k = 1, 5
+            f = sys%free_of(sys%ld(loc(k), l))
+            if (f == 0) cycle
+            if (any(gnz(1:ngnz(ic), ic) == f)) cycle
+            ngnz(ic) = ngnz(ic) + 1
+            gnz(ngnz(ic), ic) = f
+          end do
+        end do
+      end do
+    end subroutine gradient_pattern
+
+    !> G(:, ic)^T y over the gradient's nonzero pattern.
+    pure real(dp) function gdot(ic, y)
+      integer, intent(in) :: ic
+      real(dp), intent(in) :: y(:)
+      integer :: k
+      gdot = 0.0_dp
+      do k = 1, ngnz(ic)
+        gdot = gdot + gt(gnz(k, ic), ic)*y(gnz(k, ic))
+      end do
+    end function gdot
 
     pure real(dp) function wrap(x)
       real(dp), intent(in) :: x
@@ -711,23 +1037,42 @@ contains
       end do
       if (nc > 0 .and. refactor) then
         x(:, 1:nc) = gt(:, 1:nc)
-        call dgbtrs('N', nf, sys%kl, sys%ku, nc, ab, size(ab, 1), ipiv, x, nf, info)
-        amat(1:nc, 1:nc) = matmul(transpose(gt(:, 1:nc)), x(:, 1:nc))
+        if (use_cond) then
+          call lm_solve(sys, lm, nc, x, nf, status)
+          if (status /= STATUS_OK) return
+        else
+          call dgbtrs('N', nf, sys%kl, sys%ku, nc, ab, size(ab, 1), ipiv, x, nf, info)
+        end if
+        do j = 1, nc
+          do ic = 1, nc
+            amat(ic, j) = gdot(ic, x(:, j))
+          end do
+        end do
         call dgetrf(nc, nc, amat, size(amat, 1), ipc, info)
         status = lapack_status(info)
         refactor = .false.
       end if
     end subroutine constraints
 
+    !> Factorize S (assembled in lm): condensed, or the whole band (reference).
     subroutine factor()
-      call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
-      status = lapack_status(info)
+      if (use_cond) then
+        call lm_factor(sys, lm, status)
+      else
+        call lm_to_band(sys, lm, ab)
+        call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
+        status = lapack_status(info)
+      end if
       refactor = .true.
     end subroutine factor
 
     subroutine band_solve_rhs(xx)
       real(dp), intent(inout) :: xx(:)
-      call dgbtrs('N', nf, sys%kl, sys%ku, 1, ab, size(ab, 1), ipiv, xx, nf, info)
+      if (use_cond) then
+        call lm_solve(sys, lm, 1, xx, nf, status)
+      else
+        call dgbtrs('N', nf, sys%kl, sys%ku, 1, ab, size(ab, 1), ipiv, xx, nf, info)
+      end if
       if (.not. ieee_is_finite(sum(abs(xx)))) status = STATUS_NONFINITE
     end subroutine band_solve_rhs
 
