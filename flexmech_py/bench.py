@@ -67,6 +67,20 @@ def flops_newton(n: int, kl: int, ku: int, iterations: float, nc: int = 0) -> di
     return f
 
 
+def flops_condensed(interior: list, nb: int, kbb: int, iterations: float, nc: int = 0, kbi: int = 5) -> dict:
+    """Lower bound for one Newton step of the coupled model with the condensed solve (theory.md
+    section 11.3): per segment with m interior elastic DOFs (band kbi), a banded LU 2 m kbi (2 kbi),
+    4 solves for its end-position columns 4 * 2 m (3 kbi) and the 4 x 4 Schur update 2 * 16 m; the
+    condensed system of the nb free end positions (band kbb) factorized, 2 nb kbb (2 kbb); per
+    right-hand side (Newton iterations and constraint columns) a banded solve 2 m (3 kbi), the
+    border products 2 * 2 * 4 m per segment and a condensed solve 2 nb (3 kbb)."""
+    m = float(sum(interior))
+    f = {"factorization": m * (2 * kbi * 2 * kbi + 4 * 2 * 3 * kbi + 32) + 2 * nb * kbb * 2 * kbb,
+         "solve": (iterations + nc) * (m * (2 * 3 * kbi + 16) + 2 * nb * 3 * kbb)}
+    f["total"] = sum(f.values())
+    return f
+
+
 def fit_exponent(x, y) -> float:
     """Least-squares slope of log y against log x (nan with fewer than 2 points)."""
     x, y = np.asarray(x, float), np.asarray(y, float)
@@ -201,15 +215,12 @@ def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
     preps = {}
     for model in MODELS:
         for epl in ladder:
-            if model == "coupled" and epl > (8 if quick else 64):
-                continue   # arrowhead band: cost ~ epl^3 per step (docs/performance.md)
             steps = _ladder_steps(model, epl, quick)
             key = (epl, steps)
             if key not in preps:
                 preps = {k: v for k, v in preps.items() if k[0] == epl}   # keep memory bounded
                 preps[key] = Prepared(_case(seed, steps, 10), elements_per_link=epl)
-                # the dense zero-stiffness check (simulate.check_elastic_problem) flags false modes on
-                # fine meshes (EI/L^3 against EA/L spans more than its 1e-10 threshold): a timing run skips it
+                # the zero-stiffness check (a dense eigenvalue problem) would cost more than a timing run
                 preps[key]._checked = True
             p = preps[key]
             reps = 3 if steps * epl <= 20000 and model not in ("coupled", "nonlinear") else 1
@@ -230,7 +241,13 @@ def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
                 cm = p.coupled[model]
                 n, kb = int(cm.free_of.max()), _coupled_band(cm)
                 it = res.extra["coupled"]["newton"]["mean_per_step"]
-                fl = flops_newton(n, kb, kb, it, len(cm.constraints))
+                if kb > 5 + 4:   # the kernel's automatic choice: condensed when the arrowheads widen the band
+                    interior = [3 * int(k) - 1 for k in cm.n_el]
+                    nb = n - sum(interior)
+                    fl = flops_condensed(interior, nb, min(nb - 1, 7), it, len(cm.constraints))
+                    kb = 5
+                else:
+                    fl = flops_newton(n, kb, kb, it, len(cm.constraints))
             else:
                 n, kb, it = fe.nfree, fe.bandwidth, float("nan")
                 fl = flops_superposition(fe.nel, len(fe.n_el), n, kb, model)
