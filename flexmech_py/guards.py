@@ -338,6 +338,11 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
     elif hs is None and ratio is not None and ratio > 0.25:
         cause = "step_too_large"
         ctext = f"probably the time step{res_txt}; reduce solver.dt"
+    elif code == kernels.STATUS_NEWTON and ratio is not None and ratio > 10 and not _grew(res):
+        cause = "step_too_large"
+        ctext = (f"the time step is far above the shortest elastic period{res_txt}: the iteration cannot settle the "
+                 "unresolved stiff (axial) modes, also at dt/2; reduce solver.dt toward that period, use "
+                 "--integrator generalized-alpha, or fewer elements per link")
     elif not _grew(res) and code == kernels.STATUS_NEWTON:
         cause = "solver_settings"
         ctext = ("the motion had not grown before the failure and it persists at dt/2: solver.newton_tol is below what "
