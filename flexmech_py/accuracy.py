@@ -43,15 +43,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .case import MODELS, apply_overrides, validate_case
+from .case import MODELS, apply_overrides, read_case_file, validate_case
 from .errors import CaseError
 from .parallel import run_tasks
 from .results import _atomic_write, _json_default
-
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover
-    import tomli as tomllib
 
 __all__ = ["accuracy_study", "run_point", "richardson", "successive_orders", "parse_integrators", "Integrator",
            "Study", "INTEGRATORS", "DEFAULT_KINDS"]
@@ -289,17 +284,6 @@ class Study:
     settings: dict = field(default_factory=dict)
 
 
-def _read_raw(case_path) -> tuple[dict, str]:
-    path = Path(case_path)
-    if not path.is_file():
-        raise CaseError("case", f"{str(path)!r} does not exist; give a TOML case file")
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh), str(path)
-    except tomllib.TOMLDecodeError as exc:
-        raise CaseError("case", f"{path}: invalid TOML ({exc})") from None
-
-
 def _uniform_mesh(case: dict):
     ns = {ln["elements"] for ln in case["links"]}
     return ns.pop() if len(ns) == 1 else None
@@ -323,7 +307,7 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
     """
     if clock not in ("cpu", "wall"):
         raise CaseError("--clock", f"must be cpu or wall, got {clock!r}")
-    raw0, source = _read_raw(case_path)
+    raw0, source = read_case_file(case_path), str(case_path)
     raw = apply_overrides(raw0, list(overrides))
     case = validate_case(raw, source=source)
     sol = case["solver"]

@@ -458,15 +458,21 @@ def validate_case(raw: dict, source: str = "<case>") -> dict:
     return r
 
 
-def load_case(path, overrides: list[str] | None = None) -> dict:
-    """Read, override (``KEY.PATH=VALUE`` strings) and validate a TOML case file."""
+def read_case_file(path) -> dict:
+    """The raw (unvalidated) table of a TOML case file; CaseError when it is missing or not TOML."""
     path = Path(path)
     if not path.is_file():
         raise CaseError("case file", f"{str(path)!r} does not exist; give the path of a .toml case file")
     try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise CaseError("case file", f"{path}: not valid TOML ({exc}); fix the syntax") from None
+
+
+def load_case(path, overrides: list[str] | None = None) -> dict:
+    """Read, override (``KEY.PATH=VALUE`` strings) and validate a TOML case file."""
+    path = Path(path)
+    raw = read_case_file(path)
     if overrides:
         raw = apply_overrides(raw, overrides)
     case = validate_case(raw, source=str(path))

@@ -26,7 +26,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import scipy.linalg as sl
 
 from .case import load_case
 from .errors import FlexmechError
@@ -99,8 +98,7 @@ def lowest_frequencies(prep: Prepared, nmodes: int = 2, samples: int = 72, model
     idx = np.linspace(0, prep.nsteps, samples).round().astype(int)
     out = []
     for k in idx:
-        m, _, kk, _ = prep.fe.matrices(prep.rig[:, :, k], model)
-        lam = sl.eigh(0.5 * (kk + kk.T), m, eigvals_only=True)[:nmodes]
+        lam = prep.fe.squared_frequencies(prep.rig[:, :, k], model)[:nmodes]
         out.append(np.sign(lam) * np.sqrt(np.abs(lam)))
     return np.array(out)
 
@@ -142,8 +140,7 @@ def stiff_study(integrators=("newmark", "galpha-0.95", "galpha-0.9", "galpha-0.8
     kw = {"elements_per_link": elements} if elements else {}
     prep0 = Prepared(load("stiff_fourbar", sets), **kw)
     w = lowest_frequencies(prep0, 1, 12)
-    m, _, kk, _ = prep0.fe.matrices(prep0.rig[:, :, 0])
-    wmax = float(np.sqrt(sl.eigh(kk, m, eigvals_only=True)[-1]))
+    wmax = float(np.sqrt(prep0.fe.squared_frequencies(prep0.rig[:, :, 0])[-1]))
     rows, series = [], {}
     for lab in integrators:
         res, err = run_case("stiff_fourbar", sets + integrator_overrides(lab), **kw)
@@ -652,6 +649,13 @@ def plots(results: dict, out: Path) -> list[Path]:
     except ImportError:
         return []
     paths = []
+
+    def save(name: str, fig) -> None:
+        fig.tight_layout()
+        paths.append(out / name)
+        fig.savefig(paths[-1], dpi=110)
+        plt.close(fig)
+
     if "spinup" in results:
         series = results["spinup"][1]
         fig, axs = plt.subplots(len(series), 1, figsize=(8, 3 * len(series)), squeeze=False)
@@ -667,10 +671,7 @@ def plots(results: dict, out: Path) -> list[Path]:
             ax.set_ylabel("tip transverse [m]")
             ax.legend(fontsize=7, loc="lower left")
         axs[-1, 0].set_xlabel("t [s]")
-        fig.tight_layout()
-        paths.append(out / "extreme_spinup_tip.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        save("extreme_spinup_tip.png", fig)
     if "stiff" in results:
         series = results["stiff"][1]
         fig, ax = plt.subplots(figsize=(8, 3.5))
@@ -680,10 +681,7 @@ def plots(results: dict, out: Path) -> list[Path]:
         ax.set_ylabel("coupler midspan strain")
         ax.set_title("E × 10⁴, dt = 1e-4 s (280 × the highest period)", fontsize=9)
         ax.legend(fontsize=7)
-        fig.tight_layout()
-        paths.append(out / "extreme_stiff_strain.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        save("extreme_stiff_strain.png", fig)
     if "critical" in results:
         pts = results["critical"][1]
         sp = np.array([p["speed"] for p in pts])
@@ -705,10 +703,7 @@ def plots(results: dict, out: Path) -> list[Path]:
         ax.set_ylabel("growth per crank cycle")
         ax.set_title("shaded (frozen ω₁, ω₂ along the cycle): green k·Ω = ω_i, k = 1, 2; red ω_i + ω_j = Ω", fontsize=9)
         ax.legend(fontsize=7)
-        fig.tight_layout()
-        paths.append(out / "extreme_critical_speeds.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        save("extreme_critical_speeds.png", fig)
     if "long_run" in results:
         series = results["long_run"][1]
         fig, ax = plt.subplots(figsize=(8, 3.5))
@@ -718,10 +713,7 @@ def plots(results: dict, out: Path) -> list[Path]:
         ax.set_xlabel("crank cycle")
         ax.set_ylabel("coupler strain, peak-to-peak per cycle")
         ax.legend(fontsize=7)
-        fig.tight_layout()
-        paths.append(out / "extreme_long_run_amplitude.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        save("extreme_long_run_amplitude.png", fig)
     if "torque_step" in results:
         series = results["torque_step"][1]
         keys = [k for k in series if k[0] == "coupled"] or list(series)
@@ -734,10 +726,7 @@ def plots(results: dict, out: Path) -> list[Path]:
         ax.set_xlabel("ω [rad/s]")
         ax.set_ylabel("|FFT| link-2 axial force [N]")
         ax.legend(fontsize=6)
-        fig.tight_layout()
-        paths.append(out / "extreme_torque_step_spectrum.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        save("extreme_torque_step_spectrum.png", fig)
     return paths
 
 

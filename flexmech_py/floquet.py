@@ -233,11 +233,7 @@ def frozen_frequencies(pc: PeriodicCase, fr: FloquetResult, nmodes: int = 4, sam
     out = np.empty((frames.size, min(nmodes, fe.nfree)))
     for r, (fi, si) in enumerate(zip(frames, steps)):
         rig = prep.rig[:, :, si]
-        m, _, k, _ = fe.matrices(rig, pc.model)
-        if pc.geometric == "quasi_static":
-            k = k + fe.geometric_matrix(rig, fr.nf_rest[:, fi])
-        lam = np.linalg.eigvals(np.linalg.solve(m, k))
-        lam = np.sort(lam.real)
+        lam = fe.squared_frequencies(rig, pc.model, fr.nf_rest[:, fi] if pc.geometric == "quasi_static" else None)
         out[r] = np.sqrt(np.maximum(lam[: out.shape[1]], 0.0)) * np.sign(lam[: out.shape[1]])
     return out
 

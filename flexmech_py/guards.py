@@ -24,6 +24,7 @@ import numpy as np
 
 from . import coupled, kernels
 from .errors import SolverError
+from .model import squared_frequencies
 
 __all__ = ["check_validity", "failed", "error_estimate", "frames_before", "partial_or", "ORDER"]
 
@@ -229,20 +230,18 @@ def _grew(res) -> bool:
 def _shortest_period(prep, model: str, res, data) -> float | None:
     """Shortest natural period [s] of the elastic model linearized at the last kept frame (dense
     eigenproblem; None for models above 1500 free DOFs)."""
-    import scipy.linalg
-
     try:
         if model in LINEAR_MODELS:
             if prep.fe.nfree > 1500:
                 return None
-            m, _, k, _ = prep.fe.matrices(res.rig[:, :, -1], model)
+            lam = prep.fe.squared_frequencies(res.rig[:, :, -1], model)
         else:
             cm = data["cm"]
             if cm is None or int(cm.free_of.max()) > 1500:
                 return None
             _, m, _, k, _ = cm.dense(data["qf"][:, res.t.size - 1], np.zeros(cm.ndof), np.zeros(cm.ndof),
                                      gravity=prep.gravity)
-        lam = scipy.linalg.eigh(0.5 * (k + k.T), 0.5 * (m + m.T), eigvals_only=True)
+            lam = squared_frequencies(m, k)
     except Exception:   # a diagnosis must never hide the original failure
         return None
     lmax = float(np.max(lam))
@@ -367,17 +366,12 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
 
 
 # ----------------------------------------------------------------------------- error estimate
-def coarsened(prep):
-    """A Prepared run on every second step of ``prep``'s grid (:meth:`Prepared.coarsened`)."""
-    return prep.coarsened()
-
-
 SKIP_COLUMNS = ("newton_iterations",)   # solver statistics, not outputs
 
 
 def error_estimate(prep, res, geometric=None) -> dict:
     """Step-doubling estimate of the time-discretization error of every output column of ``res``."""
-    pc = coarsened(prep)
+    pc = prep.coarsened()   # the same rigid solution on every second step
     out = {"method": "time", "order": ORDER, "dt": prep.dt}
     if pc is None:
         return dict(out, method="none", reason="too few steps for a run at 2 dt")

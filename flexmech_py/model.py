@@ -57,6 +57,15 @@ def mechanism_joints(case: dict) -> list[Joint]:
     return joints
 
 
+def squared_frequencies(m: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Ascending eigenvalues w^2 [rad^2/s^2] of K x = w^2 M x (K and M symmetrized), via the Cholesky
+    factor of M (NumPy only).  Negative values: the frozen system is unstable in that mode.  Raises
+    numpy.linalg.LinAlgError when M is not positive definite."""
+    lc = np.linalg.cholesky(0.5 * (m + m.T))
+    a = np.linalg.solve(lc, np.linalg.solve(lc, 0.5 * (k + k.T)).T)
+    return np.linalg.eigvalsh(0.5 * (a + a.T))
+
+
 def reverse_cuthill_mckee(neighbours: list) -> np.ndarray:
     """Reverse Cuthill-McKee order of a graph given as sorted neighbour arrays (self included).
 
@@ -325,6 +334,15 @@ class FEModel:
             self.nfree, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig)
         kernels.check_status(status, "ked_matrices")
         return mm, cm, km, f
+
+    def squared_frequencies(self, rig: np.ndarray, model: str = "hac", nax=None) -> np.ndarray:
+        """Ascending w^2 of the frozen configuration at one rigid sample: (K [+ K_sigma(nax)], M) over
+        the free DOFs, K the stiffness the model uses there (elastic, centrifugal and angular-
+        acceleration terms; gyroscopic and damping terms left out).  See :func:`squared_frequencies`."""
+        m, _, k, _ = self.matrices(rig, model)
+        if nax is not None:
+            k = k + self.geometric_matrix(rig, nax)
+        return squared_frequencies(m, k)
 
     def geometric_matrix(self, rig: np.ndarray, nax: np.ndarray) -> np.ndarray:
         """Dense geometric stiffness over the free DOFs at one rigid sample for element axial forces

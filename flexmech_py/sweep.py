@@ -13,13 +13,12 @@ import copy
 import json
 import math
 import time
-import tomllib
 from itertools import product
 from pathlib import Path
 
 import numpy as np
 
-from .case import _parse_value, apply_overrides, validate_case
+from .case import _parse_value, apply_overrides, read_case_file, validate_case
 from .errors import CaseError
 
 __all__ = ["parse_param", "grid_points", "sweep", "sweep_point", "TIMING_COLUMNS"]
@@ -111,13 +110,7 @@ def sweep(case_path, params: list[str], *, model: str | None = None, overrides=(
     from .results import _atomic_write, _json_default, versions
 
     path = Path(case_path)
-    if not path.is_file():
-        raise CaseError("case file", f"{str(path)!r} does not exist; give the path of a .toml case file")
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise CaseError("case file", f"{path}: not valid TOML ({exc}); fix the syntax") from None
-    base = apply_overrides(raw, list(overrides))
+    base = apply_overrides(read_case_file(path), list(overrides))
     validate_case(copy.deepcopy(base), source=str(path))      # a broken base case fails once, here
     axes = [parse_param(p) for p in params]
     points = grid_points(axes)

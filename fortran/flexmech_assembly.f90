@@ -9,7 +9,7 @@ module flexmech_assembly
   use flexmech_kinds, only: dp
   implicit none
   private
-  public :: band_rows, band_add_element, band_add_element6, band_add_diagonal, half_bandwidth, band_to_dense
+  public :: band_rows, band_add_element6, band_add_diagonal, half_bandwidth, band_to_dense
 
 contains
 
@@ -32,26 +32,8 @@ contains
     end do
   end function half_bandwidth
 
-  !> ab += element matrix ke scattered to the free DOFs idx.
-  pure subroutine band_add_element(ab, kl, ku, idx, ke)
-    real(dp), intent(inout) :: ab(:, :)  !< band storage (2kl+ku+1, n)
-    integer, intent(in) :: kl, ku
-    integer, intent(in) :: idx(:)        !< free-DOF numbers of the element DOFs, 0 = constrained
-    real(dp), intent(in) :: ke(:, :)     !< element matrix (size(idx), size(idx))
-    integer :: a, b, i, j, d
-    d = kl + ku + 1
-    do b = 1, size(idx)
-      j = idx(b)
-      if (j == 0) cycle
-      do a = 1, size(idx)
-        i = idx(a)
-        if (i == 0) cycle
-        ab(d + i - j, j) = ab(d + i - j, j) + ke(a, b)
-      end do
-    end do
-  end subroutine band_add_element
-
-  !> band_add_element for a 6-DOF element (explicit shapes: the time loop's assembly, no descriptors).
+  !> ab += the 6 x 6 element matrix ke scattered to the free DOFs idx (explicit shapes: the time
+  !> loop's assembly, no array descriptors).
   pure subroutine band_add_element6(ab, ldab, kl, ku, idx, ke)
     integer, intent(in) :: ldab, kl, ku
     real(dp), intent(inout) :: ab(ldab, *)  !< band storage (2kl+ku+1, n)
