@@ -1,31 +1,37 @@
 """Case files: TOML schema, defaults, validation and ``--set`` overrides.
 
-A case is read into a plain nested ``dict`` (the *resolved input*: every
-default filled in, every value checked), which is what ``summary.json``
-records.  The schema is documented in ``docs/cases.md``; every error is a
-:class:`~flexmech_py.errors.CaseError` naming the field and the fix.
+A case is read into a :class:`Case`: a plain nested ``dict`` (the *resolved input*: every default
+filled in, every value checked; what ``summary.json`` records) whose ``mechanism`` property is the
+:class:`~flexmech_py.mechanism.Mechanism` it describes.  The schema is documented in
+``docs/cases.md``: the mechanism's tables (links, bodies, joints, drives; or a template in its short
+form, expanded by :mod:`flexmech_py.mechanism.templates`), the mesh, lumped inertias, loads, the
+solver and the outputs.  Every error is a :class:`~flexmech_py.errors.CaseError` naming the field
+and the fix.
 """
 
 from __future__ import annotations
 
 import copy
-import math
-import re
+import json
 from pathlib import Path
 
+from . import validate as v
 from .errors import CaseError
+from .mechanism import mechanism_from_spec
+from .mechanism.schema import mechanism_spec
+from .mechanism.templates import expand_template
+from .tomlfile import dumps_toml
 
 try:  # Python >= 3.11
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["load_case", "validate_case", "apply_overrides", "MODELS", "SUPERPOSITION_MODELS", "JOINTS_OF", "OUTPUT_KINDS",
+__all__ = ["Case", "load_case", "validate_case", "apply_overrides", "MODELS", "SUPERPOSITION_MODELS", "OUTPUT_KINDS",
            "INTEGRATORS", "integrator_coefficients", "DIVERGENCE_FACTOR"]
 
 SUPERPOSITION_MODELS = ("hac", "classic", "classic-translational")
 MODELS = SUPERPOSITION_MODELS + ("coupled", "nonlinear")
-MECHANISMS = ("fourbar", "serial")
 INTEGRATORS = ("newmark", "hht", "generalized-alpha")
 # the parameter key of each integrator (solver.<key>), its default and its range
 INTEGRATOR_PARAMS = {"newmark": ("beta", "gamma"), "hht": ("hht_alpha",), "generalized-alpha": ("rho_inf",)}
@@ -35,6 +41,7 @@ DIVERGENCE_FACTOR = 1.0   # default solver.divergence_limit = DIVERGENCE_FACTOR 
 OUTPUT_KINDS = {
     # kind: (required keys, optional keys with defaults)
     "joint_angle": ({"joint"}, {}),
+    "joint_displacement": ({"joint"}, {}),
     "joint_speed": ({"joint"}, {}),
     "joint_acceleration": ({"joint"}, {}),
     "link_angle": ({"link"}, {}),
@@ -44,95 +51,64 @@ OUTPUT_KINDS = {
     "position": ({"at", "component"}, {}),
     "inertia_load": ({"component"}, {"at": None, "model": "run"}),
     "axial_force": ({"link"}, {"at": 0.5}),
+    "reaction": ({"joint", "component"}, {}),
+    "drive_force": ({"joint"}, {}),
 }
 COMPONENTS = {
     "displacement": ("x", "y", "rotation", "axial", "transverse"),
     "position": ("x", "y"),
     "inertia_load": ("x", "y", "rotation", "norm"),
+    "reaction": ("x", "y", "magnitude", "moment"),
 }
 UNITS = {
-    "joint_angle": "rad", "joint_speed": "rad/s", "joint_acceleration": "rad/s^2", "link_angle": "rad",
-    "strain": "1", "curvature": "1/m", "position": "m", "axial_force": "N",
+    "joint_angle": "rad", "joint_displacement": "m", "link_angle": "rad", "strain": "1", "curvature": "1/m",
+    "position": "m", "axial_force": "N",
 }
 ERROR_ESTIMATES = ("time", "none")   # step doubling (one more run at 2 dt), or nothing (guards.py)
-_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+TOP_KEYS = {"case", "mechanism", "links", "bodies", "mesh", "joints", "drive", "drives", "initial", "point_masses",
+            "rotary_inertias", "loads", "solver", "outputs"}
 
 
-def JOINTS_OF(mech_type: str, nlinks: int) -> dict[str, tuple[str, ...]]:
-    """Joints of a mechanism type: name -> allowed elastic conditions (first = default)."""
-    if mech_type == "fourbar":
-        return {
-            "crank_pivot": ("clamp", "pin", "torque"),
-            "crank_coupler": ("pin", "locked", "torque"),
-            "coupler_follower": ("pin", "locked", "torque"),
-            "follower_pivot": ("pin", "clamp", "torque"),
-        }
-    joints = {"base": ("clamp", "pin", "torque")}
-    for k in range(2, nlinks + 1):
-        joints[f"joint_{k}"] = ("locked", "pin", "torque")
-    return joints
+class Case(dict):
+    """A resolved case (a dict: the case-file tables, checked and with every default) whose
+    :attr:`mechanism` is the Mechanism it describes.  Build one with :func:`load_case`,
+    :func:`validate_case` (a raw dict) or :meth:`from_mechanism`; write it with :meth:`write`."""
+
+    @property
+    def mechanism(self):
+        """The :class:`~flexmech_py.mechanism.Mechanism` of the case's current tables (rebuilt when the
+        tables change, e.g. after a study edits a copy)."""
+        key = json.dumps([self.get(k) for k in ("mechanism", "links", "bodies", "joints", "drives", "initial",
+                                                 "point_masses", "rotary_inertias")], sort_keys=True, default=str)
+        cached = self.__dict__.get("_mechanism")
+        if cached is None or cached[0] != key:
+            cached = (key, mechanism_from_spec(self))
+            self.__dict__["_mechanism"] = cached
+        return cached[1]
+
+    @classmethod
+    def from_mechanism(cls, mech, *, solver: dict, outputs: dict, loads: dict | None = None,
+                       mesh: dict | None = None, title: str = "mechanism", description: str = "") -> "Case":
+        """A case from a Mechanism built in Python and the other tables (validated like a file)."""
+        raw = mechanism_spec(mech)
+        raw.update(case={"title": title, "description": description}, solver=dict(solver), outputs=dict(outputs))
+        for key, val in (("loads", loads), ("mesh", mesh)):
+            if val is not None:
+                raw[key] = val
+        return validate_case(raw, source=title)
+
+    def write(self, path) -> Path:
+        """Write the case as a TOML file (general form; derived entries left out); returns the path."""
+        path = Path(path)
+        path.write_text(dumps_toml(case_file_tables(self)), encoding="utf-8")
+        return path
 
 
-# ----------------------------------------------------------------------------- scalar checks
-def _num(d: dict, key: str, where: str, *, default=None, positive=False, nonneg=False, required=False):
-    if key not in d:
-        if required:
-            raise CaseError(f"{where}.{key}", "is missing; add it (a number in SI units)")
-        return default
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise CaseError(f"{where}.{key}", f"must be a number, got {v!r}")
-    v = float(v)
-    if not math.isfinite(v):
-        raise CaseError(f"{where}.{key}", f"must be finite, got {v!r}")
-    if positive and v <= 0:
-        raise CaseError(f"{where}.{key}", f"must be > 0, got {v!r}")
-    if nonneg and v < 0:
-        raise CaseError(f"{where}.{key}", f"must be >= 0, got {v!r}")
-    return v
-
-
-def _int(d: dict, key: str, where: str, *, default=None, minimum=1):
-    if key not in d:
-        return default
-    v = d[key]
-    if isinstance(v, bool) or not isinstance(v, int) and not (isinstance(v, float) and v.is_integer()):
-        raise CaseError(f"{where}.{key}", f"must be a whole number, got {v!r}")
-    v = int(v)
-    if v < minimum:
-        raise CaseError(f"{where}.{key}", f"must be >= {minimum}, got {v}")
-    return v
-
-
-def _str(d: dict, key: str, where: str, *, default=None, choices=None, required=False):
-    if key not in d:
-        if required:
-            hint = f" (one of {', '.join(map(repr, choices))})" if choices else ""
-            raise CaseError(f"{where}.{key}", f"is missing; add it{hint}")
-        return default
-    v = d[key]
-    if not isinstance(v, str):
-        raise CaseError(f"{where}.{key}", f"must be a string, got {v!r}")
-    if choices is not None and v not in choices:
-        raise CaseError(f"{where}.{key}", f"must be one of {', '.join(map(repr, choices))}, got {v!r}")
-    return v
-
-
-def _vec(d: dict, key: str, where: str, n: int, *, default=None, nonneg=False):
-    if key not in d:
-        return default
-    v = d[key]
-    if not isinstance(v, list) or len(v) != n:
-        raise CaseError(f"{where}.{key}", f"must be a list of {n} numbers, got {v!r}")
-    return [_num({"x": x}, "x", f"{where}.{key}", nonneg=nonneg) for x in v]
-
-
-def _keys(d, allowed, where: str):
-    if not isinstance(d, dict):
-        raise CaseError(where, f"must be a table, got {d!r}")
-    for k in d:
-        if k not in allowed:
-            raise CaseError(f"{where}.{k}", f"unknown key; allowed keys here: {', '.join(sorted(allowed))}")
+def case_file_tables(case: dict) -> dict:
+    """The tables of a resolved case as a case file holds them."""
+    out = copy.deepcopy(dict(case))
+    out["case"] = {k: val for k, val in out["case"].items() if k != "path" and val != ""}
+    return {k: val for k, val in out.items() if val not in ([], {})}
 
 
 # ----------------------------------------------------------------------------- integrators
@@ -166,7 +142,7 @@ def integrator_coefficients(integrator: str, params: dict | None = None) -> tupl
 
 def _integrator(sol: dict) -> dict:
     """Validate solver.integrator and its parameters; the resolved entries (only the keys that apply)."""
-    name = _str(sol, "integrator", "solver", default="newmark", choices=INTEGRATORS)
+    name = v.text(sol, "integrator", "solver", default="newmark", choices=INTEGRATORS)
     for other, keys in INTEGRATOR_PARAMS.items():
         if other == name:
             continue
@@ -175,8 +151,8 @@ def _integrator(sol: dict) -> dict:
                 raise CaseError(f"solver.{key}", f"applies to integrator = {other!r}, not {name!r}; remove it, or "
                                                  f"set solver.integrator = {other!r}")
     if name == "newmark":
-        beta = _num(sol, "beta", "solver", default=0.25, positive=True)
-        gamma = _num(sol, "gamma", "solver", default=0.5)
+        beta = v.num(sol, "beta", "solver", default=0.25, positive=True)
+        gamma = v.num(sol, "gamma", "solver", default=0.5)
         if gamma < 0.5:
             raise CaseError("solver.gamma", f"must be >= 0.5 (gamma < 1/2 adds negative damping), got {gamma}")
         if beta < 0.25 * (gamma + 0.5) ** 2 - 1e-15:
@@ -184,278 +160,188 @@ def _integrator(sol: dict) -> dict:
                                            f"use beta >= (gamma + 1/2)^2 / 4 = {0.25 * (gamma + 0.5) ** 2:g}")
         return {"integrator": name, "beta": beta, "gamma": gamma}
     if name == "hht":
-        al = _num(sol, "hht_alpha", "solver", default=HHT_ALPHA_DEFAULT)
+        al = v.num(sol, "hht_alpha", "solver", default=HHT_ALPHA_DEFAULT)
         if not 0.0 <= al <= HHT_ALPHA_MAX + 1e-15:
             raise CaseError("solver.hht_alpha", f"must lie in [0, 1/3] (0: average acceleration, 1/3: the most "
                                                 f"numerical damping), got {al}; use e.g. 0.05")
         return {"integrator": name, "hht_alpha": al}
-    rho = _num(sol, "rho_inf", "solver", default=RHO_INF_DEFAULT)
+    rho = v.num(sol, "rho_inf", "solver", default=RHO_INF_DEFAULT)
     if not 0.0 <= rho <= 1.0:
         raise CaseError("solver.rho_inf", f"must lie in [0, 1] (1: no numerical damping, 0: the most), got {rho}; "
                                           "use e.g. 0.8")
     return {"integrator": name, "rho_inf": rho}
 
 
-# ----------------------------------------------------------------------------- sections
-def _links(raw) -> list[dict]:
-    if not isinstance(raw, list) or not raw:
-        raise CaseError("links", "is missing or empty; add one [[links]] table per link")
-    out, names = [], set()
-    allowed = {"name", "length", "area", "second_moment", "youngs_modulus", "density", "half_depth", "elements",
-               "yield_strain"}
-    for i, ln in enumerate(raw):
-        w = f"links[{i}]"
-        _keys(ln, allowed, w)
-        name = _str(ln, "name", w, required=True)
-        if not _NAME.match(name):
-            raise CaseError(f"{w}.name", f"must be an identifier (letters, digits, _), got {name!r}")
-        if name in names:
-            raise CaseError(f"{w}.name", f"duplicate link name {name!r}; give each link its own name")
-        names.add(name)
-        d = {"name": name}
-        for key in ("length", "area", "second_moment", "youngs_modulus", "density"):
-            d[key] = _num(ln, key, w, positive=True, required=True)
-        d["half_depth"] = _num(ln, "half_depth", w, positive=True)
-        if d["half_depth"] is None:  # rectangular section: h = sqrt(12 I / A)
-            d["half_depth"] = 0.5 * math.sqrt(12.0 * d["second_moment"] / d["area"])
-        d["elements"] = _int(ln, "elements", w)
-        if "yield_strain" in ln:   # absent: no yield check (guards.py)
-            d["yield_strain"] = _num(ln, "yield_strain", w, positive=True)
-        out.append(d)
-    return out
+# ----------------------------------------------------------------------------- the case
+def _general_tables(raw: dict) -> dict:
+    """The mechanism's tables in general form: a template's short form expanded, or the general
+    tables checked for short-form keys that do not belong there."""
+    mech = raw.get("mechanism", {})
+    if isinstance(mech, dict) and "type" in mech:
+        return expand_template(raw)
+    for key, what in (("drive", "[[drives]] tables (joint, law, ...)"), ("joints", "[[joints]] tables")):
+        if key in raw and not (key == "joints" and isinstance(raw[key], list)):
+            raise CaseError(key, f"is the short form of the templates (mechanism.type = 'fourbar' or 'serial'); "
+                                 f"describe a general mechanism with {what}")
+    ini = raw.get("initial", {})
+    for key in ("angles",):
+        if isinstance(ini, dict) and key in ini:
+            raise CaseError(f"initial.{key}", "belongs to the templates; give initial.coordinates = {joint = value}")
+    if not raw.get("links") and not raw.get("bodies"):
+        raise CaseError("mechanism", "is missing; add [mechanism] with type = 'fourbar' or 'serial', or describe "
+                                     "the mechanism with [[links]], [[joints]] and [[drives]] tables (docs/cases.md)")
+    return raw
 
 
-def _torque(t, where: str, joints) -> dict:
-    _keys(t, {"joint", "constant", "sin", "cos"}, where)
-    joint = _str(t, "joint", where, required=True, choices=tuple(joints))
-    d = {"joint": joint, "constant": _num(t, "constant", where, default=0.0)}
-    for key in ("sin", "cos"):
-        v = t.get(key, [])
-        if isinstance(v, (int, float)) and not isinstance(v, bool):
-            v = [v]
-        if not isinstance(v, list):
-            raise CaseError(f"{where}.{key}", f"must be a list of harmonic amplitudes [N m], got {v!r}")
-        d[key] = [_num({"x": x}, "x", f"{where}.{key}") for x in v]
-    return d
+def validate_case(raw: dict, source: str = "<case>") -> Case:
+    """Check a raw case dict and return the resolved :class:`Case` (defaults filled in)."""
+    if not isinstance(raw, dict):
+        raise CaseError("case", "the case must be a TOML table")
+    v.keys(raw, TOP_KEYS, "case file")
+    r = Case()
+    meta = raw.get("case", {})
+    v.keys(meta, {"title", "description", "source"}, "case")
+    r["case"] = {"title": v.text(meta, "title", "case", default=Path(source).stem),
+                 "description": v.text(meta, "description", "case", default=""),
+                 "source": v.text(meta, "source", "case", default="")}
+    general = _general_tables(raw)
+    mech = mechanism_from_spec(general)
+    mesh = general.get("mesh", {})
+    v.keys(mesh, {"elements_per_link"}, "mesh")
+    r["mesh"] = {"elements_per_link": v.whole(mesh, "elements_per_link", "mesh", default=2)}
+    spec = mechanism_spec(mech)
+    r["mechanism"] = spec.get("mechanism", {"ground": {}})
+    if mech.template is not None:
+        r["mechanism"]["template"] = mech.template
+    r["links"] = spec.get("links", [])
+    for ln, link in zip(r["links"], mech.links):
+        ln["length"] = link.length
+        if not link.rigid and ln.get("elements") is None:
+            ln["elements"] = r["mesh"]["elements_per_link"]
+    r["bodies"] = spec.get("bodies", [])
+    r["joints"] = spec.get("joints", [])
+    for j, joint in zip(r["joints"], mech.joints):
+        j["elastic"] = mech.condition(joint)
+    r["drives"] = spec.get("drives", [])
+    r["initial"] = {"coordinates": dict(mech.initial_coordinates), "speeds": dict(mech.initial_speeds)}
+    r["point_masses"] = spec.get("point_masses", [])
+    r["rotary_inertias"] = spec.get("rotary_inertias", [])
+    loads = general.get("loads", {})
+    v.keys(loads, {"gravity"}, "loads")
+    r["loads"] = {"gravity": v.vector(loads, "gravity", "loads", 2, default=[0.0, 0.0])}
+    r["solver"] = _solver(general.get("solver", {}), mech)
+    _check_tables_cover_run(mech, r["solver"]["t_end"])
+    if "outputs" not in general:
+        raise CaseError("outputs", "is missing; add an [outputs] table naming what to record, e.g. "
+                                   "tip_x = {kind = 'position', at = 'arm.end', component = 'x'}")
+    r["outputs"] = _outputs(general["outputs"], mech)
+    return r
 
 
-def _drive(raw, mech: dict, joints, ndof: int) -> dict:
-    if raw is None:
-        raise CaseError("drive", "is missing; add a [drive] table (type = 'torque' or 'kinematic')")
-    _keys(raw, {"type", "torques", "law", "speed", "final_speed", "spinup_time"}, "drive")
-    kind = _str(raw, "type", "drive", required=True, choices=("torque", "kinematic"))
-    other = {"torques"} if kind == "kinematic" else {"law", "speed", "final_speed", "spinup_time"}
-    for key in sorted(other & set(raw)):
-        raise CaseError(f"drive.{key}", f"does not apply to a {kind!r} drive; remove it or change drive.type")
-    if kind == "torque":
-        tq = raw.get("torques")
-        if not isinstance(tq, list) or not tq:
-            raise CaseError("drive.torques", "is missing; add [[drive.torques]] tables (joint, constant, sin, cos)")
-        return {"type": "torque", "torques": [_torque(t, f"drive.torques[{i}]", joints) for i, t in enumerate(tq)]}
-    if ndof != 1:
-        raise CaseError("drive.type", f"'kinematic' drives need a 1-DOF mechanism; this one has {ndof} DOFs: "
-                                      "use type = 'torque' or a single-link serial chain")
-    law = _str(raw, "law", "drive", required=True, choices=("constant_speed", "spinup"))
-    d = {"type": "kinematic", "law": law}
-    if law == "constant_speed":
-        d["speed"] = _num(raw, "speed", "drive", required=True)
-        if "final_speed" in raw or "spinup_time" in raw:
-            raise CaseError("drive", "final_speed and spinup_time belong to law = 'spinup'; remove them")
-    else:
-        if "speed" in raw:
-            raise CaseError("drive.speed", "belongs to law = 'constant_speed'; a spin-up uses final_speed and spinup_time")
-        d["final_speed"] = _num(raw, "final_speed", "drive", required=True)
-        d["spinup_time"] = _num(raw, "spinup_time", "drive", required=True, positive=True)
-    return d
+def _solver(sol: dict, mech) -> dict:
+    v.keys(sol, {"t_end", "dt", "output_every", "integrator", "beta", "gamma", "hht_alpha", "rho_inf", "divergence_limit",
+                 "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit",
+                 "geometric_stiffness", "geometric_tol", "geometric_maxit", "error_estimate"}, "solver")
+    t_end = v.num(sol, "t_end", "solver", positive=True, required=True)
+    dt = v.num(sol, "dt", "solver", positive=True, required=True)
+    if dt > t_end:
+        raise CaseError("solver.dt", f"({dt} s) is longer than the run (t_end = {t_end} s); choose dt <= t_end")
+    longest = max([ln.length for ln in mech.links] + [mech.characteristic_length() if not mech.links else 0.0])
+    return {"t_end": t_end, "dt": dt,
+            "output_every": v.whole(sol, "output_every", "solver", default=1),
+            **_integrator(sol),
+            "divergence_limit": v.num(sol, "divergence_limit", "solver", positive=True,
+                                      default=DIVERGENCE_FACTOR * longest),
+            "rayleigh": v.vector(sol, "rayleigh", "solver", 2, default=[0.0, 0.0], nonneg=True),
+            "model": v.text(sol, "model", "solver", default="hac", choices=MODELS),
+            "rigid_rtol": v.num(sol, "rigid_rtol", "solver", default=1e-10, positive=True),
+            "rigid_atol": v.num(sol, "rigid_atol", "solver", default=1e-12, positive=True),
+            "newton_tol": v.num(sol, "newton_tol", "solver", default=1e-8, positive=True),
+            "newton_maxit": v.whole(sol, "newton_maxit", "solver", default=25),
+            "geometric_stiffness": v.text(sol, "geometric_stiffness", "solver", default="none",
+                                          choices=("none", "current", "lagged", "quasi_static")),
+            "geometric_tol": v.num(sol, "geometric_tol", "solver", default=1e-8, positive=True),
+            "geometric_maxit": v.whole(sol, "geometric_maxit", "solver", default=50),
+            "error_estimate": v.text(sol, "error_estimate", "solver", default="time", choices=ERROR_ESTIMATES)}
 
 
-def _node_ref(ref, where: str, links: dict) -> str:
-    if not isinstance(ref, str) or "." not in ref:
-        raise CaseError(where, f"must be '<link>.start', '<link>.mid', '<link>.end' or '<link>.<fraction>', got {ref!r}")
-    link, pos = ref.split(".", 1)
-    if link not in links:
-        raise CaseError(where, f"unknown link {link!r}; links are {', '.join(links)}")
-    if pos not in ("start", "mid", "end"):
-        try:
-            f = float(pos)
-        except ValueError:
-            raise CaseError(where, f"position {pos!r} must be start, mid, end or a fraction 0..1") from None
-        if not 0.0 <= f <= 1.0:
-            raise CaseError(where, f"fraction {f} must lie in [0, 1]")
-    return ref
+def _check_tables_cover_run(mech, t_end: float) -> None:
+    """A law's table must span [0, t_end] (its spline is not extrapolated)."""
+    for i, d in enumerate(mech.drives):
+        tab = d.params if d.law == "table" else d.params.get("table")
+        if tab is None:
+            continue
+        where = f"drives[{i}]" + ("" if d.law == "table" else ".table")
+        if tab["t"][0] > 0.0 or tab["t"][-1] < t_end:
+            raise CaseError(f"{where}.t", f"the table spans [{tab['t'][0]:g}, {tab['t'][-1]:g}] s but the run needs "
+                                          f"[0, {t_end:g}] s; extend the table or shorten solver.t_end")
 
 
-def _outputs(raw, joints, links: dict, mech_type: str) -> dict:
-    if raw is None:
-        raw = DEFAULT_OUTPUTS[mech_type]
+def _outputs(raw, mech) -> dict:
     if not isinstance(raw, dict) or not raw:
         raise CaseError("outputs", "must be a table of named outputs, e.g. tip_x = {kind = 'position', at = 'l2.end', component = 'x'}")
     out = {}
     for name, spec in raw.items():
         w = f"outputs.{name}"
-        if not _NAME.match(name) or name == "t":
+        if not v.NAME.match(name) or name == "t":
             raise CaseError(w, "output names must be identifiers other than 't'")
         if not isinstance(spec, dict) or "kind" not in spec:
             raise CaseError(w, f"must be a table with a 'kind' (one of {', '.join(OUTPUT_KINDS)})")
-        kind = _str(spec, "kind", w, choices=tuple(OUTPUT_KINDS))
+        kind = v.text(spec, "kind", w, choices=tuple(OUTPUT_KINDS))
         req, opt = OUTPUT_KINDS[kind]
-        _keys(spec, {"kind"} | req | set(opt), w)
-        d = {"kind": kind}
+        v.keys(spec, {"kind"} | req | set(opt), w)
         for key in sorted(req - set(spec)):
             raise CaseError(f"{w}.{key}", f"is missing; a '{kind}' output needs {', '.join(sorted(req))}")
+        d = {"kind": kind}
         if "joint" in req:
-            d["joint"] = _str(spec, "joint", w, choices=tuple(joints))
+            d["joint"] = _output_joint(spec, kind, w, mech)
         if "link" in req:
-            d["link"] = _str(spec, "link", w, choices=tuple(links))
-            d["at"] = _num(spec, "at", w, default=opt.get("at"))
-            if not 0.0 <= d["at"] <= 1.0:
-                raise CaseError(f"{w}.at", f"is a fraction of the link length and must lie in [0, 1], got {d['at']}")
+            d["link"] = v.text(spec, "link", w, choices=tuple(ln.name for ln in mech.links))
+            if kind != "link_angle":
+                if mech.links[mech.link_index(d["link"])].rigid:
+                    raise CaseError(f"{w}.link", f"link {d['link']!r} is rigid: it has no {kind.replace('_', ' ')}")
+                d["at"] = v.num(spec, "at", w, default=opt.get("at"))
+                if not 0.0 <= d["at"] <= 1.0:
+                    raise CaseError(f"{w}.at", f"is a fraction of the link length and must lie in [0, 1], got {d['at']}")
         if kind in COMPONENTS:
-            d["component"] = _str(spec, "component", w, choices=COMPONENTS[kind])
-            if d["component"] == "norm":  # the norm of the whole load over the free DOFs
-                if "at" in spec:
-                    raise CaseError(f"{w}.at", "does not apply to component = 'norm' (the norm over all free DOFs); remove it")
-            elif "at" not in spec:
-                raise CaseError(f"{w}.at", f"is missing; a '{kind}' output needs the node, e.g. at = 'coupler.mid'")
-            else:
-                d["at"] = _node_ref(spec["at"], f"{w}.at", links)
+            d["component"] = v.text(spec, "component", w, choices=COMPONENTS[kind])
+        if kind in ("displacement", "position", "inertia_load"):
+            _output_point(spec, d, kind, w, mech)
         if kind == "inertia_load":
-            d["model"] = _str(spec, "model", w, default="run", choices=("run",) + SUPERPOSITION_MODELS)
+            d["model"] = v.text(spec, "model", w, default="run", choices=("run",) + SUPERPOSITION_MODELS)
         out[name] = d
     return out
 
 
-DEFAULT_OUTPUTS = {
-    "fourbar": {
-        "crank_angle": {"kind": "joint_angle", "joint": "crank_pivot"},
-        "crank_speed": {"kind": "joint_speed", "joint": "crank_pivot"},
-        "strain_coupler_mid": {"kind": "strain", "link": "coupler", "at": 0.5},
-        "strain_follower_mid": {"kind": "strain", "link": "follower", "at": 0.5},
-    },
-}
+def _output_joint(spec: dict, kind: str, w: str, mech) -> str:
+    name = v.text(spec, "joint", w, choices=tuple(j.name for j in mech.joints))
+    joint = mech.joint(name)
+    if kind == "joint_angle" and not joint.angular:
+        raise CaseError(f"{w}.kind", f"{name!r} is a {joint.kind} joint: its coordinate is a displacement; use "
+                                     "kind = 'joint_displacement'")
+    if kind == "joint_displacement" and joint.angular:
+        raise CaseError(f"{w}.kind", f"{name!r} is a {joint.kind} joint: its coordinate is an angle; use "
+                                     "kind = 'joint_angle'")
+    if kind == "drive_force" and mech.drive_of(name) is None:
+        raise CaseError(f"{w}.joint", f"{name!r} has no drive; name a joint with a [[drives]] entry")
+    return name
 
 
-def validate_case(raw: dict, source: str = "<case>") -> dict:
-    """Check a raw case dict and return the resolved case (defaults filled in)."""
-    if not isinstance(raw, dict):
-        raise CaseError("case", "the case must be a TOML table")
-    _keys(raw, {"case", "mechanism", "links", "mesh", "joints", "drive", "initial", "point_masses",
-                "rotary_inertias", "loads", "solver", "outputs"}, "case file")
-    r = {}
-    meta = raw.get("case", {})
-    _keys(meta, {"title", "description", "source"}, "case")
-    r["case"] = {"title": _str(meta, "title", "case", default=Path(source).stem),
-                 "description": _str(meta, "description", "case", default=""),
-                 "source": _str(meta, "source", "case", default="")}
-
-    mech = raw.get("mechanism")
-    if mech is None:
-        raise CaseError("mechanism", "is missing; add [mechanism] with type = 'fourbar' or 'serial'")
-    _keys(mech, {"type", "ground_length", "assembly", "base"}, "mechanism")
-    mtype = _str(mech, "type", "mechanism", required=True, choices=MECHANISMS)
-    links = _links(raw.get("links"))
-    r["links"] = links
-    lnames = {ln["name"]: ln for ln in links}
-    if mtype == "fourbar":
-        if len(links) != 3:
-            raise CaseError("links", f"a fourbar needs exactly 3 links (crank, coupler, follower in this order), got {len(links)}")
-        if [ln["name"] for ln in links] != ["crank", "coupler", "follower"]:
-            raise CaseError("links", "a fourbar's links must be named 'crank', 'coupler', 'follower', in this order")
-        r["mechanism"] = {"type": mtype,
-                          "ground_length": _num(mech, "ground_length", "mechanism", positive=True, required=True),
-                          "assembly": _str(mech, "assembly", "mechanism", default="open", choices=("open", "crossed"))}
-        if "base" in mech:
-            raise CaseError("mechanism.base", "applies to serial chains only; a fourbar's ground pivots are (0,0) and (ground_length,0)")
-        ndof = 1
-    else:
-        if "ground_length" in mech or "assembly" in mech:
-            raise CaseError("mechanism", "ground_length and assembly apply to fourbars only")
-        r["mechanism"] = {"type": mtype, "base": _vec(mech, "base", "mechanism", 2, default=[0.0, 0.0])}
-        ndof = len(links)
-
-    mesh = raw.get("mesh", {})
-    _keys(mesh, {"elements_per_link"}, "mesh")
-    r["mesh"] = {"elements_per_link": _int(mesh, "elements_per_link", "mesh", default=2)}
-    for ln in links:
-        if ln["elements"] is None:
-            ln["elements"] = r["mesh"]["elements_per_link"]
-
-    joints = JOINTS_OF(mtype, len(links))
-    jr = raw.get("joints", {})
-    _keys(jr, set(joints), "joints")
-    r["joints"] = {j: _str(jr, j, "joints", default=allowed[0], choices=allowed) for j, allowed in joints.items()}
-
-    r["drive"] = _drive(raw.get("drive"), r["mechanism"], joints, ndof)
-    driven = {t["joint"] for t in r["drive"].get("torques", [])}
-    for j, cond in r["joints"].items():
-        if cond == "torque" and j not in driven:
-            raise CaseError(f"joints.{j}", "'torque' leaves a driven joint free in the elastic problem, loaded by its "
-                                           "torque; this joint has no [[drive.torques]] entry: add one or use pin/clamp/locked")
-
-    ini = raw.get("initial", {})
-    _keys(ini, {"angles", "speeds"}, "initial")
-    if r["drive"]["type"] == "kinematic" and "speeds" in ini:
-        raise CaseError("initial.speeds", "does not apply to a kinematic drive (the drive law sets the speed); remove it")
-    r["initial"] = {"angles": _vec(ini, "angles", "initial", ndof, default=[0.0] * ndof),
-                    "speeds": _vec(ini, "speeds", "initial", ndof, default=[0.0] * ndof)}
-
-    pms = raw.get("point_masses", [])
-    if not isinstance(pms, list):
-        raise CaseError("point_masses", "must be an array of tables [[point_masses]] with 'at' and 'mass'")
-    r["point_masses"] = []
-    for i, pm in enumerate(pms):
-        w = f"point_masses[{i}]"
-        _keys(pm, {"at", "mass"}, w)
-        if "at" not in pm:
-            raise CaseError(f"{w}.at", "is missing; give the node as '<link>.end' etc.")
-        r["point_masses"].append({"at": _node_ref(pm["at"], f"{w}.at", lnames),
-                                  "mass": _num(pm, "mass", w, positive=True, required=True)})
-    ris = raw.get("rotary_inertias", [])
-    if not isinstance(ris, list):
-        raise CaseError("rotary_inertias", "must be an array of tables [[rotary_inertias]] with 'at', 'inertia', 'turns_with'")
-    r["rotary_inertias"] = []
-    for i, ri in enumerate(ris):
-        w = f"rotary_inertias[{i}]"
-        _keys(ri, {"at", "inertia", "turns_with"}, w)
-        if "at" not in ri:
-            raise CaseError(f"{w}.at", "is missing; give the node as '<link>.end' etc.")
-        at = _node_ref(ri["at"], f"{w}.at", lnames)
-        r["rotary_inertias"].append({"at": at, "inertia": _num(ri, "inertia", w, positive=True, required=True),
-                                     "turns_with": _str(ri, "turns_with", w, default=at.split(".")[0], choices=tuple(lnames))})
-
-    loads = raw.get("loads", {})
-    _keys(loads, {"gravity"}, "loads")
-    r["loads"] = {"gravity": _vec(loads, "gravity", "loads", 2, default=[0.0, 0.0])}
-
-    sol = raw.get("solver", {})
-    _keys(sol, {"t_end", "dt", "output_every", "integrator", "beta", "gamma", "hht_alpha", "rho_inf", "divergence_limit",
-                "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit",
-                "geometric_stiffness", "geometric_tol", "geometric_maxit", "error_estimate"}, "solver")
-    t_end = _num(sol, "t_end", "solver", positive=True, required=True)
-    dt = _num(sol, "dt", "solver", positive=True, required=True)
-    if dt > t_end:
-        raise CaseError("solver.dt", f"({dt} s) is longer than the run (t_end = {t_end} s); choose dt <= t_end")
-    integ = _integrator(sol)
-    div_limit = _num(sol, "divergence_limit", "solver", positive=True,
-                     default=DIVERGENCE_FACTOR * max(ln["length"] for ln in links))
-    r["solver"] = {"t_end": t_end, "dt": dt,
-                   "output_every": _int(sol, "output_every", "solver", default=1),
-                   **integ, "divergence_limit": div_limit,
-                   "rayleigh": _vec(sol, "rayleigh", "solver", 2, default=[0.0, 0.0], nonneg=True),
-                   "model": _str(sol, "model", "solver", default="hac", choices=MODELS),
-                   "rigid_rtol": _num(sol, "rigid_rtol", "solver", default=1e-10, positive=True),
-                   "rigid_atol": _num(sol, "rigid_atol", "solver", default=1e-12, positive=True),
-                   "newton_tol": _num(sol, "newton_tol", "solver", default=1e-8, positive=True),
-                   "newton_maxit": _int(sol, "newton_maxit", "solver", default=25),
-                   "geometric_stiffness": _str(sol, "geometric_stiffness", "solver", default="none",
-                                               choices=("none", "current", "lagged", "quasi_static")),
-                   "geometric_tol": _num(sol, "geometric_tol", "solver", default=1e-8, positive=True),
-                   "geometric_maxit": _int(sol, "geometric_maxit", "solver", default=50),
-                   "error_estimate": _str(sol, "error_estimate", "solver", default="time", choices=ERROR_ESTIMATES)}
-    if mtype == "serial" and "outputs" not in raw:
-        raise CaseError("outputs", "is missing; a serial chain needs an [outputs] table naming what to record")
-    r["outputs"] = _outputs(raw.get("outputs"), joints, lnames, mtype)
-    return r
+def _output_point(spec: dict, d: dict, kind: str, w: str, mech) -> None:
+    if d.get("component") == "norm":   # the norm of the whole load over the free DOFs
+        if "at" in spec:
+            raise CaseError(f"{w}.at", "does not apply to component = 'norm' (the norm over all free DOFs); remove it")
+        return
+    if "at" not in spec:
+        raise CaseError(f"{w}.at", f"is missing; a '{kind}' output needs the point, e.g. at = 'coupler.mid'")
+    ref = mech.point(v.text(spec, "at", w), f"{w}.at")
+    if ref.body is None:
+        raise CaseError(f"{w}.at", "names a ground point, which does not move; name a point of a body")
+    if kind == "inertia_load" and ref.body.kind != "link":
+        raise CaseError(f"{w}.at", "inertia loads are given at the points of links")
+    if kind == "displacement" and d["component"] in ("rotation", "axial", "transverse") and ref.body.kind != "link":
+        raise CaseError(f"{w}.component", f"{d['component']!r} is defined for link points; use x or y")
+    d["at"] = spec["at"]
 
 
 def read_case_file(path) -> dict:

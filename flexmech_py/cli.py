@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 from .case import MODELS as MODELS_ALL
-from .errors import FlexmechError, SolverError
+from .errors import FlexmechError, MechanismError, SolverError
 
 __all__ = ["main"]
 
@@ -350,7 +350,7 @@ def _cmd_run(args) -> int:
     case = load_case(args.case, overrides=args.set + integrator_overrides(args))
     try:
         res = simulate(case, model=args.model, dt=args.dt, elements_per_link=args.elements_per_link)
-    except SolverError as exc:   # the solver stopped: keep and mark the frames before the failure
+    except (SolverError, MechanismError) as exc:   # the run stopped: keep and mark the frames before it
         if exc.partial is None:
             raise
         res = exc.partial

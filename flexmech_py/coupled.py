@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernels, rigid
+from . import kernels
+from .mechanism.motion import LinkMotion
 from .errors import CaseError
 from .model import FEModel, rcm_free_numbering
 
@@ -57,6 +58,9 @@ class CoupledModel:
                 for li in range(len(links))}
 
         def seg_end(li, end):   # (segment index, 0 start / 1 end) of a link end
+            if end not in ("start", "end"):
+                raise CaseError("joints", f"a joint at fraction {end} of link {links[li]['name']!r}: the coupled and "
+                                          "nonlinear models join links at their ends only (for now)")
             return (first[li], 0) if end == "start" else (last[li], 1)
 
         # A torque-driven joint is a hub whose rotation is now free: its torque acts on the tangent
@@ -64,15 +68,16 @@ class CoupledModel:
         # joint means the link is clamped to its hub).  A kinematic drive prescribes the tangent angle
         # at its joint; a non-driven clamp or locked joint welds the tangents; interior nodes of a
         # split link are welded too.  All are rotation constraints (Lagrange multipliers).
-        driven = {t["joint"] for t in case["drive"].get("torques", [])}
-        kin = fe.joints[0].name if case["drive"]["type"] == "kinematic" else None
+        mech = case.mechanism
+        driven = {d.joint for d in mech.drives if not d.kinematic}
+        kin = {d.joint for d in mech.drives if d.kinematic}
         cons = []
         for j in fe.joints:
             sb, eb = seg_end(j.outboard, j.outboard_end)
             sa, ea = seg_end(j.inboard, j.inboard_end) if j.inboard is not None else (-1, 0)
-            if j.name == kin:
+            if j.name in kin:
                 cons.append(([sb + 1, sa + 1], [eb, ea], "drive", j))
-            elif j.name not in driven and j.elastic in ("clamp", "locked"):
+            elif j.name not in driven and j.shares_rotation:
                 cons.append(([sb + 1, sa + 1], [eb, ea], "weld", j))
         for i in range(1, len(segments)):
             if segments[i][0] == segments[i - 1][0]:   # consecutive elements of one link
@@ -85,7 +90,7 @@ class CoupledModel:
             dof[key] = len(dof)
             return dof[key]
 
-        ground = _ground_points(case)
+        ground = _ground_points(case, fe)
         ld_cols = []
         for si, (li, k0, k1) in enumerate(segments):
             col = []
@@ -139,13 +144,18 @@ class CoupledModel:
             si, kk = seg_at(lw, fe.node_of[lw].index(node))
             ri.append((si + 1, kk, r["inertia"]))
         tq = []
-        if case["drive"]["type"] == "torque":
-            nh = max(max(len(t["sin"]), len(t["cos"])) for t in case["drive"]["torques"])
-            for t in case["drive"]["torques"]:
-                j = fe.joint(t["joint"])
+        forces = [d for d in mech.drives if not d.kinematic]
+        if forces:
+            nh = max(max(len(d.params["sin"]), len(d.params["cos"])) for d in forces)
+            for d in forces:
+                if d.params.get("time_harmonics") or d.params.get("table"):
+                    raise CaseError(f"drives.{d.joint}", "the coupled and nonlinear models take force laws in the "
+                                                         "joint angle only (constant, sin, cos) for now")
+                j = fe.joint(d.joint)
                 sb, eb = seg_end(j.outboard, j.outboard_end)
                 sa, ea = seg_end(j.inboard, j.inboard_end) if j.inboard is not None else (-1, 0)
-                coef = [t["constant"]] + (t["sin"] + [0.0] * nh)[:nh] + (t["cos"] + [0.0] * nh)[:nh]
+                coef = [j.sign * c for c in [d.params["constant"]] + (d.params["sin"] + [0.0] * nh)[:nh]
+                        + (d.params["cos"] + [0.0] * nh)[:nh]]
                 tq.append(([sb + 1, sa + 1], [eb, ea], coef))
         return cls(case=case, fe=fe, segments=segments, n_el=n_el, ld=np.asfortranarray(ld), ndof=ndof,
                    free_of=free_of, q_fixed=q_fixed, prop=np.asfortranarray(prop), pm=_pack_pm(pm), ri=_pack_ri(ri),
@@ -164,9 +174,10 @@ class CoupledModel:
     def _args(self):
         return (self.free_of, self.n_el, self.ld, self.prop) + self.pm + self.ri + self.tq
 
-    def initial_state(self, q_rigid: np.ndarray, qd_rigid: np.ndarray, mech) -> tuple[np.ndarray, np.ndarray]:
-        """All-DOF (q, v) at rest elastically, with every node on the rigid configuration."""
-        km = mech.kinematics(q_rigid[None], qd_rigid[None], None)
+    def initial_state(self, rm0) -> tuple[np.ndarray, np.ndarray]:
+        """All-DOF (q, v) at rest elastically, with every node on the rigid configuration of the first
+        sample of the rigid motion rm0."""
+        km = rm0.motion
         q, v = self.q_fixed.copy(), np.zeros(self.ndof)
         for si, (li, k0, k1) in enumerate(self.segments):
             L = self.case["links"][li]["length"] / self.case["links"][li]["elements"]
@@ -182,17 +193,17 @@ class CoupledModel:
                     q[dofs[k]], v[dofs[k]] = pos[k], vel[k]
         return q, v
 
-    def constraint_values(self, t, q_rigid, qd_rigid, qdd_rigid, mech) -> np.ndarray:
-        """(3, nc, nt) [angle, rate, acceleration] of the rotation constraints on the grid: the drive law
-        (the rigid joint motion) for a kinematic drive, the initial relative angle for a weld."""
+    def constraint_values(self, rm) -> np.ndarray:
+        """(3, nc, nt) [angle, rate, acceleration] of the rotation constraints on the rigid motion's grid:
+        the drive law (the rigid joint motion) for a kinematic drive, the initial relative angle for a weld
+        (in the FE joint's orientation)."""
         nc = max(1, len(self.constraints))
-        out = np.zeros((3, nc, t.size))
-        km0 = mech.kinematics(q_rigid[:1], qd_rigid[:1], None)
+        out = np.zeros((3, nc, rm.t.size))
         for i, (_, _, kind, j) in enumerate(self.constraints):
             if kind == "drive":
-                out[:, i] = [q_rigid[:, 0], qd_rigid[:, 0], qdd_rigid[:, 0]]
+                out[:, i] = j.sign * rm.joint(j.name).T
             elif not isinstance(j, float):   # weld at a joint: its initial relative angle
-                out[0, i] = km0.phi[0, j.outboard] - (km0.phi[0, j.inboard] if j.inboard is not None else 0.0)
+                out[0, i] = j.sign * rm.joint(j.name)[0, 0]
         return np.asfortranarray(out)
 
     def run(self, q0, v0, t, cval, dt, *, beta=0.25, gamma=0.5, alpha_m=0.0, alpha_f=0.0, out_every=1, tol=1e-8,
@@ -241,10 +252,15 @@ class CoupledModel:
         return res, mm, cm, km, energy
 
 
-def _ground_points(case: dict) -> dict:
-    if case["mechanism"]["type"] == "fourbar":
-        return {"crank_pivot": (0.0, 0.0), "follower_pivot": (case["mechanism"]["ground_length"], 0.0)}
-    return {"base": tuple(case["mechanism"]["base"])}
+def _ground_points(case: dict, fe: FEModel) -> dict:
+    """{joint: (x, y)} of every ground joint's fixed point."""
+    mech = case.mechanism
+    out = {}
+    for j in fe.joints:
+        if j.inboard is None:
+            a, b = mech.joint_points(mech.joint(j.name))
+            out[j.name] = tuple(a.position if a.body is None else b.position)
+    return out
 
 
 def _pack_pm(pm):
@@ -268,11 +284,11 @@ def _pack_tq(tq):
             np.asfortranarray(np.array([t[2] for t in tq], float).T))
 
 
-def chord_motion(cm: CoupledModel, qf, vf, af) -> rigid.LinkMotion:
+def chord_motion(cm: CoupledModel, qf, vf, af) -> LinkMotion:
     """Rigid motion of every link's chord (start node to end node) over the frames: the rigid
     motion the coupled and nonlinear models compute."""
     nl = len(cm.case["links"])
-    out = {k: np.empty((qf.shape[1], nl)) for k in rigid.LinkMotion.__dataclass_fields__}
+    out = {k: np.empty((qf.shape[1], nl)) for k in LinkMotion.__dataclass_fields__}
     for li in range(nl):
         ds, de = cm.link_ends(li)
         rs, re_ = qf[ds], qf[de]
@@ -288,7 +304,7 @@ def chord_motion(cm: CoupledModel, qf, vf, af) -> rigid.LinkMotion:
         out["ox"][:, li], out["oy"][:, li] = rs
         out["vx"][:, li], out["vy"][:, li] = vs
         out["ax"][:, li], out["ay"][:, li] = as_
-    return rigid.LinkMotion(**out)
+    return LinkMotion(**out)
 
 
 def _th(d, n: int, k: int) -> int:

@@ -27,7 +27,17 @@ class CaseError(FlexmechError, ValueError):
 
 
 class MechanismError(FlexmechError):
-    """The mechanism cannot assemble or cannot move through the requested motion."""
+    """The mechanism cannot assemble or cannot move through the requested motion.
+
+    ``time`` [s]: when the motion reached the singular position or assembly limit (None: at set-up);
+    ``code``: the kernel status (7 singular position, 8 cannot assemble); ``partial``: the rigid
+    motion sampled before it (a RigidMotion), when there is one."""
+
+    def __init__(self, message: str, time: float | None = None, code: int | None = None, partial=None):
+        self.time = time
+        self.code = code
+        self.partial = partial
+        super().__init__(message)
 
 
 class SolverError(FlexmechError, RuntimeError):

@@ -372,8 +372,8 @@ def toggle_study(deltas=(20.0, 3.0, 1.0, 0.3, 0.1), dt=None, elements=None, thro
         rows.append(_row(
             "4 through toggle", "hac", "–", "–",
             ("stopped with MechanismError: " + err) if res is None else "ran (unexpected)",
-            f"ground {eps * 1000:g} mm longer than the change point: the crank cannot turn fully; the kinematic "
-            "drive is checked before any integration", _cmd("toggle_fourbar", sets), error=err))
+            f"ground {eps * 1000:g} mm longer than the change point: the crank cannot turn fully; the run stops "
+            "at the assembly limit and keeps its frames up to there", _cmd("toggle_fourbar", sets), error=err))
     return rows, pts
 
 
@@ -410,7 +410,7 @@ def spinup_study(rates=(4.0, 6.0, 10.0), t_end=20.0, dt=None, elements=None, con
         if divergence_limit is not None:
             sets.append(f"solver.divergence_limit={divergence_limit}")
         prep = Prepared(load("spinup_beam", sets), **kw)
-        T = prep.case["drive"]["spinup_time"]
+        T = next(d for d in prep.case["drives"] if d["law"] == "spinup")["spinup_time"]
         w1 = spinup_first_frequency(prep.case)
         series[ws] = {}
         runs = {}

@@ -26,7 +26,7 @@ import time
 import numpy as np
 import scipy.linalg
 
-from .case import SUPERPOSITION_MODELS
+from .case import SUPERPOSITION_MODELS, Case
 from .errors import CaseError
 from .simulate import Prepared, check_elastic_problem
 
@@ -65,15 +65,15 @@ class PeriodicCase:
 
     def __init__(self, case: dict, model: str | None = None, *, speed: float | None = None,
                  geometric: str | None = None, dt: float | None = None, elements_per_link: int | None = None):
+        case = case if isinstance(case, Case) else Case(case)   # a resolved case that travelled as a plain dict
         model = case["solver"]["model"] if model is None else model
         geometric = case["solver"]["geometric_stiffness"] if geometric is None else geometric
-        self.check(case, model, geometric)
-        drive = case["drive"]
-        speed = drive["speed"] if speed is None else float(speed)
+        i = self.check(case, model, geometric)
+        speed = case["drives"][i]["speed"] if speed is None else float(speed)
         if not (math.isfinite(speed) and speed != 0.0):
-            raise CaseError("drive.speed", f"the crank speed must be finite and nonzero for a period, got {speed}")
+            raise CaseError(f"drives[{i}].speed", f"the crank speed must be finite and nonzero for a period, got {speed}")
         c = copy.deepcopy(case)
-        c["drive"]["speed"] = speed
+        c["drives"][i]["speed"] = speed
         self.period = 2.0 * math.pi / abs(speed)
         sol = c["solver"]
         # the monodromy is always average-acceleration Newmark (no numerical damping; theory.md §16)
@@ -87,17 +87,22 @@ class PeriodicCase:
         self.case = self.prep.case
         self.fe = self.prep.fe
         self.nsteps, self.dt = self.prep.nsteps, self.prep.dt
-        check_elastic_problem(self.fe, self.prep.rig)
+        if self.prep.setup.mode != "kinematic":
+            raise CaseError("drives", f"the mechanism has {self.prep.setup.dof} degrees of freedom and one drive: its motion "
+                                      "is not periodic; drive every degree of freedom")
+        check_elastic_problem(self.fe, self.prep.rig, self.prep.setup.dof)
         self.prep._checked = True
 
     @staticmethod
-    def check(case: dict, model: str, geometric: str) -> None:
-        """CaseError unless the case is a constant-speed drive with a model linear in the elastic state."""
-        drive = case["drive"]
-        if drive["type"] != "kinematic" or drive.get("law") != "constant_speed":
-            raise CaseError("drive", "the periodic steady state and Floquet multipliers need a kinematic drive with "
-                                     "law = 'constant_speed' (periodic coefficients); this case has "
-                                     f"type = {drive['type']!r}" + (f", law = {drive.get('law')!r}" if drive["type"] == "kinematic" else ""))
+    def check(case: dict, model: str, geometric: str) -> int:
+        """CaseError unless the case has one drive, constant-speed on a revolute joint, and a model linear in
+        the elastic state; returns the drive's index."""
+        drives, mech = case["drives"], case.mechanism
+        laws = ", ".join(f"{d['joint']}: {d['law']!r}" for d in drives) or "none"
+        if len(drives) != 1 or drives[0]["law"] != "constant_speed" or not mech.joint(drives[0]["joint"]).angular:
+            raise CaseError("drives", "the periodic steady state and Floquet multipliers need one kinematic drive with "
+                                      "law = 'constant_speed' on a revolute joint (periodic coefficients); this case has "
+                                      f"{laws}")
         if model not in SUPERPOSITION_MODELS:
             raise CaseError("model", f"Floquet analysis needs a model linear in the elastic state: one of "
                                      f"{', '.join(SUPERPOSITION_MODELS)}, not {model!r} (its equations are nonlinear)")
@@ -106,6 +111,7 @@ class PeriodicCase:
                                                           "(axial forces from the rigid-body loads, still linear in u)")
         if geometric not in ("none", "quasi_static"):
             raise CaseError("solver.geometric_stiffness", f"must be 'none' or 'quasi_static' here, got {geometric!r}")
+        return 0
 
     @property
     def n(self) -> int:

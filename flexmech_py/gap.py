@@ -25,16 +25,14 @@ THRESHOLDS = {"compression_over_euler": 1.0, "displacement_over_length": 0.02}  
 def deflection_over_length(res) -> np.ndarray:
     """(nlinks, nf) largest distance of a link's nodes from the chord through its end nodes, over its
     length: the bending deflection, whatever the model (total positions = rigid-body solution + u)."""
-    from .simulate import build_mechanism
-
     fe = res.fe
-    km = build_mechanism(res.case).kinematics(res.q, res.qd, res.qdd)
+    km = res.motion
     out = np.zeros((len(fe.case["links"]), res.t.size))
     for li, ln in enumerate(fe.case["links"]):
-        n, L = ln["elements"], ln["length"]
+        L = ln["length"]
         c, s = np.cos(km.phi[:, li]), np.sin(km.phi[:, li])
-        pos = [np.array([km.ox[:, li] + k / n * L * c, km.oy[:, li] + k / n * L * s])
-               + res.u[fe.trans_dof[fe.node_of[li][k]]] for k in range(n + 1)]
+        pos = [np.array([km.ox[:, li] + f * L * c, km.oy[:, li] + f * L * s])
+               + res.u[fe.trans_dof[fe.node_of[li][k]]] for k, f in enumerate(fe.node_frac[li])]
         chord = pos[-1] - pos[0]
         ell = np.hypot(chord[0], chord[1])
         for p in pos[1:-1]:
@@ -65,8 +63,10 @@ def _driven_torque_case(case):
     import copy
 
     c = copy.deepcopy(case)
-    for t in c["drive"].get("torques", []):
-        c["joints"][t["joint"]] = "torque"
+    forced = {d["joint"] for d in c["drives"] if d["law"] == "force"}
+    for j in c["joints"]:
+        if j["name"] in forced:
+            j["elastic"] = "torque"
     return c
 
 
@@ -85,7 +85,7 @@ def gap_study(case: dict, column: str, windows, elements=8, ref_elements=16, con
     rows = []
     for model, geo, joint in configs:
         if joint == "torque":
-            if case["drive"]["type"] != "torque":
+            if not any(d["law"] == "force" for d in case["drives"]):
                 continue
             if "torque" not in preps:
                 preps["torque"] = Prepared(_driven_torque_case(case), elements_per_link=elements)

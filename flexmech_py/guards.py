@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from . import coupled, kernels
-from .errors import SolverError
+from .errors import MechanismError, SolverError
 from .model import squared_frequencies
 
 __all__ = ["check_validity", "failed", "error_estimate", "frames_before", "partial_or", "ORDER"]
@@ -123,6 +123,18 @@ def _advice(model: str, geo: str) -> str:
     return ""
 
 
+def _first_coordinate(case) -> tuple[str, str]:
+    """What q[:, 0] measures, in words, and its unit: the first drive's joint (else the first joint's);
+    a joint to the ground is named by the body it turns ("crank")."""
+    name = case["drives"][0]["joint"] if case["drives"] else case["joints"][0]["name"]
+    joint = next(j for j in case["joints"] if j["name"] == name)
+    a, b = (p.split(".")[0] for p in joint["connects"])
+    unit = case.mechanism.joint(name).unit
+    if "ground" in (a, b):
+        return (b if a == "ground" else a), unit
+    return f"joint {name}", unit
+
+
 def _validity_warnings(res, events, limiting, model, geo) -> list[str]:
     out = []
     if limiting:
@@ -130,8 +142,8 @@ def _validity_warnings(res, events, limiting, model, geo) -> list[str]:
         k = int(np.searchsorted(res.t, t0))
         speed = ""
         if res.qd is not None and res.qd.size:
-            who = "crank" if res.case["mechanism"]["type"] == "fourbar" else "first joint"
-            speed = f" ({who} speed {abs(res.qd[k, 0]):.4g} rad/s)"
+            who, unit = _first_coordinate(res.case)
+            speed = f" ({who} speed {abs(res.qd[k, 0]):.4g} {unit}/s)"
         if model == "nonlinear":
             out.append(f"the {model} model's results after t = {_fmt_t(t0)} s{speed} are outside its validity: "
                        "the material yields there and every flexmech model is elastic")
@@ -160,6 +172,15 @@ def _validity_warnings(res, events, limiting, model, geo) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- failures
+def rigid_failure(res, exc: MechanismError) -> MechanismError:
+    """The MechanismError of a run whose rigid motion reached a singular position or an assembly limit,
+    carrying ``res`` (every frame before it) as its partial result."""
+    res.failure = {"code": exc.code, "time_s": exc.time, "quantity": "the rigid-body motion",
+                   "what": kernels.STATUS_WHAT.get(exc.code, "the rigid-body motion stopped"),
+                   "likely_cause": "mechanism", "message": str(exc)}
+    return MechanismError(str(exc), time=exc.time, code=exc.code, partial=res)
+
+
 def partial_or(res, failure: SolverError | None, geometric: str, cm=None):
     """Return ``res``, or, when the time loop stopped (``failure``), raise a SolverError carrying
     ``res`` (its frames end before the failed step) as ``partial``."""

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import FlexmechError, SolverError
+from .errors import FlexmechError, MechanismError, SolverError
 
 try:
     from . import _flexmech
@@ -27,6 +27,7 @@ except ImportError as exc:  # pragma: no cover - only on a broken install
     ) from exc
 
 api = _flexmech.flexmech_api
+mbs = _flexmech.flexmech_mbs_api
 
 STATUS_MESSAGES = {
     1: "the system matrix is singular (a zero-stiffness or zero-mass mode: check joints and constraints)",
@@ -38,6 +39,10 @@ STATUS_MESSAGES = {
     6: "the elastic displacement exceeded the divergence limit (solver.divergence_limit, default the longest link "
        "length): the step is too large for the integrator, the motion is physically unstable, or the deflection "
        "left the model's range of validity",
+    7: "the mechanism reached a singular position (its joints' constraint equations lost their independence: a "
+       "toggle, a dead centre or a change point)",
+    8: "the mechanism cannot assemble (the position equations of its joints and drives have no solution near the "
+       "last configuration)",
 }
 #: what stopped, in a few words (the diagnosis in flexmech_py.guards adds quantity and likely cause)
 STATUS_WHAT = {
@@ -47,9 +52,14 @@ STATUS_WHAT = {
     4: "invalid input to a compiled routine",
     5: "Newton iterations did not converge within solver.newton_maxit",
     6: "the elastic state grew beyond solver.divergence_limit",
+    7: "the mechanism reached a singular position",
+    8: "the mechanism could not assemble",
 }
 STATUS_WHAT_GEOMETRIC = "the geometric-stiffness axial forces did not converge within solver.geometric_maxit"
-STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED = range(1, 7)
+(STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED,
+ STATUS_SINGULAR_POSITION, STATUS_ASSEMBLY) = range(1, 9)
+#: status codes of the rigid-body layer that mean the mechanism itself cannot go on (MechanismError)
+MECHANISM_FAILURES = (STATUS_SINGULAR_POSITION, STATUS_ASSEMBLY)
 #: status codes a time loop returns while its earlier frames stay valid (partial results are kept)
 RUNTIME_FAILURES = (STATUS_SINGULAR, STATUS_NONFINITE, STATUS_NEWTON, STATUS_DIVERGED)
 
@@ -60,8 +70,10 @@ GEOMETRIC_NOT_CONVERGED = ("the axial forces of the geometric stiffness did not 
 
 
 def check_status(status: int, what: str, time: float | None = None, iteration: str = "newton",
-                 step: int | None = None, data: dict | None = None) -> None:
-    """Raise :class:`SolverError` for a non-zero kernel status code (the only translation point).
+                 step: int | None = None, data: dict | None = None, detail: str = "") -> None:
+    """Raise :class:`SolverError` (:class:`MechanismError` for the rigid-body layer's singular position
+    and assembly failures) for a non-zero kernel status code (the only translation point); ``detail``
+    is appended to the message (what the caller knows: joints, drive coordinates).
 
     ``iteration`` names what status 5 refers to: ``newton`` (coupled/nonlinear) or ``geometric``.
     A time loop passes its failed ``step`` and its raw arrays ``data`` (frames before the failure and
@@ -73,7 +85,9 @@ def check_status(status: int, what: str, time: float | None = None, iteration: s
     if status == 5 and iteration == "geometric":
         msg = GEOMETRIC_NOT_CONVERGED
     where = f" at t = {time:.6g} s" if time is not None else ""
-    raise SolverError(f"{what} stopped{where}: {msg}", time=time, code=status, step=step,
+    if status in MECHANISM_FAILURES:
+        raise MechanismError(f"{what} stopped{where}: {msg}{detail}", time=time, code=status)
+    raise SolverError(f"{what} stopped{where}: {msg}{detail}", time=time, code=status, step=step,
                       data=data if status in RUNTIME_FAILURES else None)
 
 

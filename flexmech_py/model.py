@@ -2,14 +2,16 @@
 
 Conventions (docs/theory.md):
 
-- Every link is meshed with ``n`` equal beam elements from its *start* (its
-  rigid reference point O) to its *end*; element axes follow the rigid link angle.
-- Each mesh node has two elastic translational DOFs (global X, Y components),
-  shared by the links that meet at a joint.  Rotational DOFs belong to a
-  (node, link) pair; links joined by a ``locked`` joint share one.
-- Ground joints fix the node's translations; ``clamp`` also fixes the rotation
-  of the attached link.  Constrained DOFs are kept in the numbering ("all
-  DOFs") and dropped from the solved system ("free DOFs").
+- Every flexible link is meshed with beam elements from its *start* (its frame origin O) to its
+  *end*; element axes follow the rigid link angle.  The mesh has a node at every named point of the
+  link: ``elements`` (or mesh.elements_per_link) equal elements when the link has no named points
+  besides its ends, else the segments between named points share them by length (one at least).
+- Each mesh node has two elastic translational DOFs (global X, Y components), shared by the links
+  joined there by a revolute or weld joint.  Rotational DOFs belong to a (node, link) pair; links
+  joined by a ``locked``/``clamp`` revolute or a weld share one.
+- Ground joints fix the node's translations; ``clamp``/``locked`` (and welds) also fix the rotation
+  of the attached link.  Constrained DOFs are kept in the numbering ("all DOFs") and dropped from the
+  solved system ("free DOFs").
 - Free DOFs are numbered by reverse Cuthill-McKee to keep the band narrow.
 """
 
@@ -20,10 +22,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import kernels
-from .case import JOINTS_OF, SUPERPOSITION_MODELS
+from .case import SUPERPOSITION_MODELS
 from .errors import CaseError
 
-__all__ = ["FEModel", "Joint", "LOAD_MODEL_CODE"]
+__all__ = ["FEModel", "Joint", "LOAD_MODEL_CODE", "link_mesh"]
 
 LOAD_MODEL_CODE = {"hac": 1, "classic": 2, "classic-translational": 3}
 GEOMETRIC_CODE = {"none": 0, "current": 1, "lagged": 2, "quasi_static": 3}
@@ -31,30 +33,73 @@ GEOMETRIC_CODE = {"none": 0, "current": 1, "lagged": 2, "quasi_static": 3}
 
 @dataclass
 class Joint:
-    """A joint: ``inboard`` link index (None = ground) and ``outboard`` link index, each at an end."""
+    """A joint as the FE model sees it: its ``kind`` and elastic condition, point a on link
+    ``inboard`` (None = ground) at fraction ``inboard_frac`` and point b on link ``outboard`` at
+    ``outboard_frac`` (0 start, 1 end)."""
 
     name: str
     inboard: int | None
-    inboard_end: str | None
+    inboard_frac: float | None
     outboard: int
-    outboard_end: str
+    outboard_frac: float
     elastic: str
+    kind: str = "revolute"
+    sign: float = 1.0       # -1 when a and b were swapped to put the ground on the a side
+
+    @property
+    def inboard_end(self) -> str | None:
+        return None if self.inboard is None else _end_name(self.inboard_frac)
+
+    @property
+    def outboard_end(self) -> str:
+        return _end_name(self.outboard_frac)
+
+    @property
+    def shares_rotation(self) -> bool:
+        return self.kind == "weld" or self.elastic in ("locked", "clamp")
+
+
+def _end_name(frac: float) -> str:
+    return {0.0: "start", 1.0: "end"}.get(float(frac), f"{frac:g}")
 
 
 def mechanism_joints(case: dict) -> list[Joint]:
-    """The joints of the case's mechanism type, with their elastic conditions."""
-    mtype = case["mechanism"]["type"]
-    el = case["joints"]
-    if mtype == "fourbar":
-        return [Joint("crank_pivot", None, None, 0, "start", el["crank_pivot"]),
-                Joint("crank_coupler", 0, "end", 1, "start", el["crank_coupler"]),
-                Joint("coupler_follower", 1, "end", 2, "end", el["coupler_follower"]),
-                Joint("follower_pivot", None, None, 2, "start", el["follower_pivot"])]
-    n = len(case["links"])
-    joints = [Joint("base", None, None, 0, "start", el["base"])]
-    joints += [Joint(f"joint_{k}", k - 2, "end", k - 1, "start", el[f"joint_{k}"]) for k in range(2, n + 1)]
-    assert [j.name for j in joints] == list(JOINTS_OF(mtype, n))
-    return joints
+    """The mechanism's joints between links (and the ground), with their elastic conditions."""
+    mech = case.mechanism
+    out = []
+    for j in mech.joints:
+        a, b = mech.joint_points(j)
+        for ref in (a, b):
+            if ref.body is not None and ref.body.kind != "link":
+                raise CaseError(f"joints.{j.name}", f"joins rigid body {ref.body.name!r}: rigid bodies are not yet "
+                                                    "part of the finite-element models")
+        if j.kind == "prismatic":
+            raise CaseError(f"joints.{j.name}", "prismatic joints are not yet part of the finite-element models")
+        sign = 1.0
+        if b.body is None:      # the ground on the b side: swap, and flip the sign of the joint coordinate
+            a, b, sign = b, a, -1.0
+        ai = None if a.body is None else mech.link_index(a.body.name)
+        af = None if a.body is None else a.body.fraction(a.point)
+        out.append(Joint(j.name, ai, af, mech.link_index(b.body.name), b.body.fraction(b.point), mech.condition(j),
+                         j.kind, sign))
+    for ln in mech.links:
+        if ln.rigid:
+            raise CaseError(f"links.{ln.name}.rigid", "rigid links are not yet part of the finite-element models")
+    return out
+
+
+def link_mesh(link, n: int) -> np.ndarray:
+    """Node fractions (0 .. 1) of a link meshed with about n elements and a node at every named point."""
+    cuts = sorted({0.0, 1.0} | {float(f) for f in link.points.values()})
+    if len(cuts) == 2:
+        return np.linspace(0.0, 1.0, n + 1)
+    fr = [0.0]
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        if hi - lo <= 1e-12:
+            continue
+        k = max(1, int(round(n * (hi - lo))))
+        fr += list(np.linspace(lo, hi, k + 1)[1:])
+    return np.array(fr)
 
 
 def squared_frequencies(m: np.ndarray, k: np.ndarray) -> np.ndarray:
@@ -140,6 +185,53 @@ class _UnionFind:
         self.parent[self.find(other)] = self.find(keep)
 
 
+def _node_index(fracs: np.ndarray, frac: float) -> int:
+    """Index of the mesh node at fraction ``frac`` of a link (it is one: named points are nodes)."""
+    k = int(np.argmin(np.abs(fracs - frac)))
+    if abs(fracs[k] - frac) > 1e-9:
+        raise AssertionError((fracs, frac))
+    return k
+
+
+def _merge_nodes(joints, fracs) -> tuple[list, int]:
+    """Global nodes: one per (link, mesh node), merged where a revolute or weld joins two links."""
+    nodes = _UnionFind()
+    for j in joints:
+        if j.inboard is not None:
+            nodes.union((j.inboard, _node_index(fracs[j.inboard], j.inboard_frac)),
+                        (j.outboard, _node_index(fracs[j.outboard], j.outboard_frac)))
+    ids, node_of = {}, []
+    for li, f in enumerate(fracs):
+        row = []
+        for k in range(f.size):
+            root = nodes.find((li, k))
+            ids.setdefault(root, len(ids))
+            row.append(ids[root])
+        node_of.append(row)
+    return node_of, len(ids)
+
+
+def _number_dofs(joints, node_of, fracs, nnodes: int, names):
+    """(rot, trans, ndof, dof names): translations per node, then one rotation per (node, link)
+    group, (node, link) pairs merged by joints that share the rotation."""
+    rots = _UnionFind()
+    for j in joints:
+        if j.inboard is not None and j.shares_rotation:   # "torque" and "pin": separate rotations
+            na = node_of[j.inboard][_node_index(fracs[j.inboard], j.inboard_frac)]
+            rots.union((na, j.inboard), (na, j.outboard))
+    trans = np.arange(2 * nnodes).reshape(nnodes, 2)
+    rot, rot_groups = {}, {}
+    dof_names = [f"node{n}.{c}" for n in range(nnodes) for c in ("x", "y")]
+    for li, row in enumerate(node_of):
+        for node in row:
+            g = rots.find((node, li))
+            if g not in rot_groups:
+                rot_groups[g] = 2 * nnodes + len(rot_groups)
+                dof_names.append(f"node{node}.rot[{names[g[1]]}]")
+            rot[(node, li)] = rot_groups[g]
+    return rot, trans, 2 * nnodes + len(rot_groups), dof_names
+
+
 @dataclass
 class FEModel:
     """The discretized mechanism; build it with :meth:`from_case`."""
@@ -166,66 +258,41 @@ class FEModel:
     ri_prop: np.ndarray
     bandwidth: int = 0
     dof_names: list = field(default_factory=list)
+    node_frac: list = field(default_factory=list)   # node_frac[link][k]: fraction of the link's length of node k
     last_run: dict | None = field(default=None, repr=False)   # the last run's frames and final state (run())
 
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_case(cls, case: dict) -> "FEModel":
+        mech = case.mechanism
         links = case["links"]
         names = [ln["name"] for ln in links]
-        n_el = [ln["elements"] for ln in links]
         joints = mechanism_joints(case)
-        # global nodes: one per (link, k), merged at joints
-        nodes = _UnionFind()
-        for j in joints:
-            if j.inboard is not None:
-                nodes.union((j.inboard, 0 if j.inboard_end == "start" else n_el[j.inboard]),
-                            (j.outboard, 0 if j.outboard_end == "start" else n_el[j.outboard]))
-        ids, node_of = {}, []
-        for li, n in enumerate(n_el):
-            row = []
-            for k in range(n + 1):
-                root = nodes.find((li, k))
-                ids.setdefault(root, len(ids))
-                row.append(ids[root])
-            node_of.append(row)
-        nnodes = len(ids)
-
-        # rotational DOF groups: (node, link) pairs, merged by locked joints
-        rots = _UnionFind()
-        for j in joints:
-            if j.inboard is not None and j.elastic == "locked":   # "torque" and "pin": separate rotations
-                na = node_of[j.inboard][0 if j.inboard_end == "start" else -1]
-                rots.union((na, j.inboard), (na, j.outboard))
-        # DOF numbering (before bandwidth reduction): node translations, then rotations
-        trans = np.arange(2 * nnodes).reshape(nnodes, 2)
-        rot, rot_groups = {}, {}
-        dof_names = [f"node{n}.{c}" for n in range(nnodes) for c in ("x", "y")]
-        for li, row in enumerate(node_of):
-            for node in row:
-                g = rots.find((node, li))
-                if g not in rot_groups:
-                    rot_groups[g] = 2 * nnodes + len(rot_groups)
-                    dof_names.append(f"node{node}.rot[{names[g[1]]}]")
-                rot[(node, li)] = rot_groups[g]
-        ndof = 2 * nnodes + len(rot_groups)
+        fracs = [link_mesh(link, ln["elements"]) for link, ln in zip(mech.links, links)]
+        n_el = [f.size - 1 for f in fracs]
+        node_of, nnodes = _merge_nodes(joints, fracs)
+        rot, trans, ndof, dof_names = _number_dofs(joints, node_of, fracs, nnodes, names)
         fixed = np.zeros(ndof, bool)
         for j in joints:
             if j.inboard is None:
-                node = node_of[j.outboard][0 if j.outboard_end == "start" else -1]
+                node = node_of[j.outboard][_node_index(fracs[j.outboard], j.outboard_frac)]
                 fixed[trans[node]] = True
-                if j.elastic == "clamp":
+                if j.shares_rotation:
                     fixed[rot[(node, j.outboard)]] = True
-
         el_link, el_dof, el_prop = [], [], []
         for li, ln in enumerate(links):
-            le = ln["length"] / n_el[li]
             ra, ea, ei = ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"], ln["youngs_modulus"] * ln["second_moment"]
+            uniform = len(mech.links[li].points) == 0
+            le_u = ln["length"] / n_el[li]
             for k in range(n_el[li]):
                 n1, n2 = node_of[li][k], node_of[li][k + 1]
                 el_link.append(li + 1)
                 el_dof.append([trans[n1, 0], trans[n1, 1], rot[(n1, li)], trans[n2, 0], trans[n2, 1], rot[(n2, li)]])
-                el_prop.append([le, k * le, ra, ea, ei])
+                if uniform:    # equal elements: the same numbers as a uniform mesh always had
+                    el_prop.append([le_u, k * le_u, ra, ea, ei])
+                else:
+                    el_prop.append([(fracs[li][k + 1] - fracs[li][k]) * ln["length"], fracs[li][k] * ln["length"],
+                                    ra, ea, ei])
         el_dof = np.array(el_dof, dtype=np.int32).T  # (6, nel), 0-based for now
 
         model = cls(case=case, joints=joints, link_names=names, n_el=n_el, node_of=node_of, nnodes=nnodes,
@@ -234,7 +301,7 @@ class FEModel:
                     el_prop=np.asfortranarray(np.array(el_prop, float).T),
                     lm_link=np.zeros(0, np.int32), lm_dof=np.zeros((2, 0), np.int32), lm_prop=np.zeros((2, 0)),
                     ri_link=np.zeros(0, np.int32), ri_dof=np.zeros(0, np.int32), ri_prop=np.zeros(0),
-                    dof_names=dof_names)
+                    dof_names=dof_names, node_frac=fracs)
         model._number_free_dofs(el_dof)
         model._lumped(case)
         return model
@@ -246,17 +313,20 @@ class FEModel:
         self.bandwidth = int(kernels.api.ked_bandwidth(self.free_of, self.el_dof))
 
     def node_ref(self, ref: str, where: str) -> tuple[int, int, float]:
-        """Resolve '<link>.<start|mid|end|fraction>' to (link index, global node, zeta along the link)."""
+        """Resolve a link point ('<link>.<start|mid|end|name|fraction>') to (link index, global node,
+        zeta along the link [m]); a CaseError when it is not a mesh node."""
         link, pos = ref.split(".", 1)
         li = self.link_names.index(link)
-        frac = {"start": 0.0, "mid": 0.5, "end": 1.0}.get(pos)
-        frac = float(pos) if frac is None else frac
-        n = self.n_el[li]
-        k = int(round(frac * n))
-        if abs(frac * n - k) > 1e-9:
+        frac = self.case.mechanism.links[li].fraction(pos, where)
+        f = self.node_frac[li]
+        k = int(np.argmin(np.abs(f - frac)))
+        if abs(f[k] - frac) > 1e-9:
+            n = self.n_el[li]
             raise CaseError(where, f"{ref!r} is not at a mesh node ({link} has {n} elements: "
-                                   f"fractions k/{n}); choose a node or change elements_per_link")
-        return li, self.node_of[li][k], k * self.case["links"][li]["length"] / n
+                                   f"fractions k/{n}); choose a node, name the point in links.points, "
+                                   "or change elements_per_link")
+        return li, self.node_of[li][k], k * self.case["links"][li]["length"] / self.n_el[li] \
+            if len(self.case.mechanism.links[li].points) == 0 else f[k] * self.case["links"][li]["length"]
 
     def _lumped(self, case: dict) -> None:
         lm = [self.node_ref(pm["at"], f"point_masses[{i}].at") + (pm["mass"],)
@@ -290,6 +360,10 @@ class FEModel:
     def joint(self, name: str) -> Joint:
         """The joint called ``name``."""
         return next(j for j in self.joints if j.name == name)
+
+    def node_index(self, li: int, frac: float) -> int:
+        """Index along link ``li`` of its mesh node at fraction ``frac`` of its length."""
+        return _node_index(self.node_frac[li], frac)
 
     def free_translational(self) -> np.ndarray:
         """All-DOF numbers (0-based) of the free translational DOFs."""

@@ -18,22 +18,33 @@ from .errors import CaseError
 __all__ = ["evaluate_outputs", "output_unit"]
 
 
-def output_unit(spec: dict) -> str:
+def output_unit(spec: dict, case: dict) -> str:
+    """The unit of an output (a joint's outputs take its coordinate's unit: rad or m)."""
     kind = spec["kind"]
     if kind in UNITS:
         return UNITS[kind]
+    if kind in ("joint_speed", "joint_acceleration", "drive_force"):
+        angular = case.mechanism.joint(spec["joint"]).angular
+        return {"joint_speed": ("rad/s", "m/s"), "joint_acceleration": ("rad/s^2", "m/s^2"),
+                "drive_force": ("N m", "N")}[kind][0 if angular else 1]
     comp = spec["component"]
     if kind == "displacement":
         return "rad" if comp == "rotation" else "m"
+    if kind == "reaction":
+        return "N m" if comp == "moment" else "N"
     return "N m" if comp == "rotation" else "N"  # inertia_load
 
 
-def _joint_rigid(fe, motion, name, attr):
+def _joint_from_links(fe, motion, name, k):
+    """A revolute joint's angle (k = 0), speed (1) or acceleration (2) from link motion: phi_b - phi_a
+    of its FE joint, in the mechanism's orientation."""
     j = fe.joint(name)
+    attr = ("phi", "omega", "alpha")[k]
     val = getattr(motion, attr)[:, j.outboard]
     if j.inboard is not None:
         val = val - getattr(motion, attr)[:, j.inboard]
-    return np.unwrap(val) if attr == "phi" else val  # angles continuous in time (no 2 pi jumps)
+    val = j.sign * val
+    return np.unwrap(val) if k == 0 else val
 
 
 def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float) -> np.ndarray:
@@ -61,69 +72,86 @@ def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float)
     return kap / len(parts)
 
 
-def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, q, qd, qdd, rig_frames, run_model: str,
+def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run_model: str, rm=None,
                      load_cache: dict | None = None, joint_motion=None, curvature=None,
                      axial=None) -> dict[str, np.ndarray]:
     """Evaluate every named output over the frames.
 
-    u_all (ndof, nf) elastic DOFs (displacements from the rigid motion ``motion``);
-    rig_frames (5, nlinks, nf) the kernel rigid samples (for inertia loads).
-    joint_motion: LinkMotion for joint and link angles (default ``motion``; the coupled model
-    passes its own rigid motion); curvature: callable(link, fraction) -> kappa (default: from u_all);
+    u_all (ndof, nf) elastic DOFs (displacements from the rigid motion ``motion``, a LinkMotion);
+    rig_frames (5, nlinks, nf) the kernel rigid samples (for inertia loads); rm the RigidMotion at the
+    frames (joint coordinates, reactions, drive forces of the rigid-body solution).
+    joint_motion: LinkMotion the joint and link angles come from instead (the coupled models pass
+    their own chord motion); curvature: callable(link, fraction) -> kappa (default: from u_all);
     axial: (nel, nf) element axial forces [N] for ``axial_force`` outputs.
     """
-    joint_motion = motion if joint_motion is None else joint_motion
     out = {}
     loads = {} if load_cache is None else load_cache
     links = fe.case["links"]
     for name, sp in specs.items():
         kind = sp["kind"]
-        if kind in ("joint_angle", "joint_speed", "joint_acceleration"):
-            attr = {"joint_angle": "phi", "joint_speed": "omega", "joint_acceleration": "alpha"}[kind]
-            out[name] = _joint_rigid(fe, joint_motion, sp["joint"], attr)
+        if kind in ("joint_angle", "joint_displacement", "joint_speed", "joint_acceleration"):
+            k = {"joint_angle": 0, "joint_displacement": 0, "joint_speed": 1, "joint_acceleration": 2}[kind]
+            out[name] = (_joint_from_links(fe, joint_motion, sp["joint"], k) if joint_motion is not None
+                         else rm.joint(sp["joint"])[:, k].copy())
         elif kind == "link_angle":
-            out[name] = np.unwrap(joint_motion.phi[:, fe.link_names.index(sp["link"])])
+            lm = motion if joint_motion is None else joint_motion
+            out[name] = np.unwrap(lm.phi[:, fe.link_names.index(sp["link"])])
         elif kind in ("strain", "curvature"):
             li = fe.link_names.index(sp["link"])
             kap = (link_curvature(fe, u_all, motion.phi[:, li], li, sp["at"]) if curvature is None
                    else curvature(li, sp["at"]))
             out[name] = kap * links[li]["half_depth"] if kind == "strain" else kap
         elif kind == "axial_force":
-            if axial is None:
-                raise CaseError(f"outputs.{name}", "axial forces are not available for this model")
-            li = fe.link_names.index(sp["link"])
-            els = fe.link_elements(li)
-            n = len(els)
-            s = sp["at"] * n
-            k = int(round(s))
-            if abs(s - k) < 1e-9 and 0 < k < n:
-                out[name] = 0.5 * (axial[els[k - 1]] + axial[els[k]])
-            else:
-                out[name] = axial[els[min(int(np.floor(s)), n - 1)]]
+            out[name] = _axial_output(fe, axial, sp, name)
         elif kind in ("displacement", "position"):
-            li, node, zeta = fe.node_ref(sp["at"], f"outputs.{name}.at")
-            comp = sp["component"]
-            ux, uy = u_all[fe.trans_dof[node, 0]], u_all[fe.trans_dof[node, 1]]
-            phi = motion.phi[:, li]
-            c, s = np.cos(phi), np.sin(phi)
-            if kind == "position":
-                rigid = (motion.ox[:, li] + zeta * c) if comp == "x" else (motion.oy[:, li] + zeta * s)
-                out[name] = rigid + (ux if comp == "x" else uy)
-            else:
-                out[name] = {"x": ux, "y": uy, "axial": c * ux + s * uy, "transverse": -s * ux + c * uy,
-                             "rotation": u_all[fe.rot_dof[(node, li)]] if comp == "rotation" else None}[comp]
+            out[name] = _point_output(fe, u_all, motion, sp, name)
         elif kind == "inertia_load":
             model = run_model if sp["model"] == "run" else sp["model"]
             if model not in loads:
                 loads[model] = fe.loads(rig_frames, model)
-            f = loads[model]
-            comp = sp["component"]
-            if comp == "norm":  # forces only: the translational free DOFs [N]
-                out[name] = np.linalg.norm(f[fe.free_translational()], axis=0)
-            else:
-                li, node, _ = fe.node_ref(sp["at"], f"outputs.{name}.at")
-                dof = fe.rot_dof[(node, li)] if comp == "rotation" else fe.trans_dof[node, "xy".index(comp)]
-                out[name] = f[dof].copy()
+            out[name] = _load_output(fe, loads[model], sp, name)
+        elif kind == "reaction":
+            r = rm.reaction(sp["joint"])
+            out[name] = {"x": r[:, 0], "y": r[:, 1], "moment": r[:, 2],
+                         "magnitude": np.hypot(r[:, 0], r[:, 1])}[sp["component"]].copy()
+        elif kind == "drive_force":
+            out[name] = rm.drive_force(sp["joint"]).copy()
         else:  # pragma: no cover - the case validator only admits the kinds above
             raise AssertionError(kind)
     return out
+
+
+def _axial_output(fe, axial, sp: dict, name: str) -> np.ndarray:
+    if axial is None:
+        raise CaseError(f"outputs.{name}", "axial forces are not available for this model")
+    li = fe.link_names.index(sp["link"])
+    els = fe.link_elements(li)
+    n = len(els)
+    s = sp["at"] * n
+    k = int(round(s))
+    if abs(s - k) < 1e-9 and 0 < k < n:
+        return 0.5 * (axial[els[k - 1]] + axial[els[k]])
+    return axial[els[min(int(np.floor(s)), n - 1)]]
+
+
+def _point_output(fe, u_all, motion, sp: dict, name: str) -> np.ndarray:
+    li, node, zeta = fe.node_ref(sp["at"], f"outputs.{name}.at")
+    comp = sp["component"]
+    ux, uy = u_all[fe.trans_dof[node, 0]], u_all[fe.trans_dof[node, 1]]
+    phi = motion.phi[:, li]
+    c, s = np.cos(phi), np.sin(phi)
+    if sp["kind"] == "position":
+        rigid = (motion.ox[:, li] + zeta * c) if comp == "x" else (motion.oy[:, li] + zeta * s)
+        return rigid + (ux if comp == "x" else uy)
+    if comp == "rotation":
+        return u_all[fe.rot_dof[(node, li)]]
+    return {"x": ux, "y": uy, "axial": c * ux + s * uy, "transverse": -s * ux + c * uy}[comp]
+
+
+def _load_output(fe, f: np.ndarray, sp: dict, name: str) -> np.ndarray:
+    comp = sp["component"]
+    if comp == "norm":  # forces only: the translational free DOFs [N]
+        return np.linalg.norm(f[fe.free_translational()], axis=0)
+    li, node, _ = fe.node_ref(sp["at"], f"outputs.{name}.at")
+    dof = fe.rot_dof[(node, li)] if comp == "rotation" else fe.trans_dof[node, "xy".index(comp)]
+    return f[dof].copy()

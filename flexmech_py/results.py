@@ -60,6 +60,7 @@ class Result:
     axial: np.ndarray | None = None             # (nel, nf) element axial forces [N], tension > 0
     curvature: object = field(default=None, repr=False)   # callable(link, fraction) -> (nf,) curvature [1/m]
     failure: dict | None = None                 # set when the run stopped: a partial result (guards.failed)
+    motion: object = field(default=None, repr=False)   # LinkMotion of the rigid-body solution at the frames
 
     @property
     def status(self) -> str:

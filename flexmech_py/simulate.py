@@ -8,50 +8,29 @@ import time
 
 import numpy as np
 
-from . import rigid
-from .case import MODELS, SUPERPOSITION_MODELS, integrator_coefficients
-from .errors import CaseError, SolverError
+from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients
+from .errors import CaseError, MechanismError, SolverError
 from . import coupled, guards
 from .coupled import CoupledModel
+from .mechanism import MotionSource, prepare_motion
+from .mechanism.motion import LinkMotion, RigidMotion
 from .model import FEModel
 from .outputs import evaluate_outputs, link_curvature, output_unit
 from .results import Result
 
-__all__ = ["simulate", "simulate_models", "Prepared", "RigidSource", "build_mechanism", "link_masses", "rigid_motion", "time_grid", "RigidMotion"]
+__all__ = ["simulate", "simulate_models", "Prepared", "motion_source", "rigid_motion", "time_grid", "RigidMotion"]
 
 
-def build_mechanism(case: dict):
-    """The rigid mechanism (rigid.FourBar or rigid.SerialChain) of a resolved case."""
-    L = [ln["length"] for ln in case["links"]]
-    mech = case["mechanism"]
-    if mech["type"] == "fourbar":
-        q0 = case["initial"]["angles"][0]
-        fb = rigid.FourBar.open_assembly(L[0], L[1], L[2], mech["ground_length"], q0)
-        if mech["assembly"] == "crossed":
-            fb = rigid.FourBar(L[0], L[1], L[2], mech["ground_length"], branch=-fb.branch)
-        return fb
-    return rigid.SerialChain(L, base=tuple(mech["base"]))
+def motion_source(case: dict) -> MotionSource:
+    """The rigid-body motion of a resolved case as a function of time (flexmech_py.mechanism.motion)."""
+    setup = prepare_motion(case.mechanism, case["loads"]["gravity"])
+    sol = case["solver"]
+    return MotionSource(setup, rtol=sol["rigid_rtol"], atol=sol["rigid_atol"], hmax=sol["t_end"])
 
 
-def link_masses(case: dict, fe: FEModel) -> list:
-    """Rigid mass properties per link, equal to those of the FE model (bars + lumped inertias)."""
-    masses = [rigid.LinkMass.from_bar(ln["density"] * ln["area"], ln["length"]) for ln in case["links"]]
-    for i, pm in enumerate(case["point_masses"]):
-        li, _, zeta = fe.node_ref(pm["at"], f"point_masses[{i}].at")
-        masses[li].add_point_mass(pm["mass"], zeta)
-    for r in case["rotary_inertias"]:
-        masses[fe.link_names.index(r["turns_with"])].add_rotary_inertia(r["inertia"])
-    return masses
-
-
-def torque_value(tq: dict, theta):
-    """Joint torque law tau(theta) = constant + sum_k sin_k sin(k theta) + cos_k cos(k theta) [N m]."""
-    tau = tq["constant"] + 0.0 * theta
-    for k, a in enumerate(tq["sin"], start=1):
-        tau = tau + a * np.sin(k * theta)
-    for k, b in enumerate(tq["cos"], start=1):
-        tau = tau + b * np.cos(k * theta)
-    return tau
+def rigid_motion(case: dict, t: np.ndarray) -> RigidMotion:
+    """The rigid-body motion of a case on the grid t [s]."""
+    return motion_source(case)(np.asarray(t, float))
 
 
 def time_grid(case: dict, dt: float | None = None, out_every: int | None = None):
@@ -66,77 +45,24 @@ def time_grid(case: dict, dt: float | None = None, out_every: int | None = None)
     return nsteps, sol["t_end"] / nsteps, out_every
 
 
-class RigidMotion:
-    """Rigid-body motion sampled on a time grid: q, qd, qdd (N, ndof) and the link motion."""
-
-    def __init__(self, t, q, qd, qdd, motion):
-        self.t, self.q, self.qd, self.qdd, self.motion = t, q, qd, qdd, motion
-
-    def kernel_samples(self, gravity, idx=slice(None)) -> np.ndarray:
-        """(5, nlinks, N) array [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] for the kernels."""
-        m = self.motion
-        rig = np.stack([m.phi[idx], m.omega[idx], m.alpha[idx], m.ax[idx] - gravity[0], m.ay[idx] - gravity[1]])
-        return np.asfortranarray(rig.transpose(0, 2, 1))
-
-
-class RigidSource:
-    """The rigid-body motion of a case as a function of time: ``source(t)`` is the RigidMotion on any
-    increasing grid t inside [0, t_end] (kinematic drives in closed form; torque drives from the
-    dense output of one forward-dynamics integration), so a long run can sample it chunk by chunk."""
-
-    def __init__(self, case: dict, fe: FEModel, t_end: float, mech=None):
-        self.case = case
-        self.mech = build_mechanism(case) if mech is None else mech
-        drive = case["drive"]
-        self.q0 = np.array(case["initial"]["angles"], float)
-        qd0 = np.array(case["initial"]["speeds"], float)
-        self._dense = None
-        if drive["type"] != "kinematic":
-            masses = link_masses(case, fe)
-            joint_torques = []
-            for tq in drive["torques"]:
-                j = fe.joint(tq["joint"])
-                joint_torques.append((lambda theta, tq=tq: torque_value(tq, theta), j.outboard, j.inboard))
-            self._dense = rigid.integrate_dense(self.mech, masses, self.q0, qd0, (0.0, t_end), None,
-                                                gravity=tuple(case["loads"]["gravity"]), joint_torques=joint_torques,
-                                                rtol=case["solver"]["rigid_rtol"], atol=case["solver"]["rigid_atol"])
-
-    def __call__(self, t: np.ndarray) -> RigidMotion:
-        drive, mech = self.case["drive"], self.mech
-        if self._dense is None:
-            if drive["law"] == "constant_speed":
-                q, qd, qdd = rigid.constant_speed(t, self.q0[0], drive["speed"])
-            else:
-                q, qd, qdd = rigid.spinup(t, drive["final_speed"], drive["spinup_time"], q0=self.q0[0])
-            if isinstance(mech, rigid.FourBar):
-                rigid.check_motion(mech, q, t)
-        else:
-            q, qd, qdd = self._dense(t)
-        return RigidMotion(t, q, qd, qdd, mech.kinematics(q, qd, qdd))
-
-
-def rigid_motion(case: dict, fe: FEModel, t: np.ndarray, mech=None) -> RigidMotion:
-    """Rigid-body motion on the grid t: kinematic drive, or torque-driven forward dynamics."""
-    t = np.asarray(t, float)
-    return RigidSource(case, fe, float(t[-1]), mech)(t)
-
-
 def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion):
-    """Applied joint torques as generalized forces on the free elastic DOFs: (q_free, q_val) or (None, None).
+    """The force drives' torques as generalized forces on the free elastic DOFs: (q_free, q_val) or
+    (None, None).
 
-    Assembled over all DOFs (constrained ones included) and restricted to the free
-    DOFs; rows that vanish identically (torques on clamped DOFs, or action and
-    reaction on one locked rotation) are dropped, so they cost nothing.
+    A torque on a revolute joint acts on the rotation of its b link at the joint node, its reaction
+    on the a link's.  Assembled over all DOFs (constrained ones included) and restricted to the free
+    DOFs; rows that vanish identically (torques on clamped DOFs, or action and reaction on one locked
+    rotation) are dropped, so they cost nothing.
     """
-    drive = case["drive"]
-    if drive["type"] != "torque":
+    mech = case.mechanism
+    forced = [d.joint for d in mech.drives if not d.kinematic]
+    if not forced:
         return None, None
     q_all = np.zeros((fe.ndof, rm.t.size))
-    for tq in drive["torques"]:
-        j = fe.joint(tq["joint"])
-        theta = rm.motion.phi[:, j.outboard] - (rm.motion.phi[:, j.inboard] if j.inboard is not None else 0.0)
-        tau = torque_value(tq, theta)
-        node = fe.node_of[j.outboard][0 if j.outboard_end == "start" else -1]
+    for name in forced:
+        j = fe.joint(name)
+        tau = j.sign * rm.drive_force(name)
+        node = fe.node_of[j.outboard][fe.node_index(j.outboard, j.outboard_frac)]
         q_all[fe.rot_dof[(node, j.outboard)]] += tau
         if j.inboard is not None:
             q_all[fe.rot_dof[(node, j.inboard)]] -= tau
@@ -147,8 +73,10 @@ def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion):
     return (rows + 1).astype(np.int32), np.asfortranarray(qf[rows])
 
 
-def check_elastic_problem(fe: FEModel, rig0: np.ndarray) -> None:
-    """Reject an elastic problem with zero-stiffness modes (an unconstrained mechanism motion)."""
+def check_elastic_problem(fe: FEModel, rig0: np.ndarray, dof: int | None = None) -> None:
+    """Reject an elastic problem with zero-stiffness modes (an unconstrained mechanism motion);
+    ``dof`` the mechanism's degrees of freedom (at most that many joints can be left free with
+    'torque' on purpose)."""
     if fe.nfree > 1500:  # a dense eigenvalue check would cost more than the run; skipped
         return
     # squared natural frequencies of M and the elastic K alone (the rigid sample's angle only): a
@@ -162,7 +90,8 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray) -> None:
     nzero = int(np.sum(np.abs(ev) < 1e-13 * scale))
     # a joint left free with 'torque' turns the mechanism's own degree of freedom into a zero-stiffness
     # mode of the elastic problem, on purpose (theory.md section 14)
-    allowed = min(sum(1 for j in fe.joints if j.elastic == "torque"), len(fe.case["initial"]["angles"]))
+    released = sum(1 for j in fe.joints if j.elastic == "torque")
+    allowed = min(released, released if dof is None else dof)
     if nzero > allowed:
         raise CaseError("joints", f"the elastic problem has {nzero - allowed} unintended zero-stiffness mode(s): the joints leave the "
                                   "mechanism free to move elastically; clamp the driven ground joint "
@@ -182,6 +111,7 @@ class Prepared:
     def __init__(self, case: dict, *, dt: float | None = None, elements_per_link: int | None = None,
                  out_every: int | None = None, chunk_steps: int | None = None):
         t_start = time.perf_counter()
+        case = case if isinstance(case, Case) else Case(case)   # a resolved case that travelled as a plain dict
         if elements_per_link is not None:
             case = _with_elements(case, elements_per_link)
         self.case = case
@@ -193,16 +123,34 @@ class Prepared:
         for name, sp in case["outputs"].items():  # node references must fall on the mesh: check before running
             if isinstance(sp.get("at"), str):
                 self.fe.node_ref(sp["at"], f"outputs.{name}.at")
-        self.mech = build_mechanism(case)
         t0, c0 = time.perf_counter(), time.thread_time()
-        self.source = RigidSource(case, self.fe, float(case["solver"]["t_end"]), self.mech)
-        self.rm_frames = self.source(self.times(0, self.nsteps, self.out_every))   # the motion at the output frames
+        self.source = motion_source(case)
+        self.setup = self.source.setup
+        self.rigid_failure = None
+        try:
+            self.rm_frames = self.source(self.times(0, self.nsteps, self.out_every))   # the motion at the output frames
+        except MechanismError as exc:
+            self._stop_at(exc)
         self.t_rigid, self.t_rigid_cpu = time.perf_counter() - t0, time.thread_time() - c0
         self.gravity = case["loads"]["gravity"]
         self._checked = False
         self._full = None
         self.coupled = {}
         self.t_prepare = time.perf_counter() - t_start
+
+    def _stop_at(self, exc: MechanismError) -> None:
+        """The rigid motion reached a singular position or an assembly limit: keep the grid up to the last
+        output frame before it (every model runs that far and its result is marked partial), or re-raise
+        when not even two frames are left."""
+        frames = exc.partial
+        if frames is None or frames.t.size < 2:
+            exc.partial = None
+            raise exc
+        n_new = (frames.t.size - 1) * self.out_every
+        t_new = float(self.times(n_new, n_new)[0])
+        self.case = Case(self.case, solver=dict(self.case["solver"], t_end=t_new))
+        self.nsteps, self.rm_frames, self.rigid_failure = n_new, frames, exc
+        exc.partial = None
 
     def times(self, i0: int, i1: int, every: int = 1) -> np.ndarray:
         """Step times t_i = i t_end/N [s] for i = i0, i0 + every, ..., i1 (bit-equal to
@@ -276,7 +224,7 @@ class Prepared:
             return None
         pc = copy.copy(self)
         if 2 * nc != n:   # the grid ends earlier: at the fine grid's step 2 nc
-            pc.case = dict(self.case, solver=dict(self.case["solver"], t_end=float(self.times(2 * nc, 2 * nc)[0])))
+            pc.case = Case(self.case, solver=dict(self.case["solver"], t_end=float(self.times(2 * nc, 2 * nc)[0])))
         pc.nsteps, pc.dt, pc.out_every = nc, 2.0 * self.dt, oc
         pc.chunk_steps = oc * max(1, math.ceil(self.chunk_steps / 2 / oc))
         pc._t, pc._full = None, None
@@ -284,10 +232,7 @@ class Prepared:
             pc.rm_frames = self.rm_frames
         else:
             sel = slice(0, 2 * (nc // oc) + 1, 2)   # coarse frame k is fine frame 2 k
-            r = self.rm_frames
-            pc.rm_frames = RigidMotion(r.t[sel], r.q[sel], r.qd[sel], r.qdd[sel],
-                                       rigid.LinkMotion(**{k: getattr(r.motion, k)[sel]
-                                                           for k in rigid.LinkMotion.__dataclass_fields__}))
+            pc.rm_frames = self.rm_frames.select(sel)
         return pc
 
     def run(self, model: str | None = None, geometric: str | None = None, *, estimate: bool | None = None,
@@ -314,6 +259,8 @@ class Prepared:
         if estimate is None:
             estimate = self.case["solver"].get("error_estimate", "time") != "none"
         res.extra["error_estimate"] = guards.error_estimate(self, res, geometric) if estimate else {"method": "none"}
+        if self.rigid_failure is not None:
+            raise guards.rigid_failure(res, self.rigid_failure)
         return res
 
     def _run_raw(self, model: str, geometric: str | None, u0=None, v0=None) -> Result:
@@ -324,7 +271,7 @@ class Prepared:
                 raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
             return self._run_coupled(t_start, model)
         if not self._checked:
-            check_elastic_problem(fe, self.rm_frames.kernel_samples(self.gravity)[:, :, :1])
+            check_elastic_problem(fe, self.rm_frames.kernel_samples(self.gravity)[:, :, :1], self.setup.dof)
             self._checked = True
         sol = dict(case["solver"])
         if geometric is not None:
@@ -370,14 +317,13 @@ class Prepared:
             uf, vf, af, nf = uf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid], nf[:, :nvalid]
         sel = slice(0, nvalid)
         rmf = self.rm_frames
-        motion_f = rigid.LinkMotion(**{k: getattr(rmf.motion, k)[sel] for k in rigid.LinkMotion.__dataclass_fields__})
+        motion_f = rmf.motion.select(sel)
         rig_f = rmf.kernel_samples(self.gravity, sel)
         u_all = fe.expand(uf)
         if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
             nf = np.array([[fe.el_prop[3, e] / fe.el_prop[0, e]] for e in range(fe.nel)]) * _axial_stretch(fe, u_all, motion_f)
-        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rmf.q[sel], rmf.qd[sel], rmf.qdd[sel], rig_f,
-                                   model, axial=nf)
-        units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
+        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rmf.select(sel), axial=nf)
+        units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
         self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": t_samples}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
@@ -388,7 +334,7 @@ class Prepared:
         res = Result(case=case, model=model, t=rmf.t[sel], columns=columns, units=units, fe=fe,
                      q=rmf.q[sel], qd=rmf.qd[sel], qdd=rmf.qdd[sel], u=u_all, v=fe.expand(vf),
                      a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
-                     axial=nf)
+                     axial=nf, motion=motion_f)
         res.curvature = lambda li, frac: link_curvature(fe, u_all, motion_f.phi[:, li], li, frac)
         return guards.partial_or(res, failure, sol["geometric_stiffness"])
 
@@ -400,8 +346,8 @@ class Prepared:
         if model not in self.coupled:
             self.coupled[model] = CoupledModel.from_case(case, fe, split=(model == "nonlinear"))
         cm = self.coupled[model]
-        q0, v0 = cm.initial_state(self.rm.q[0], self.rm.qd[0], self.mech)
-        cval = cm.constraint_values(self.t, self.rm.q, self.rm.qd, self.rm.qdd, self.mech)
+        q0, v0 = cm.initial_state(self.rm.select(slice(0, 1)))
+        cval = cm.constraint_values(self.rm)
         am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
         t0, c0 = time.perf_counter(), time.thread_time()
         failure = None
@@ -418,16 +364,15 @@ class Prepared:
             iters = exc.data["iters"]
         t_kernel, c_kernel = time.perf_counter() - t0, time.thread_time() - c0
         idx = slice(0, self.out_every * (qf.shape[1] - 1) + 1, self.out_every)
-        ref = rigid.LinkMotion(**{k: getattr(self.rm.motion, k)[idx] for k in rigid.LinkMotion.__dataclass_fields__})
+        ref = self.rm.motion.select(idx)
         chord = coupled.chord_motion(cm, qf, vf, af)
         u_dev = coupled.deviation(cm, qf, ref)
         rig_chord = np.asfortranarray(np.stack([chord.phi, chord.omega, chord.alpha, chord.ax - self.gravity[0],
                                                 chord.ay - self.gravity[1]]).transpose(0, 2, 1))
-        columns = evaluate_outputs(fe, case["outputs"], u_dev, ref, self.rm.q[idx], self.rm.qd[idx], self.rm.qdd[idx],
-                                   rig_chord, "classic", joint_motion=chord,
-                                   curvature=lambda li, frac: coupled.curvature(cm, qf, li, frac),
+        columns = evaluate_outputs(fe, case["outputs"], u_dev, ref, rig_chord, "classic", rm=self.rm.select(idx),
+                                   joint_motion=chord, curvature=lambda li, frac: coupled.curvature(cm, qf, li, frac),
                                    axial=(axial := coupled.axial_forces(cm, qf)))
-        units = {name: output_unit(sp) for name, sp in case["outputs"].items()}
+        units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
         energy = {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}
         for k, y in energy.items():
             columns[k], units[k] = y, "J"
@@ -444,7 +389,7 @@ class Prepared:
         res = Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
                      q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_dev, v=np.zeros_like(u_dev),
                      a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
-                     axial=axial)
+                     axial=axial, motion=ref)
         res.curvature = lambda li, frac: coupled.curvature(cm, qf, li, frac)
         return guards.partial_or(res, failure, "coupled", cm=cm)
 
@@ -493,5 +438,6 @@ def _with_elements(case: dict, n: int) -> dict:
     c = copy.deepcopy(case)
     c["mesh"]["elements_per_link"] = int(n)
     for ln in c["links"]:
-        ln["elements"] = int(n)
+        if not ln.get("rigid"):
+            ln["elements"] = int(n)
     return c

@@ -14,18 +14,22 @@
 !>      (flexmech_newmark: max |u| over the free translational DOFs; flexmech_coupled: the largest
 !>      node offset from the straight link chord or change of the chord length); the step that
 !>      crossed it is returned in fail_step
+!>   7  the mechanism reached a singular position: its constraint Jacobian (with the kinematic drives)
+!>      lost rank (a toggle or dead centre of a driven coordinate, a change point of a loop)
+!>   8  the mechanism cannot assemble: the position equations of the joints and drives have no
+!>      solution near the last configuration (Newton did not converge)
 module flexmech_lapack
   use flexmech_kinds, only: dp
   implicit none
   private
-  public :: dgbtrf, dgbtrs, dgetrf, dgetrs
+  public :: dgbtrf, dgbtrs, dgetrf, dgetrs, dgecon
   public :: STATUS_OK, STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON, &
-            STATUS_DIVERGED
+            STATUS_DIVERGED, STATUS_SINGULAR_POSITION, STATUS_ASSEMBLY
   public :: lapack_status
 
   integer, parameter :: STATUS_OK = 0, STATUS_SINGULAR = 1, STATUS_NONFINITE = 2, &
                         STATUS_LAPACK_ARG = 3, STATUS_BAD_INPUT = 4, STATUS_NEWTON = 5, &
-                        STATUS_DIVERGED = 6
+                        STATUS_DIVERGED = 6, STATUS_SINGULAR_POSITION = 7, STATUS_ASSEMBLY = 8
 
   interface
     subroutine dgbtrf(m, n, kl, ku, ab, ldab, ipiv, info)
@@ -49,6 +53,14 @@ module flexmech_lapack
       real(dp), intent(inout) :: a(lda, *)
       integer, intent(out) :: ipiv(*), info
     end subroutine dgetrf
+    subroutine dgecon(norm, n, a, lda, anorm, rcond, work, iwork, info)
+      import :: dp
+      character, intent(in) :: norm
+      integer, intent(in) :: n, lda
+      real(dp), intent(in) :: a(lda, *), anorm
+      real(dp), intent(out) :: rcond, work(*)
+      integer, intent(out) :: iwork(*), info
+    end subroutine dgecon
     subroutine dgetrs(trans, n, nrhs, a, lda, ipiv, b, ldb, info)
       import :: dp
       character, intent(in) :: trans

@@ -34,10 +34,11 @@ def _beam(J=None, tau=10.0, n=4, t_end=0.05, dt=1e-5, out=250, **extra):
 def test_kernel_matrices_are_the_derivatives_of_the_residual(cases_dir):
     """M = dR/da exactly, C_v = dR/dv exactly (R is quadratic in v), K_t = dR/dq up to the inertia's
     configuration dependence through the chord (left out of the iteration matrix, theory.md §11)."""
-    case = fm.load_case(cases_dir / "manipulator_bricout.toml", overrides=["solver.t_end=0.001"])
+    case = fm.load_case(cases_dir / "manipulator_bricout.toml",
+                        overrides=["solver.t_end=0.001", "initial.speeds=[3.0, -2.0]"])
     p = Prepared(case)
     cm = CoupledModel.from_case(case, p.fe)
-    q, v = cm.initial_state(p.rm.q[0], np.array([3.0, -2.0]), p.mech)
+    q, v = cm.initial_state(p.rm.select(slice(0, 1)))
     rng = np.random.default_rng(0)
     free = np.flatnonzero(cm.free_of > 0)
     free = free[np.argsort(cm.free_of[free])]
@@ -187,7 +188,7 @@ def test_weld_keeps_the_relative_angle(cases_dir):
     initial value (the elbow torque is removed; the base torque turns the welded arm)."""
     case = fm.load_case(cases_dir / "manipulator_bricout.toml",
                         overrides=["solver.t_end=0.05", "drive.torques.1.constant=0.0"])
-    case["drive"]["torques"] = case["drive"]["torques"][:1]
+    case["drives"] = case["drives"][:1]
     res = fm.simulate(case, model="coupled")
     c = res.extra["coupled"]
     beta_ref = res["beta"][0]
@@ -197,9 +198,8 @@ def test_weld_keeps_the_relative_angle(cases_dir):
     from flexmech_py.coupled import joint_angles
     p = Prepared(case)
     cm = CoupledModel.from_case(case, p.fe)
-    q0, v0 = cm.initial_state(p.rm.q[0], p.rm.qd[0], p.mech)
-    qf, vf, af, lf, ef, _ = cm.run(q0, v0, p.t, cm.constraint_values(p.t, p.rm.q, p.rm.qd, p.rm.qdd, p.mech), p.dt,
-                                   out_every=p.out_every)
+    q0, v0 = cm.initial_state(p.rm.select(slice(0, 1)))
+    qf, vf, af, lf, ef, _ = cm.run(q0, v0, p.t, cm.constraint_values(p.rm), p.dt, out_every=p.out_every)
     ang = joint_angles(cm, qf)["joint_2"]
     assert np.max(np.abs(ang - 0.5)) < 1e-10
     assert c["energy_balance"]["relative_drift"] < 1e-6

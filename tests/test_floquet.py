@@ -115,7 +115,7 @@ def test_geometric_stiffness_quasi_static_is_linear_and_buckles_the_seed_links(s
     (dict(geometric="current"), "geometric_stiffness"),
     (dict(geometric="lagged"), "geometric_stiffness"),
     (dict(model="coupled"), "model"),
-    (dict(speed=0.0), "drive.speed"),
+    (dict(speed=0.0), r"drives\[0\].speed"),
 ])
 def test_refuses_what_has_no_monodromy(seed, change, field):
     kw = dict(model="hac")

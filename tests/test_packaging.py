@@ -11,7 +11,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_every_python_file_is_installed():
     listed = set(re.findall(r"'([\w/]+\.py)'", (ROOT / "flexmech_py" / "meson.build").read_text()))
-    present = {p.name for p in (ROOT / "flexmech_py").glob("*.py")}
+    pkg = ROOT / "flexmech_py"
+    present = {p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")}
     assert present == listed, f"not listed: {present - listed}; listed but missing: {listed - present}"
 
 

@@ -1,0 +1,209 @@
+"""The rigid-body motion of a mechanism sampled on time grids (docs/theory.md section 17.3-17.4).
+
+:class:`MotionSource` follows the motion from t = 0 with the Fortran layer (flexmech_motion): every
+sample is computed as the grid asks, chunk by chunk, continuing from a stored state, so memory does
+not grow with the run (a grid earlier than the last sample restarts from t = 0; the trajectory is the
+same, so results do not depend on the chunking).  A sample is a :class:`RigidMotion`: the bodies'
+coordinates and their derivatives, the joints' coordinates, the constraint multipliers (joint
+reactions, drive forces) and, for every link, the motion of its start in the layout the elastic
+models use (:class:`LinkMotion`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from .. import kernels
+from ..errors import MechanismError
+from .analysis import MotionSetup, constraint_matrices, scaled_jacobian
+from .system import Mechanism
+
+__all__ = ["LinkMotion", "RigidMotion", "MotionSource", "KINEMATIC_RCOND_MIN", "DYNAMIC_GRAM_MIN"]
+
+KINEMATIC_RCOND_MIN = 1e-9     # the scaled Jacobian of a kinematic mechanism is singular below this
+DYNAMIC_GRAM_MIN = 1e-12       # (sigma_min / sigma_max)^2 of the scaled joint Jacobian below this: singular
+POSITION_TOL = 1e-12           # positions converge to POSITION_TOL x the mechanism's length
+
+
+@dataclass
+class LinkMotion:
+    """Rigid motion of every link's frame, arrays (N, nlinks): axis angle phi [rad], angular velocity
+    omega [rad/s] and acceleration alpha [rad/s^2]; position (ox, oy) [m], velocity (vx, vy) [m/s] and
+    acceleration (ax, ay) [m/s^2] of the link's start O."""
+
+    phi: np.ndarray
+    omega: np.ndarray
+    alpha: np.ndarray
+    ox: np.ndarray
+    oy: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+
+    def select(self, idx) -> "LinkMotion":
+        """The samples ``idx`` (an index, slice or mask along time)."""
+        return LinkMotion(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
+
+
+class RigidMotion:
+    """The motion sampled at times t (N,): body coordinates z, zd, zdd (N, n) (centre of mass and
+    frame angle per body), multipliers lam (N, nrow), joint coordinates jq (N, nj, 3) [value, rate,
+    acceleration], the drives' generalized forces dv (N, ndrives); q, qd, qdd (N, ndof) the
+    coordinates of the primary joints; ``motion`` the links' LinkMotion."""
+
+    def __init__(self, setup: MotionSetup, t, z, zd, zdd, lam, jq, dv):
+        self.setup = setup
+        self.t, self.z, self.zd, self.zdd, self.lam, self.jq, self.dv = t, z, zd, zdd, lam, jq, dv
+        idx = [[j.name for j in setup.mech.joints].index(p) for p in setup.primary]
+        self.q, self.qd, self.qdd = (jq[:, idx, k] for k in range(3))
+        self.motion = _link_motion(setup.mech, z, zd, zdd)
+
+    def select(self, idx) -> "RigidMotion":
+        return RigidMotion(self.setup, self.t[idx], self.z[idx], self.zd[idx], self.zdd[idx], self.lam[idx],
+                           self.jq[idx], self.dv[idx])
+
+    def joint(self, name: str) -> np.ndarray:
+        """(N, 3) [coordinate, rate, acceleration] of a joint (rad or m)."""
+        return self.jq[:, [j.name for j in self.setup.mech.joints].index(name)]
+
+    def kernel_samples(self, gravity, idx=slice(None)) -> np.ndarray:
+        """(5, nlinks, N) [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] of the links, for the kernels."""
+        m = self.motion
+        rig = np.stack([m.phi[idx], m.omega[idx], m.alpha[idx], m.ax[idx] - gravity[0], m.ay[idx] - gravity[1]])
+        return np.asfortranarray(rig.transpose(0, 2, 1))
+
+    def reaction(self, name: str) -> np.ndarray:
+        """(N, 3) [F_x, F_y, M] that body a exerts on body b at the joint (global components [N],
+        moment [N m]; for a prismatic joint the force is normal to the guide)."""
+        mech, packed = self.setup.mech, self.setup.packed
+        j = mech.joint(name)
+        r0, _ = packed.joint_rows[mech.joints.index(j)]
+        out = np.zeros((self.t.size, 3))
+        if j.kind in ("revolute", "weld"):
+            out[:, :2] = self.lam[:, r0:r0 + 2]
+            if j.kind == "weld":
+                out[:, 2] = -self.lam[:, r0 + 2]
+        else:
+            n = _guide_normal(self, j)
+            out[:, :2] = -self.lam[:, [r0]] * n
+            out[:, 2] = -self.lam[:, r0 + 1]
+        return out
+
+    def drive_force(self, name: str) -> np.ndarray:
+        """(N,) torque [N m] or force [N] the drive of joint ``name`` applies on its coordinate (a force
+        drive's law; a kinematic drive's constraint force)."""
+        names = [d.joint for d in self.setup.packed.drives]
+        return self.dv[:, names.index(name)]
+
+
+def _guide_normal(rm: RigidMotion, joint) -> np.ndarray:
+    """(N, 2) the normal of a prismatic joint's guide (turning with body a)."""
+    mech = rm.setup.mech
+    a, _ = mech.joint_points(joint)
+    u0 = joint.unit_axis()
+    n0 = np.array([-u0[1], u0[0]])
+    if a.body is None:
+        return np.tile(n0, (rm.t.size, 1))
+    bi = mech.body_index(a.body)
+    rot = rm.z[:, 3 * bi + 2] - a.body.angle
+    c, s = np.cos(rot), np.sin(rot)
+    return np.stack([c * n0[0] - s * n0[1], s * n0[0] + c * n0[1]], axis=1)
+
+
+def _link_motion(mech: Mechanism, z, zd, zdd) -> LinkMotion:
+    """The motion of each link's start from its centre of mass: O = C - xc e, v_O = v_C - xc omega Omega e,
+    a_O = a_C - xc (alpha Omega e - omega^2 e)."""
+    nl = len(mech.links)
+    xc = np.array([ln.mass_properties()[1] for ln in mech.links])
+    phi, om, al = z[:, 2:3 * nl:3], zd[:, 2:3 * nl:3], zdd[:, 2:3 * nl:3]
+    c, s = np.cos(phi), np.sin(phi)
+    return LinkMotion(phi=phi, omega=om, alpha=al,
+                      ox=z[:, 0:3 * nl:3] - xc * c, oy=z[:, 1:3 * nl:3] - xc * s,
+                      vx=zd[:, 0:3 * nl:3] + xc * om * s, vy=zd[:, 1:3 * nl:3] - xc * om * c,
+                      ax=zdd[:, 0:3 * nl:3] + xc * (al * s + om * om * c),
+                      ay=zdd[:, 1:3 * nl:3] - xc * (al * c - om * om * s))
+
+
+class MotionSource:
+    """The rigid-body motion of a prepared mechanism as a function of time: ``source(t)`` is the
+    RigidMotion on any increasing grid t >= 0.  ``rtol``, ``atol``: the dynamic mode's error
+    tolerances; ``hmax`` its largest step [s]."""
+
+    def __init__(self, setup: MotionSetup, rtol: float = 1e-10, atol: float = 1e-12, hmax: float = np.inf):
+        self.setup, self.rtol, self.atol = setup, float(rtol), float(atol)
+        self.hmax = float(min(hmax, 1e300))
+        self.tol = POSITION_TOL * setup.packed.lref
+        self.stats = {"steps": 0, "rejected": 0, "rhs": 0, "rcond_low": np.inf}
+        self._restart()
+
+    def _restart(self) -> None:
+        st, p = self.setup, self.setup.packed
+        if st.mode == "kinematic":
+            self._state = np.concatenate([[0.0], st.z0, np.zeros(2 * p.n)])
+            self._t_from = 0.0
+            self._sample(np.array([0.0]))       # velocities and accelerations at t = 0 for the extrapolation
+            return
+        nst = kernels.mbs.mbs_state_size(p.n)
+        self._state, status = kernels.mbs.mbs_dynamic_start(nst, p.ispec, p.rspec, 0.0, st.z0, st.zd0, self.rtol,
+                                                            self.atol, self.hmax, self.tol)
+        kernels.check_status(status, "rigid-body dynamics (start)", time=0.0, detail=self._detail(st.z0, 0.0))
+        self._t_from = 0.0
+
+    def __call__(self, t) -> RigidMotion:
+        t = np.ascontiguousarray(t, dtype=float).reshape(-1)
+        if t.size == 0 or np.any(np.diff(t) < 0) or t[0] < 0:
+            raise ValueError("sample times must be a non-empty increasing grid from t >= 0")
+        if t[0] < self._t_from - 1e-12 * max(1.0, abs(t[0])):
+            self._restart()
+        return self._sample(t)
+
+    def _sample(self, t: np.ndarray) -> RigidMotion:
+        p = self.setup.packed
+        if self.setup.mode == "kinematic":
+            zf, zdf, zddf, lamf, jqf, dvf, nvalid, status, fail_t, rlow = kernels.mbs.mbs_kinematic(
+                p.nrow, p.nj, max(len(p.drives), 1), p.ispec, p.rspec, t, self._state, self.tol, KINEMATIC_RCOND_MIN)
+        else:
+            zf, zdf, zddf, lamf, jqf, dvf, nvalid, status, fail_t, rlow = kernels.mbs.mbs_dynamic(
+                p.n, p.nrow, p.nj, max(len(p.drives), 1), p.ispec, p.rspec, t, self._state, self.hmax, self.tol,
+                DYNAMIC_GRAM_MIN)
+            self.stats.update(steps=int(self._state[1]), rejected=int(self._state[2]), rhs=int(self._state[3]))
+            self._t_from = float(self._state[6])
+        self.stats["rcond_low"] = min(self.stats["rcond_low"], float(rlow))
+        rm = RigidMotion(self.setup, t[:nvalid], zf.T[:nvalid], zdf.T[:nvalid], zddf.T[:nvalid], lamf.T[:nvalid],
+                         jqf.transpose(2, 1, 0)[:nvalid], dvf.T[:nvalid, :len(p.drives)])
+        if status != 0:
+            z_at = zf[:, nvalid - 1] if nvalid else self.setup.z0
+            try:
+                kernels.check_status(status, "the rigid-body motion", time=float(fail_t),
+                                     detail=self._detail(z_at, float(fail_t), rm))
+            except MechanismError as exc:
+                exc.partial = rm
+                raise
+        if self.setup.mode == "kinematic":
+            self._t_from = float(t[nvalid - 1])
+        return rm
+
+    def _detail(self, z, t: float, rm: RigidMotion | None = None) -> str:
+        """The joints that lose their independence at z and the drive coordinates reached."""
+        mech, packed = self.setup.mech, self.setup.packed
+        try:
+            _, jac, _, _, _ = constraint_matrices(packed, z, t=t)
+        except Exception:       # pragma: no cover - the description was checked at set-up
+            return ""
+        a = scaled_jacobian(mech, packed, jac)
+        u, s, _ = np.linalg.svd(a, full_matrices=False)
+        w = np.abs(u[:, -1])
+        rows = [int(r) for r in np.argsort(-w) if w[r] > 0.3 * w.max()]
+        names = []
+        for r in rows:
+            for j, (r0, nr) in zip(mech.joints, packed.joint_rows):
+                if r0 <= r < r0 + nr and j.name not in names:
+                    names.append(j.name)
+        out = f"; joints involved: {', '.join(names)}" if names else ""
+        if rm is not None and rm.t.size:
+            coords = [f"{p} = {rm.joint(p)[-1, 0]:.6g} {mech.joint(p).unit}" for p in self.setup.primary]
+            out += f"; last valid sample t = {rm.t[-1]:.6g} s with " + ", ".join(coords)
+        return out

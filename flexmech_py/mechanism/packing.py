@@ -1,0 +1,164 @@
+"""The mechanism in the flat layout of the Fortran rigid-body layer (flexmech_mbs: mbs_build).
+
+Coordinates z = [x_C, y_C, phi] per body (the centre of mass and the frame angle; body numbering of
+Mechanism.bodies); a link's frame angle is its axis angle, a rigid body's is 0 when drawn.  Every
+joint contributes two markers (its points a and b); ground markers hold global positions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .drives import Drive
+from .system import Mechanism
+
+__all__ = ["Packed", "pack", "drawn_coordinates", "joint_coordinates", "marker_position", "row_scales",
+           "coordinate_drive"]
+
+
+@dataclass
+class Packed:
+    """ispec/rspec for flexmech_mbs and what Python needs to read its results."""
+
+    ispec: np.ndarray
+    rspec: np.ndarray
+    n: int                      # coordinates (3 per body)
+    nrow: int                   # constraint rows: joints, then kinematic drives
+    nj: int
+    lref: float                 # length scale [m]
+    joint_rows: list            # (first row, number of rows) per joint, 0-based
+    drive_rows: dict            # joint name -> row of its kinematic drive
+    drives: list = field(default_factory=list)   # the drives packed (Drive objects), in order
+    markers: list = field(default_factory=list)  # (body index or None, local position) per marker
+
+
+def drawn_coordinates(mech: Mechanism) -> np.ndarray:
+    """z of the configuration as drawn (each body's centre of mass and frame angle)."""
+    z = np.zeros(3 * len(mech.bodies))
+    for i, b in enumerate(mech.bodies):
+        z[3 * i:3 * i + 2] = b.centre_of_mass()
+        z[3 * i + 2] = b.angle
+    return z
+
+
+def _marker(mech: Mechanism, ref) -> tuple:
+    if ref.body is None:
+        return None, np.asarray(ref.position, float)
+    return mech.body_index(ref.body), ref.body.marker(ref.point)
+
+
+def marker_position(z: np.ndarray, marker: tuple) -> np.ndarray:
+    """Global position of a marker at coordinates z."""
+    bi, s = marker
+    if bi is None:
+        return s
+    c, sn = math.cos(z[3 * bi + 2]), math.sin(z[3 * bi + 2])
+    return z[3 * bi:3 * bi + 2] + np.array([c * s[0] - sn * s[1], sn * s[0] + c * s[1]])
+
+
+def joint_coordinates(mech: Mechanism, z: np.ndarray, names=None) -> dict:
+    """{joint: coordinate} at z: phi_b - phi_a [rad], or the slide u . (r_b - r_a) [m] of a prismatic
+    joint (u its guide direction turning with body a)."""
+    out = {}
+    z0 = drawn_coordinates(mech)
+    for j in mech.joints:
+        if names is not None and j.name not in names:
+            continue
+        a, b = mech.joint_points(j)
+        ma, mb = _marker(mech, a), _marker(mech, b)
+        phi = lambda m: 0.0 if m[0] is None else z[3 * m[0] + 2]
+        if j.kind != "prismatic":
+            out[j.name] = phi(mb) - phi(ma)
+            continue
+        rot = phi(ma) - (0.0 if ma[0] is None else z0[3 * ma[0] + 2])
+        u = _rotate(j.unit_axis(), rot)
+        out[j.name] = float(u @ (marker_position(z, mb) - marker_position(z, ma)))
+    return out
+
+
+def _rotate(v, ang: float) -> np.ndarray:
+    c, s = math.cos(ang), math.sin(ang)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_drives=(),
+         kinematic_only: bool = False) -> Packed:
+    """The flat description.  ``starts``: joint coordinates a kinematic law's default start refers to
+    (the assembled configuration; default: as drawn); ``extra_drives``: Drive objects appended after
+    the mechanism's own (assembly at given coordinates, coordinate rows for analysis);
+    ``kinematic_only``: leave out the force drives."""
+    z0 = drawn_coordinates(mech)
+    starts = joint_coordinates(mech, z0) if starts is None else starts
+    bodies = mech.bodies
+    nb = len(bodies)
+    markers, jt_kind, jt_mk, jt_axis, jt_ref, joint_rows = [], [], [], [], [], []
+    row = 0
+    for j in mech.joints:
+        a, b = mech.joint_points(j)
+        ma, mb = _marker(mech, a), _marker(mech, b)
+        markers += [ma, mb]
+        jt_kind.append(j.code)
+        jt_mk.append([len(markers) - 1, len(markers)])
+        ang_a = 0.0 if ma[0] is None else z0[3 * ma[0] + 2]
+        ang_b = 0.0 if mb[0] is None else z0[3 * mb[0] + 2]
+        jt_axis.append(_rotate(j.unit_axis(), -ang_a) if j.kind == "prismatic" else np.zeros(2))
+        jt_ref.append(ang_b - ang_a)
+        joint_rows.append((row, j.rows))
+        row += j.rows
+    drives = [d for d in mech.drives if not (kinematic_only and not d.kinematic)] + list(extra_drives)
+    names = [j.name for j in mech.joints]
+    packed_laws = [d.packed(starts[d.joint]) for d in drives]
+    nh = max([max(len(k["sin"]), len(k["cos"])) for k in packed_laws] + [0])
+    nth = max([len(k["time_harmonics"]) for k in packed_laws] + [0])
+    tab_t, tab_c, dv_tab, drive_rows = [], [], [], {}
+    for d, k in zip(drives, packed_laws):
+        if d.kinematic:
+            drive_rows[d.joint] = row
+            row += 1
+        if k["table"] is None:
+            dv_tab.append([0, 0])
+        else:
+            dv_tab.append([len(tab_t) + 1, len(k["table"][0])])
+            tab_t += list(k["table"][0])
+            tab_c += list(k["table"][1].T)
+    lref = mech.characteristic_length()
+    mass = [b.mass_properties() for b in bodies]
+    ispec = [nb, len(markers), len(mech.joints), len(drives), len(tab_t), nh, nth]
+    ispec += [0 if m[0] is None else m[0] + 1 for m in markers]
+    ispec += jt_kind + [i for pair in jt_mk for i in pair]
+    ispec += [names.index(d.joint) + 1 for d in drives] + [d.code for d in drives]
+    ispec += [i for pair in dv_tab for i in pair]
+    rspec = [m for m, _, _ in mass] + [j for _, _, j in mass] + [float(gravity[0]), float(gravity[1]), lref]
+    rspec += [x for m in markers for x in m[1]]
+    rspec += [x for a in jt_axis for x in a] + jt_ref
+    for k in packed_laws:
+        rspec += list(k["par"])
+    for k in packed_laws:
+        rspec += list(k["sin"]) + [0.0] * (nh - len(k["sin"])) + list(k["cos"]) + [0.0] * (nh - len(k["cos"]))
+    for k in packed_laws:
+        th = list(k["time_harmonics"]) + [[0.0, 0.0, 0.0]] * (nth - len(k["time_harmonics"]))
+        rspec += [x for h in th for x in h]
+    rspec += tab_t + [x for c in tab_c for x in c]
+    return Packed(ispec=np.array(ispec, np.int32), rspec=np.array(rspec, float), n=3 * nb, nrow=row,
+                  nj=len(mech.joints), lref=lref, joint_rows=joint_rows, drive_rows=drive_rows, drives=drives,
+                  markers=markers)
+
+
+def row_scales(mech: Mechanism, packed: Packed) -> np.ndarray:
+    """(nrow,) length per unit of each constraint row: 1 for rows in metres, lref for rows in radians."""
+    sc = np.ones(packed.nrow)
+    for j, (r0, nr) in zip(mech.joints, packed.joint_rows):
+        if j.kind in ("prismatic", "weld"):
+            sc[r0 + nr - 1] = packed.lref         # the angle row
+    for d in packed.drives:
+        if d.kinematic and mech.joint(d.joint).angular:
+            sc[packed.drive_rows[d.joint]] = packed.lref
+    return sc
+
+
+def coordinate_drive(joint: str, value: float) -> Drive:
+    """A drive holding a joint coordinate at ``value`` (a row for assembly and analysis)."""
+    return Drive(joint=joint, law="constant_speed", params={"speed": 0.0, "start": float(value)})

@@ -1,0 +1,324 @@
+"""The mechanism's case-file tables (general form), read into a :class:`Mechanism` and written back.
+
+Tables (docs/cases.md, "Mechanisms"): ``[mechanism] ground = {NAME = [x, y]}``, ``[[links]]``,
+``[[bodies]]``, ``[[joints]]``, ``[[drives]]``, ``[initial]`` (``coordinates``, ``speeds``), and the
+lumped inertias ``[[point_masses]]``, ``[[rotary_inertias]]`` that attach to links.  Every error is
+a CaseError naming the field and the fix.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import validate as v
+from ..errors import CaseError
+from .drives import LAW_CODES, LAW_PARAMS, Drive
+from .joints import JOINT_KINDS
+from .system import Mechanism
+
+__all__ = ["mechanism_from_spec", "mechanism_spec", "link_section", "LINK_KEYS", "SECTION_KEYS"]
+
+SECTION_KEYS = ("area", "second_moment", "youngs_modulus", "density")
+LINK_KEYS = {"name", "start", "end", "length", "angle", "area", "second_moment", "youngs_modulus", "density",
+             "half_depth", "elements", "yield_strain", "rigid", "mass", "inertia", "centre", "points"}
+
+
+def link_section(ln: dict, where: str) -> dict:
+    """The validated section and mass entries of a link table (shared by the templates)."""
+    rigid = ln.get("rigid", False)
+    if not isinstance(rigid, bool):
+        raise CaseError(f"{where}.rigid", f"must be true or false, got {rigid!r}")
+    d = {"rigid": rigid}
+    if rigid and "mass" in ln:
+        d["mass"] = v.num(ln, "mass", where, positive=True)
+        d["inertia"] = v.num(ln, "inertia", where, nonneg=True)
+        d["centre"] = v.num(ln, "centre", where, default=0.5)
+        if not 0.0 <= d["centre"] <= 1.0:
+            raise CaseError(f"{where}.centre", f"is a fraction of the length and must lie in [0, 1], got {d['centre']}")
+        for key in SECTION_KEYS + ("half_depth", "elements"):
+            if key in ln:
+                d[key] = v.num(ln, key, where, positive=True)
+    else:
+        for key in ("mass", "inertia", "centre"):
+            if key in ln:
+                raise CaseError(f"{where}.{key}", "applies to rigid links only (rigid = true); a flexible link's "
+                                                  "mass comes from density x area")
+        needed = ("area", "density") if rigid else SECTION_KEYS
+        for key in SECTION_KEYS:
+            d[key] = v.num(ln, key, where, positive=True, required=key in needed)
+        d["half_depth"] = v.num(ln, "half_depth", where, positive=True)
+        if d["half_depth"] is None and d.get("second_moment") and d.get("area"):
+            d["half_depth"] = 0.5 * math.sqrt(12.0 * d["second_moment"] / d["area"])   # rectangular section
+        d["elements"] = v.whole(ln, "elements", where)
+    if "yield_strain" in ln:
+        d["yield_strain"] = v.num(ln, "yield_strain", where, positive=True)
+    return d
+
+
+def mechanism_from_spec(raw: dict) -> Mechanism:
+    """A Mechanism from the general-form tables of a case (raw dict); checks topology too."""
+    mech = Mechanism()
+    mraw = raw.get("mechanism", {})
+    v.keys(mraw, {"ground", "template"}, "mechanism")
+    ground = mraw.get("ground", {})
+    v.keys(ground, set(ground), "mechanism.ground")
+    for name, pos in ground.items():
+        if not v.NAME.match(name):
+            raise CaseError(f"mechanism.ground.{name}", "ground point names must be identifiers")
+        mech.add_ground_point(name, v.vector(ground, name, "mechanism.ground", 2))
+    if mraw.get("template") is not None:
+        mech.template = dict(mraw["template"])
+    _links(mech, raw.get("links", []))
+    _bodies(mech, raw.get("bodies", []))
+    _joints(mech, raw.get("joints", []))
+    _drives(mech, raw.get("drives", []))
+    _lumped(mech, raw)
+    _initial(mech, raw.get("initial", {}))
+    mech.check()
+    return mech
+
+
+def _links(mech: Mechanism, raw) -> None:
+    if not isinstance(raw, list):
+        raise CaseError("links", "must be an array of tables [[links]]")
+    names = set()
+    for i, ln in enumerate(raw):
+        w = f"links[{i}]"
+        v.keys(ln, LINK_KEYS, w)
+        name = v.identifier(ln, "name", w, names)
+        names.add(name)
+        props = link_section(ln, w)
+        pts = ln.get("points", {})
+        v.keys(pts, set(pts), f"{w}.points")
+        fr = {}
+        for k in pts:
+            if not v.NAME.match(k) or k in ("start", "mid", "end"):
+                raise CaseError(f"{w}.points.{k}", "point names must be identifiers other than start, mid, end")
+            fr[k] = v.num(pts, k, f"{w}.points")
+            if not 0.0 <= fr[k] <= 1.0:
+                raise CaseError(f"{w}.points.{k}", f"is a fraction of the link's length and must lie in [0, 1], got {fr[k]}")
+        if "start" not in ln:
+            raise CaseError(f"{w}.start", "is missing; give [x, y] in metres or a point such as 'ground.O2'")
+        if "end" in ln:
+            if "angle" in ln:
+                raise CaseError(f"{w}.angle", "give either 'end', or 'length' and 'angle', not both")
+            end, length, angle = _point_or_xy(ln["end"], f"{w}.end"), None, None
+        else:
+            end = None
+            length = v.num(ln, "length", w, positive=True, required=True)
+            angle = v.num(ln, "angle", w, required=True)
+        link = mech.add_link(name, _point_or_xy(ln["start"], f"{w}.start"), end, length=length, angle=angle,
+                             points=fr, **props)
+        if not link.length > 1e-12:
+            raise CaseError(f"{w}.end", f"link {name!r} has zero length (start and end coincide); move its end")
+        if end is not None and "length" in ln:     # both given (as the resolved input has): they must agree
+            given = v.num(ln, "length", w, positive=True)
+            if abs(given - link.length) > 1e-9 * link.length:
+                raise CaseError(f"{w}.length", f"is {given:g} m but start and end are {link.length:.9g} m apart; "
+                                               "give one or make them agree")
+            link.nominal_length = given
+
+
+def _point_or_xy(val, where: str):
+    """A point reference (string) or a position [x, y] [m]."""
+    if isinstance(val, str):
+        return val
+    if isinstance(val, list) and len(val) == 2 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in val):
+        return [float(x) for x in val]
+    raise CaseError(where, f"must be [x, y] in metres or a point reference such as 'ground.O2', got {val!r}")
+
+
+def _bodies(mech: Mechanism, raw) -> None:
+    if not isinstance(raw, list):
+        raise CaseError("bodies", "must be an array of tables [[bodies]]")
+    for i, b in enumerate(raw):
+        w = f"bodies[{i}]"
+        v.keys(b, {"name", "mass", "inertia", "centre", "points"}, w)
+        name = v.identifier(b, "name", w)
+        if "centre" not in b:
+            raise CaseError(f"{w}.centre", "is missing; give the centre of mass [x, y] in the assembly configuration")
+        pts = b.get("points", {})
+        v.keys(pts, set(pts), f"{w}.points")
+        for k in pts:
+            if not v.NAME.match(k) or k == "centre":
+                raise CaseError(f"{w}.points.{k}", "point names must be identifiers other than 'centre'")
+        mech.add_body(name, v.num(b, "mass", w, positive=True, required=True),
+                      v.num(b, "inertia", w, nonneg=True, required=True), _point_or_xy(b["centre"], f"{w}.centre"),
+                      {k: _point_or_xy(p, f"{w}.points.{k}") for k, p in pts.items()})
+
+
+def _joints(mech: Mechanism, raw) -> None:
+    if not isinstance(raw, list):
+        raise CaseError("joints", "must be an array of tables [[joints]] (name, type, connects)")
+    for i, j in enumerate(raw):
+        w = f"joints[{i}]"
+        v.keys(j, {"name", "type", "connects", "elastic", "axis"}, w)
+        name = v.identifier(j, "name", w, {jt.name for jt in mech.joints})
+        kind = v.text(j, "type", w, required=True, choices=tuple(JOINT_KINDS))
+        con = j.get("connects")
+        if not (isinstance(con, list) and len(con) == 2 and all(isinstance(c, str) for c in con)):
+            raise CaseError(f"{w}.connects", "must be two point references [a, b], e.g. ['ground', 'crank.start']")
+        extra = {}
+        if kind == "prismatic":
+            extra["axis"] = tuple(v.vector(j, "axis", w, 2) or _missing(f"{w}.axis", "the guide direction, e.g. [1, 0]"))
+        elif "axis" in j:
+            raise CaseError(f"{w}.axis", f"applies to prismatic joints only, not to a {kind} joint")
+        cls = JOINT_KINDS[kind]
+        elastic = v.text(j, "elastic", w, choices=cls.conditions)
+        joint = mech.add_joint(kind, name, con[0], con[1], elastic=elastic, **extra)
+        mech.joint_points(joint, f"{w}.connects")
+
+
+def _missing(where: str, what: str):
+    raise CaseError(where, f"is missing; give {what}")
+
+
+def _drives(mech: Mechanism, raw) -> None:
+    if not isinstance(raw, list):
+        raise CaseError("drives", "must be an array of tables [[drives]] (joint, law, ...)")
+    for i, d in enumerate(raw):
+        w = f"drives[{i}]"
+        law = v.text(d, "law", w, required=True, choices=tuple(LAW_CODES))
+        req, opt = LAW_PARAMS[law]
+        v.keys(d, {"joint", "law"} | req | set(opt), w)
+        joint = v.text(d, "joint", w, required=True)
+        mech.joint(joint, f"{w}.joint")
+        for key in sorted(req - set(d)):
+            raise CaseError(f"{w}.{key}", f"is missing; a '{law}' law needs {', '.join(sorted(req))}")
+        if law == "table":
+            params = _table({"t": d["t"], "value": d["value"]}, w)
+        else:
+            params = {key: _law_param(d, key, w, opt.get(key)) for key in sorted(req | set(opt))}
+        mech.drives.append(Drive(joint=joint, law=law, params=params))
+
+
+def _law_param(d: dict, key: str, w: str, default):
+    if key not in d:
+        return default
+    if key in ("sin", "cos"):
+        val = d[key]
+        val = [val] if isinstance(val, (int, float)) and not isinstance(val, bool) else val
+        if not isinstance(val, list):
+            raise CaseError(f"{w}.{key}", f"must be a list of harmonic amplitudes, got {val!r}")
+        return [v.num({"x": x}, "x", f"{w}.{key}") for x in val]
+    if key == "time_harmonics":
+        val = d[key]
+        if not isinstance(val, list) or not all(isinstance(h, list) and len(h) == 3 for h in val):
+            raise CaseError(f"{w}.{key}", "must be a list of [amplitude, angular frequency rad/s, phase rad] triples")
+        return [[v.num({"x": x}, "x", f"{w}.{key}") for x in h] for h in val]
+    if key == "table":
+        return _table(d[key], f"{w}.table")
+    return v.num(d, key, w, positive=key == "spinup_time")
+
+
+def _table(tab, where: str) -> dict:
+    if not isinstance(tab, dict):
+        raise CaseError(where, "must be a table {t = [...], value = [...]}")
+    v.keys(tab, {"t", "value"}, where)
+    t, y = tab.get("t"), tab.get("value")
+    if not isinstance(t, list) or not isinstance(y, list) or len(t) != len(y) or len(t) < 2:
+        raise CaseError(where, "needs lists t and value of equal length (at least 2 samples)")
+    t = [v.num({"x": x}, "x", f"{where}.t") for x in t]
+    y = [v.num({"x": x}, "x", f"{where}.value") for x in y]
+    if np.any(np.diff(t) <= 0):
+        raise CaseError(f"{where}.t", "the sample times must increase strictly")
+    return {"t": t, "value": y}
+
+
+def _lumped(mech: Mechanism, raw: dict) -> None:
+    for key, what in (("point_masses", "mass"), ("rotary_inertias", "inertia")):
+        items = raw.get(key, [])
+        if not isinstance(items, list):
+            raise CaseError(key, f"must be an array of tables [[{key}]] with 'at' and '{what}'")
+        for i, it in enumerate(items):
+            w = f"{key}[{i}]"
+            v.keys(it, {"at", what} | ({"turns_with"} if key == "rotary_inertias" else set()), w)
+            if "at" not in it:
+                raise CaseError(f"{w}.at", "is missing; give the point as '<link>.end' etc.")
+            ref = mech.point(it["at"], f"{w}.at")
+            val = v.num(it, what, w, positive=True, required=True)
+            if ref.body is None or ref.body.kind != "link":
+                raise CaseError(f"{w}.at", "must be a point of a link; add a rigid body's lumped mass to its "
+                                           "mass and inertia")
+            frac = ref.body.fraction(ref.point, f"{w}.at")
+            if key == "point_masses":
+                ref.body.lumped.append((frac, val))
+                continue
+            carrier = ref.body
+            if "turns_with" in it:
+                carrier = mech.body(v.text(it, "turns_with", w), f"{w}.turns_with")
+                if carrier.kind != "link" or _fraction_at(carrier, ref.position) is None:
+                    raise CaseError(f"{w}.turns_with", f"link {it['turns_with']!r} does not pass through {it['at']!r}; "
+                                                       "name a link that meets at that point")
+                frac = _fraction_at(carrier, ref.position)
+            carrier.hubs.append((frac, val))
+
+
+def _fraction_at(link, pos):
+    """The fraction of a named point of ``link`` at assembly position ``pos``, or None."""
+    for name in link.point_names():
+        if np.linalg.norm(link.position(name) - np.asarray(pos)) <= 1e-9 * max(1.0, link.length):
+            return link.fraction(name)
+    return None
+
+
+def _initial(mech: Mechanism, ini) -> None:
+    v.keys(ini, {"coordinates", "speeds"}, "initial")
+    for key, target in (("coordinates", mech.initial_coordinates), ("speeds", mech.initial_speeds)):
+        tab = ini.get(key, {})
+        if not isinstance(tab, dict):
+            raise CaseError(f"initial.{key}", "must be a table {joint = value}")
+        for name in tab:
+            mech.joint(name, f"initial.{key}.{name}")
+            target[name] = v.num(tab, name, f"initial.{key}")
+    for name in mech.initial_speeds:
+        d = mech.drive_of(name)
+        if d is not None and d.kinematic:
+            raise CaseError(f"initial.speeds.{name}", "is driven kinematically (its law sets the speed); remove it")
+
+
+def mechanism_spec(mech: Mechanism) -> dict:
+    """The case-file tables of a mechanism (general form)."""
+    out = {"mechanism": {"ground": {k: list(p) for k, p in mech.ground.items()}}, "links": [], "bodies": [],
+           "joints": [j.spec() for j in mech.joints], "drives": [d.spec() for d in mech.drives],
+           "point_masses": [], "rotary_inertias": []}
+    for ln in mech.links:
+        d = {"name": ln.name, "start": list(ln.start), "end": list(ln.end)}
+        if ln.nominal_length is not None:
+            d["length"] = ln.nominal_length
+        for key in ("area", "second_moment", "youngs_modulus", "density", "half_depth", "elements", "yield_strain",
+                    "mass", "inertia"):
+            if getattr(ln, key) is not None:
+                d[key] = getattr(ln, key)
+        if ln.rigid:
+            d["rigid"] = True
+            if ln.mass is not None:
+                d["centre"] = ln.centre
+        if ln.points:
+            d["points"] = dict(ln.points)
+        out["links"].append(d)
+        out["point_masses"] += [{"at": f"{ln.name}.{_point_name(ln, f)}", "mass": m} for f, m in ln.lumped]
+        out["rotary_inertias"] += [{"at": f"{ln.name}.{_point_name(ln, f)}", "inertia": j, "turns_with": ln.name}
+                                   for f, j in ln.hubs]
+    for b in mech.rigid_bodies:
+        out["bodies"].append({"name": b.name, "mass": b.mass, "inertia": b.inertia, "centre": list(b.centre),
+                              "points": {k: list(p) for k, p in b.points.items()}})
+    ini = {}
+    if mech.initial_coordinates:
+        ini["coordinates"] = dict(mech.initial_coordinates)
+    if mech.initial_speeds:
+        ini["speeds"] = dict(mech.initial_speeds)
+    if ini:
+        out["initial"] = ini
+    return {k: val for k, val in out.items() if val not in ([], {}, {"ground": {}})}
+
+
+def _point_name(link, frac: float) -> str:
+    for name in link.point_names():
+        if abs(link.fraction(name) - frac) < 1e-12:
+            return name
+    return repr(float(frac))
+

@@ -1,0 +1,184 @@
+!> Rigid-body motion of a mechanism sampled at requested times, continuing from a stored state so a
+!> long run is sampled chunk by chunk in bounded memory (docs/theory.md section 17.3-17.4).
+!>
+!> Kinematic mode (every degree of freedom driven): at each sample the square position equations are
+!> solved by Newton from the previous sample extrapolated to second order; velocities, accelerations
+!> and multipliers follow from the Jacobian.  State: [t_prev, z(n), zd(n), zdd(n)].
+!> Dynamic mode (free degrees of freedom): the index-1 equations M z'' + Phi_z^T lam = Q, Phi_z z'' = gamma
+!> integrated by flexmech_ode; after every accepted step (z, zd) are projected back onto the position
+!> and velocity constraints (so they hold to the projection tolerance over any run length) and the
+!> constraint Jacobian's conditioning is checked.  Samples come from the dense output, with the
+!> accelerations and multipliers solved at the sampled state.  State: the packed flexmech_ode state.
+!> Outputs per sample: z, zd, zdd (n), lam (nrow), the joint coordinates jq (3, nj) and the drives'
+!> generalized forces dvf (nd) (flexmech_mbs: mbs_drive_values).
+module flexmech_motion
+  use flexmech_kinds, only: dp
+  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_SINGULAR_POSITION, STATUS_NONFINITE
+  use flexmech_mbs, only: mbs_system, mbs_kinematic_sample, mbs_accelerations, mbs_project, mbs_gram_rcond, &
+                          mbs_joint_coordinates, mbs_constraints, mbs_drive_values
+  use flexmech_ode, only: ode_state, ode_start, ode_step, ode_dense, ode_pack, ode_unpack, ODE_OK
+  implicit none
+  private
+  public :: kinematic_samples, dynamic_start, dynamic_samples, POSITION_MAXIT
+
+  integer, parameter :: POSITION_MAXIT = 25   !< Newton iterations allowed for positions and projections
+
+contains
+
+  !> Kinematic mode at the increasing times ts.  rcond_min: the scaled Jacobian's reciprocal condition
+  !> below which the position is singular.  nvalid samples are valid; on failure status /= 0 and fail_t
+  !> is the time of the sample that failed.  rcond_low: the smallest rcond met.
+  subroutine kinematic_samples(sys, ts, state, tol, rcond_min, zf, zdf, zddf, lamf, jqf, dvf, nvalid, status, &
+                               fail_t, rcond_low)
+    type(mbs_system), intent(inout) :: sys
+    real(dp), intent(in) :: ts(:), tol, rcond_min
+    real(dp), intent(inout) :: state(:)      !< (1 + 3n) [t_prev, z, zd, zdd]
+    real(dp), intent(out) :: zf(:, :), zdf(:, :), zddf(:, :), lamf(:, :), jqf(:, :, :), dvf(:, :)
+    integer, intent(out) :: nvalid, status
+    real(dp), intent(out) :: fail_t, rcond_low
+    real(dp) :: z(sys%n), zd(sys%n), zdd(sys%n), lam(sys%nrow), dt, rc, h, scale(sys%n)
+    integer :: i, n
+    n = sys%n
+    scale = 1.0_dp/sys%lref
+    scale(3:n:3) = 1.0_dp     ! angles in rad, positions in units of the mechanism's length
+    nvalid = 0; fail_t = 0.0_dp; rcond_low = huge(1.0_dp)
+    status = STATUS_OK
+    if (sys%nrow /= n .or. size(state) /= 1 + 3*n) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    do i = 1, size(ts)
+      call advance(ts(i), status)
+      if (status /= STATUS_OK) then
+        fail_t = ts(i)
+        return
+      end if
+      zf(:, i) = z; zdf(:, i) = zd; zddf(:, i) = zdd; lamf(:, i) = lam
+      call mbs_joint_coordinates(sys, z, zd, zdd, jqf(:, :, i))
+      call mbs_drive_values(sys, z, zd, ts(i), lam, dvf(:, i))
+      nvalid = i
+    end do
+
+  contains
+
+    !> From the state to time tn, in as many substeps as keep the second-order extrapolation of every
+    !> coordinate within 0.05 rad (0.05 lref for positions) of the last solution, so Newton follows
+    !> the assembly branch however far apart the samples are.
+    subroutine advance(tn, stat)
+      real(dp), intent(in) :: tn
+      integer, intent(out) :: stat
+      real(dp) :: change, tk, t0
+      integer :: m, k
+      t0 = state(1)
+      dt = tn - t0
+      change = maxval((abs(state(2 + n:1 + 2*n))*abs(dt) + 0.5_dp*abs(state(2 + 2*n:1 + 3*n))*dt*dt)*scale)
+      m = min(100000, 1 + int(change/0.05_dp))
+      do k = 1, m
+        tk = t0 + dt*real(k, dp)/real(m, dp)
+        if (k == m) tk = tn
+        h = tk - state(1)
+        z = state(2:1 + n) + h*state(2 + n:1 + 2*n) + (0.5_dp*h*h)*state(2 + 2*n:1 + 3*n)
+        call mbs_kinematic_sample(sys, z, tk, tol, POSITION_MAXIT, rcond_min, zd, zdd, lam, rc, stat)
+        rcond_low = min(rcond_low, rc)
+        if (stat /= STATUS_OK) return
+        state = [tk, z, zd, zdd]
+      end do
+    end subroutine advance
+
+  end subroutine kinematic_samples
+
+  !> Start the dynamic mode at (t0, z0, zd0) (projected onto the constraints first): the packed
+  !> integrator state in state (length ode_state_size(2n)).
+  subroutine dynamic_start(sys, t0, z0, zd0, rtol, atol, hmax, tol, state, status)
+    type(mbs_system), intent(inout) :: sys
+    real(dp), intent(in) :: t0, z0(:), zd0(:), rtol, atol, hmax, tol
+    real(dp), intent(out) :: state(:)
+    integer, intent(out) :: status
+    type(ode_state) :: st
+    real(dp) :: z(sys%n), zd(sys%n)
+    z = z0; zd = zd0
+    call mbs_project(sys, z, zd, t0, tol, POSITION_MAXIT, status)
+    if (status /= STATUS_OK) return
+    call ode_start(sys, t0, [z, zd], rtol, atol, hmax, st, status)
+    if (status /= STATUS_OK) return
+    call ode_pack(st, state)
+  end subroutine dynamic_start
+
+  !> Dynamic mode at the increasing times ts (>= the start of the last step), continuing from state.
+  !> gram_min: the Gram matrix's reciprocal condition (about (sigma_min/sigma_max)^2 of the scaled
+  !> constraint Jacobian) below which the position is singular.  rcond_low: the smallest value met.
+  subroutine dynamic_samples(sys, ts, state, hmax, tol, gram_min, zf, zdf, zddf, lamf, jqf, dvf, nvalid, status, &
+                             fail_t, rcond_low)
+    type(mbs_system), intent(inout) :: sys
+    real(dp), intent(in) :: ts(:), hmax, tol, gram_min
+    real(dp), intent(inout) :: state(:)
+    real(dp), intent(out) :: zf(:, :), zdf(:, :), zddf(:, :), lamf(:, :), jqf(:, :, :), dvf(:, :)
+    integer, intent(out) :: nvalid, status
+    real(dp), intent(out) :: fail_t, rcond_low
+    type(ode_state) :: st
+    real(dp) :: y(2*sys%n), lam(sys%nrow), gr
+    integer :: i, n, ost, rst
+    n = sys%n
+    nvalid = 0; fail_t = 0.0_dp; rcond_low = huge(1.0_dp)
+    status = STATUS_OK
+    call ode_unpack(state, st)
+    if (st%n /= 2*n) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    do i = 1, size(ts)
+      if (ts(i) < st%t_old - 1e-12_dp*max(1.0_dp, abs(ts(i)))) then
+        status = STATUS_BAD_INPUT
+        exit
+      end if
+      do while (ts(i) > st%t)
+        call ode_step(sys, st, hmax, ost, rst)
+        if (ost /= ODE_OK) then   ! the step size collapsed or the augmented system failed: a singularity
+          status = STATUS_SINGULAR_POSITION
+          if (rst == STATUS_NONFINITE) status = STATUS_NONFINITE
+          fail_t = st%t
+          exit
+        end if
+        call settle(status)        ! projection, new f, conditioning
+        if (status /= STATUS_OK) then
+          fail_t = st%t
+          exit
+        end if
+      end do
+      if (status /= STATUS_OK) exit
+      if (ts(i) >= st%t) then
+        y = st%y
+      else
+        call ode_dense(st, ts(i), y)
+      end if
+      call mbs_accelerations(sys, y(1:n), y(n + 1:), ts(i), zddf(:, i), lam, status)
+      if (status /= STATUS_OK) then
+        fail_t = ts(i)
+        exit
+      end if
+      zf(:, i) = y(1:n); zdf(:, i) = y(n + 1:); lamf(:, i) = lam
+      call mbs_joint_coordinates(sys, y(1:n), y(n + 1:), zddf(:, i), jqf(:, :, i))
+      call mbs_drive_values(sys, y(1:n), y(n + 1:), ts(i), lam, dvf(:, i))
+      nvalid = i
+    end do
+    call ode_pack(st, state)
+
+  contains
+
+    subroutine settle(stat)
+      integer, intent(out) :: stat
+      real(dp) :: z(n), zd(n)
+      z = st%y(1:n); zd = st%y(n + 1:)
+      call mbs_project(sys, z, zd, st%t, tol, 3, stat)
+      if (stat /= STATUS_OK) return
+      st%y = [z, zd]
+      call sys%rhs(st%t, st%y, st%f, stat)        ! leaves the constraints evaluated at the new point
+      if (stat /= STATUS_OK) return
+      gr = mbs_gram_rcond(sys)
+      rcond_low = min(rcond_low, gr)
+      if (gr < gram_min) stat = STATUS_SINGULAR_POSITION
+    end subroutine settle
+
+  end subroutine dynamic_samples
+
+end module flexmech_motion
