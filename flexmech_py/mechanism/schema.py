@@ -70,8 +70,7 @@ def mechanism_from_spec(raw: dict) -> Mechanism:
         mech.add_ground_point(name, v.vector(ground, name, "mechanism.ground", 2))
     if mraw.get("template") is not None:
         mech.template = dict(mraw["template"])
-    _links(mech, raw.get("links", []))
-    _bodies(mech, raw.get("bodies", []))
+    _add_bodies(mech, raw.get("links", []), raw.get("bodies", []))
     _joints(mech, raw.get("joints", []))
     _drives(mech, raw.get("drives", []))
     _lumped(mech, raw)
@@ -80,45 +79,84 @@ def mechanism_from_spec(raw: dict) -> Mechanism:
     return mech
 
 
-def _links(mech: Mechanism, raw) -> None:
-    if not isinstance(raw, list):
-        raise CaseError("links", "must be an array of tables [[links]]")
-    names = set()
-    for i, ln in enumerate(raw):
-        w = f"links[{i}]"
-        v.keys(ln, LINK_KEYS, w)
-        name = v.identifier(ln, "name", w, names)
-        names.add(name)
-        props = link_section(ln, w)
-        pts = ln.get("points", {})
-        v.keys(pts, set(pts), f"{w}.points")
-        fr = {}
-        for k in pts:
-            if not v.NAME.match(k) or k in ("start", "mid", "end"):
-                raise CaseError(f"{w}.points.{k}", "point names must be identifiers other than start, mid, end")
-            fr[k] = v.num(pts, k, f"{w}.points")
-            if not 0.0 <= fr[k] <= 1.0:
-                raise CaseError(f"{w}.points.{k}", f"is a fraction of the link's length and must lie in [0, 1], got {fr[k]}")
-        if "start" not in ln:
-            raise CaseError(f"{w}.start", "is missing; give [x, y] in metres or a point such as 'ground.O2'")
-        if "end" in ln:
-            if "angle" in ln:
-                raise CaseError(f"{w}.angle", "give either 'end', or 'length' and 'angle', not both")
-            end, length, angle = _point_or_xy(ln["end"], f"{w}.end"), None, None
-        else:
-            end = None
-            length = v.num(ln, "length", w, positive=True, required=True)
-            angle = v.num(ln, "angle", w, required=True)
-        link = mech.add_link(name, _point_or_xy(ln["start"], f"{w}.start"), end, length=length, angle=angle,
-                             points=fr, **props)
-        if not link.length > 1e-12:
-            raise CaseError(f"{w}.end", f"link {name!r} has zero length (start and end coincide); move its end")
-        if end is not None and "length" in ln:     # both given (as the resolved input has): they must agree
-            given = v.num(ln, "length", w, positive=True)
-            if abs(given - link.length) > 1e-9 * link.length:
-                raise CaseError(f"{w}.length", f"is {given:g} m but start and end are {link.length:.9g} m apart; "
-                                               "give one or make them agree")
-            link.nominal_length = given
+def _add_bodies(mech: Mechanism, links, bodies) -> None:
+    """Add links and rigid bodies, each after the bodies its point references name (a link may end at a
+    plate's point and the plate's point be given on another link); numbered in file order."""
+    for key, items in (("links", links), ("bodies", bodies)):
+        if not isinstance(items, list):
+            raise CaseError(key, f"must be an array of tables [[{key}]]")
+    pending = [("links", i, ln) for i, ln in enumerate(links)] + [("bodies", i, b) for i, b in enumerate(bodies)]
+    names = {it.get("name") for _, _, it in pending if isinstance(it, dict)}
+    while pending:
+        left = []
+        for key, i, item in pending:
+            refs = _references(item, key, i, names)
+            if refs <= set(mech.body_names()):
+                (_add_link if key == "links" else _add_body)(mech, item, f"{key}[{i}]")
+            else:
+                left.append((key, i, item))
+        if len(left) == len(pending):
+            key, i, item = left[0]
+            raise CaseError(f"{key}[{i}]", f"its point references form a cycle with "
+                                           f"{', '.join(sorted(_references(item, key, i, names)))}; give one of "
+                                           "them as coordinates [x, y]")
+        pending = left
+    order = {it.get("name"): k for k, it in enumerate(list(links) + list(bodies))}
+    mech.links.sort(key=lambda b: order[b.name])
+    mech.rigid_bodies.sort(key=lambda b: order[b.name])
+
+
+def _references(item, key: str, i: int, names: set) -> set:
+    """Names of the bodies an item's positions refer to (the ground excluded); unknown names are errors."""
+    if not isinstance(item, dict):
+        raise CaseError(f"{key}[{i}]", "must be a table")
+    vals = [(f, item[f]) for f in ("start", "end", "centre") if f in item]
+    if key == "bodies" and isinstance(item.get("points"), dict):
+        vals += [(f"points.{k}", val) for k, val in item["points"].items()]
+    out = set()
+    for field_, val in vals:
+        if isinstance(val, str) and not val.startswith("ground"):
+            body = val.split(".")[0]
+            if body not in names:
+                raise CaseError(f"{key}[{i}].{field_}", f"unknown body {body!r} in {val!r}; bodies are "
+                                                         f"{', '.join(sorted(n for n in names if n))}")
+            out.add(body)
+    return out
+
+
+def _add_link(mech: Mechanism, ln: dict, w: str) -> None:
+    v.keys(ln, LINK_KEYS, w)
+    name = v.identifier(ln, "name", w, set(mech.body_names()))
+    props = link_section(ln, w)
+    pts = ln.get("points", {})
+    v.keys(pts, set(pts), f"{w}.points")
+    fr = {}
+    for k in pts:
+        if not v.NAME.match(k) or k in ("start", "mid", "end"):
+            raise CaseError(f"{w}.points.{k}", "point names must be identifiers other than start, mid, end")
+        fr[k] = v.num(pts, k, f"{w}.points")
+        if not 0.0 <= fr[k] <= 1.0:
+            raise CaseError(f"{w}.points.{k}", f"is a fraction of the link's length and must lie in [0, 1], got {fr[k]}")
+    if "start" not in ln:
+        raise CaseError(f"{w}.start", "is missing; give [x, y] in metres or a point such as 'ground.O2'")
+    if "end" in ln:
+        if "angle" in ln:
+            raise CaseError(f"{w}.angle", "give either 'end', or 'length' and 'angle', not both")
+        end, length, angle = _point_or_xy(ln["end"], f"{w}.end"), None, None
+    else:
+        end = None
+        length = v.num(ln, "length", w, positive=True, required=True)
+        angle = v.num(ln, "angle", w, required=True)
+    link = mech.add_link(name, _point_or_xy(ln["start"], f"{w}.start"), end, length=length, angle=angle,
+                         points=fr, **props)
+    if not link.length > 1e-12:
+        raise CaseError(f"{w}.end", f"link {name!r} has zero length (start and end coincide); move its end")
+    if end is not None and "length" in ln:     # both given (as the resolved input has): they must agree
+        given = v.num(ln, "length", w, positive=True)
+        if abs(given - link.length) > 1e-9 * link.length:
+            raise CaseError(f"{w}.length", f"is {given:g} m but start and end are {link.length:.9g} m apart; "
+                                           "give one or make them agree")
+        link.nominal_length = given
 
 
 def _point_or_xy(val, where: str):
@@ -131,23 +169,19 @@ def _point_or_xy(val, where: str):
     raise CaseError(where, f"must be [x, y] in metres or a point reference such as 'ground.O2', got {val!r}")
 
 
-def _bodies(mech: Mechanism, raw) -> None:
-    if not isinstance(raw, list):
-        raise CaseError("bodies", "must be an array of tables [[bodies]]")
-    for i, b in enumerate(raw):
-        w = f"bodies[{i}]"
-        v.keys(b, {"name", "mass", "inertia", "centre", "points"}, w)
-        name = v.identifier(b, "name", w)
-        if "centre" not in b:
-            raise CaseError(f"{w}.centre", "is missing; give the centre of mass [x, y] in the assembly configuration")
-        pts = b.get("points", {})
-        v.keys(pts, set(pts), f"{w}.points")
-        for k in pts:
-            if not v.NAME.match(k) or k == "centre":
-                raise CaseError(f"{w}.points.{k}", "point names must be identifiers other than 'centre'")
-        mech.add_body(name, v.num(b, "mass", w, positive=True, required=True),
-                      v.num(b, "inertia", w, nonneg=True, required=True), _point_or_xy(b["centre"], f"{w}.centre"),
-                      {k: _point_or_xy(p, f"{w}.points.{k}") for k, p in pts.items()})
+def _add_body(mech: Mechanism, b: dict, w: str) -> None:
+    v.keys(b, {"name", "mass", "inertia", "centre", "points"}, w)
+    name = v.identifier(b, "name", w, set(mech.body_names()))
+    if "centre" not in b:
+        raise CaseError(f"{w}.centre", "is missing; give the centre of mass [x, y] in the assembly configuration")
+    pts = b.get("points", {})
+    v.keys(pts, set(pts), f"{w}.points")
+    for k in pts:
+        if not v.NAME.match(k) or k == "centre":
+            raise CaseError(f"{w}.points.{k}", "point names must be identifiers other than 'centre'")
+    mech.add_body(name, v.num(b, "mass", w, positive=True, required=True),
+                  v.num(b, "inertia", w, nonneg=True, required=True), _point_or_xy(b["centre"], f"{w}.centre"),
+                  {k: _point_or_xy(p, f"{w}.points.{k}") for k, p in pts.items()})
 
 
 def _joints(mech: Mechanism, raw) -> None:
