@@ -26,16 +26,18 @@ CONVERTED_UNITS = {"deg": ("rad", np.pi / 180.0), "deg/s": ("rad/s", np.pi / 180
 
 
 def _text(path: Path) -> str:
-    """The file as text; CaseError (one line) for a file that is not UTF-8 text."""
+    """The file as text; CaseError (one line, naming the first byte that is not text) for anything else."""
     raw = path.read_bytes()
-    where = raw.find(b"\0")
     try:
-        if where >= 0:
-            raise UnicodeDecodeError("utf-8", raw, where, where + 1, "NUL byte")
-        return raw.decode("utf-8")
+        text, bad = raw.decode("utf-8"), -1
     except UnicodeDecodeError as exc:
-        raise CaseError("--reference", f"{path} is not a text CSV file (byte {raw[exc.start]:#04x} at offset "
-                                       f"{exc.start}); give a comma-separated text file (format: docs/compare.md)") from None
+        text, bad = "", exc.start
+    nul = raw.find(b"\0")
+    if nul >= 0 or bad >= 0:
+        at = min(x for x in (nul, bad) if x >= 0)
+        raise CaseError("--reference", f"{path} is not a text CSV file (byte {raw[at]:#04x} at offset {at}); give a "
+                                       "comma-separated text file (format: docs/compare.md)")
+    return text
 
 
 def _row(path: Path, lineno: int, line: str, header: list) -> list[float]:

@@ -18,6 +18,7 @@ docs/stability.md ("Guards", "Validity warnings") documents the thresholds and m
 from __future__ import annotations
 
 import copy
+import math
 import time
 
 import numpy as np
@@ -444,6 +445,12 @@ def _observed_order(prep, pc, res, rc, name: str, geometric) -> float | None:
     return float(np.log2(d24 / d12)) if d12 > 0 and d24 > 0 else None
 
 
+def _round_down(x: float, digits: int = 2) -> float:
+    """x rounded down to ``digits`` significant digits (a step printed shorter must not grow)."""
+    scale = 10.0 ** (math.floor(math.log10(x)) - digits + 1)
+    return math.floor(x / scale * (1 + 1e-12)) * scale
+
+
 def _estimate_warning(dt: float, name: str, over: dict, order: float | None) -> dict:
     """The warning of an estimate past ERROR_WARN: the worst column, and the step that would meet the
     threshold, dt (ERROR_WARN / estimate)^(1/p), p = min(observed order, ORDER).  Promised only when the
@@ -456,7 +463,7 @@ def _estimate_warning(dt: float, name: str, over: dict, order: float | None) -> 
     seen = f"observed order {order:.2g} from runs at dt, 2 dt and 4 dt" if order is not None else "no run at 4 dt"
     out = {"column": name, "observed_order": order, "suggested_dt": None}
     if order is not None and abs(order - ORDER) <= ORDER_TOLERANCE:
-        dt_new = dt * (ERROR_WARN / rel) ** (1.0 / min(order, ORDER))
+        dt_new = _round_down(dt * (ERROR_WARN / rel) ** (1.0 / min(order, ORDER)))
         out["suggested_dt"] = dt_new
         return dict(out, message=head + f"dt = {dt_new:.2g} s instead of {dt:.3g} s would meet it ({seen}): "
                                         f"--dt {dt_new:.2g} or --set solver.dt={dt_new:.2g}")

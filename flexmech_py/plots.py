@@ -123,47 +123,45 @@ def _part_spans(regions):
 
 
 def _stability_top(ax, ok, regions, stable_rate):
-    """max|mu| - 1 (log) against speed: stable band under the threshold, unstable points by multiplier type,
-    the unstable regions shaded and labelled with their multiplier."""
-    floor = 1e-8
+    """Growth rate ln max|mu| / T (symlog) against speed: the threshold line and the stable band under it,
+    unstable points marked by multiplier type, the unstable regions shaded and labelled with it."""
     sp = np.array([r["speed"] for r in ok])
-    mu1 = np.maximum(np.array([r["max_abs_mu"] for r in ok]) - 1.0, floor)
+    rate = np.array([r["growth_rate"] for r in ok])
     stable = np.array([bool(r["stable"]) for r in ok])
     kind = np.array([r.get("multiplier", "") for r in ok])
-    ax.semilogy(sp, mu1, "k-", lw=0.6)
-    ax.semilogy(sp[stable], mu1[stable], "b.", ms=2, label="stable")
+    ax.plot(sp, rate, "k-", lw=0.6)
+    ax.plot(sp[stable], rate[stable], "b.", ms=2, label="stable")
     for k, (marker, color, sym) in _MU_STYLE.items():
         sel = ~stable & (kind == k)
         if sel.any():
-            ax.semilogy(sp[sel], mu1[sel], marker, color=color, ms=4, ls="none",
-                        label=f"unstable, {'complex pair' if k == 'complex' else 'real ' + sym}")
-    ymax = max(1.0, float(mu1.max()))
-    ax.set_ylim(floor, ymax * 30)
+            ax.plot(sp[sel], rate[sel], marker, color=color, ms=4, ls="none",
+                    label=f"unstable, {'complex pair' if k == 'complex' else 'real ' + sym}")
+    ax.set_yscale("symlog", linthresh=1e-3, linscale=0.5)
+    ymax = max(10.0, float(rate.max()))
+    ymin = min(-1e-3, float(rate.min()) * 3)
+    ax.set_ylim(ymin, ymax * 30)
     if stable_rate is not None:
-        om = np.linspace(sp.min(), sp.max(), 400)
-        thr = np.expm1(stable_rate * 2 * np.pi / om)
-        ax.fill_between(om, floor, thr, color="tab:green", alpha=0.12, lw=0)
-        ax.semilogy(om, thr, color="tab:green", lw=1.0, ls="--",
-                    label=f"threshold: growth {stable_rate:g} 1/s, |μ| = exp({stable_rate:g}·2π/Ω); "
-                          "below: stable (|μ| ≤ 1 drawn at 1e-8)")
+        ax.axhspan(ymin, stable_rate, color="tab:green", alpha=0.10, lw=0)
+        ax.axhline(stable_rate, color="tab:green", lw=1.0, ls="--",
+                   label=f"threshold {stable_rate:g} 1/s (|μ| = exp({stable_rate:g}·2π/Ω)): stable below")
     width = sp.max() - sp.min()
     n = 0
     for lo, hi, part in _part_spans(regions or []):
         color = _MU_STYLE[part["type"]][1]
         ax.axvspan(lo, hi, color=color, alpha=0.12, lw=0)
         if hi - lo > 0.015 * width:   # narrow parts: the markers say their type
-            ax.text(0.5 * (lo + hi), ymax * 10 ** (1.1 - 0.45 * (n % 3)), _region_label(part), color=color,
+            ax.text(0.5 * (lo + hi), ymax * 10 ** (1.0 - 0.45 * (n % 3)), _region_label(part), color=color,
                     fontsize=7, ha="center")
             n += 1
-    ax.set_ylabel("max |μ| − 1")
+    ax.set_ylabel("growth rate ln max|μ| / T [1/s]")
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(fontsize=7, loc="lower right")
 
 
 def plot_stability(rows: list, path, *, title: str = "", regions=None, stable_rate: float | None = None,
                    nmodes: int = 3, kmax: int = 4):
-    """Stability chart: top, max|mu| - 1 (log) against crank speed with the stability threshold (growth
-    rate ``stable_rate``) and its stable band, the unstable points marked by the type of their dominant
+    """Stability chart: top, the growth rate ln max|mu| / T (symlog) against crank speed with the stability
+    threshold ``stable_rate`` and the stable band under it, the unstable points marked by the type of their dominant
     multiplier and the unstable ``regions`` (:func:`flexmech_py.regions.unstable_regions`) shaded and
     labelled with it (+1, -1, or the angle of a complex pair); bottom, the frozen natural-frequency
     bands along the cycle against speed with the lines k Omega / 2 (a band crossing k Omega / 2 at
