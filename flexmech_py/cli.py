@@ -152,11 +152,9 @@ def _warn(messages) -> None:
 
 
 def _cmd_stability(args) -> int:
-    import math
-
     from .case import load_case
     from .floquet import REFINE_ROUNDS, STABLE_RATE, parse_range, stability_chart, write_stability_csv
-    from .regions import describe_region, unstable_regions, write_regions_csv
+    from .regions import unstable_regions, write_regions_csv
 
     case = load_case(args.case, overrides=args.set)
     speeds = parse_range(args.speed, "--speed")
@@ -181,12 +179,24 @@ def _cmd_stability(args) -> int:
                            title=f"{case['case']['title']}\nmodel {model}, geometric stiffness {geometric}, "
                                  f"Rayleigh {list(case['solver']['rayleigh'])}")
         paths += [p] if p else []
+    return _report_chart(rows, runs, regions, paths)
+
+
+def _report_chart(rows, runs, regions, paths) -> int:
+    """Console summary of a stability chart: its cost and refinement, the unstable regions with their
+    multiplier type, failed speeds (exit code 3), the files written."""
+    import math
+
+    from .floquet import STABLE_RATE
+    from .regions import describe_region
+
     bad = [r for r in rows if "error" in r]
     digits = max(0, math.ceil(0.5 - math.log10(runs.resolution))) if runs.resolution else 1
     refined = (f" + {runs.added} added in {runs.rounds} refinement round(s) to {runs.resolution:.3g} rad/s"
                if runs.rounds else "")
     print(f"{len(rows)} speeds ({len(rows) - runs.added} on the grid{refined}; {runs.computed} computed, "
-          f"{runs.cached} cached) in {runs.wall_s:.1f} s on {runs.jobs} process(es)" + (f"; {len(bad)} failed" if bad else ""))
+          f"{runs.cached} cached) in {runs.wall_s:.1f} s on {runs.jobs} process(es)"
+          + (f"; {len(bad)} failed" if bad else ""))
     print(f"unstable (growth rate ln max|mu| / T > {STABLE_RATE:g} 1/s): "
           + (f"{len(regions)} region(s)" if regions else "no speed"))
     for reg in regions:

@@ -354,7 +354,8 @@ def write_stability_csv(rows: list, path, header: str = "") -> None:
         names += [k for k in r if k not in names and k != "error"]
     names.append("error")
     units = {"speed": "rad/s", "max_abs_mu": "1", "growth_rate": "1/s", "stable": "1", "mu_re": "1", "mu_im": "1",
-             "multiplier": "", "round": "1", "resonance_margin": "1", "steps_per_period": "1", "wall_s": "s", "error": ""}
+             "multiplier": "", "round": "1", "resonance_margin": "1", "steps_per_period": "1", "wall_s": "s",
+             "error": ""}
     lines = [f"# {header}" if header else "# flexmech stability",
              "# units: " + ",".join(units.get(n, "rad/s") for n in names), ",".join(names)]
     for r in rows:
