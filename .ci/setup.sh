@@ -34,13 +34,34 @@ if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv || die "python3 -m venv failed: apt-get install python3-venv, then re-run"
 fi
 PY=.venv/bin/python
-$PY -m pip install -q --upgrade pip >/dev/null
-say "installing build tools and dependencies"
-$PY -m pip install -q "meson-python>=0.15" "meson>=1.1" ninja "numpy>=1.23" "scipy>=1.9" "matplotlib>=3.5" "pytest>=7" \
-  || die "pip could not install the Python dependencies: check access to the package index"
-say "building and installing flexmech (Fortran kernels, f2py)"
-$PY -m pip install -q --no-build-isolation . >/tmp/flexmech-build.log 2>&1 \
-  || { tail -30 /tmp/flexmech-build.log >&2; die "the build failed (full log: /tmp/flexmech-build.log)"; }
+DEPS=("meson-python>=0.15" "meson>=1.1" ninja "numpy>=1.23" "scipy>=1.9" "matplotlib>=3.5" "pytest>=7")
+DEPS_STAMP=.venv/.flexmech-deps          # the dependency list last installed into .venv
+BUILD_STAMP=.venv/.flexmech-build        # hash of the sources the installed package was built from
+LOG=build/flexmech-build.log             # the last build's log (build/ is git-ignored)
+if [ "$(cat "$DEPS_STAMP" 2>/dev/null)" = "${DEPS[*]}" ] \
+   && $PY -c 'import mesonpy, numpy, scipy, matplotlib, pytest' >/dev/null 2>&1; then
+  say "build tools and dependencies: already installed"
+else
+  $PY -m pip install -q --upgrade pip >/dev/null
+  say "installing build tools and dependencies"
+  $PY -m pip install -q "${DEPS[@]}" || die "pip could not install the Python dependencies: check access to the package index"
+  printf '%s' "${DEPS[*]}" > "$DEPS_STAMP"
+fi
+
+# rebuild only when a file the package is built from changed (or nothing is installed yet)
+sources=$(find fortran flexmech_py cases meson.build meson.options pyproject.toml -type f \
+            ! -name '*.pyc' ! -path '*/__pycache__/*' -print0 | LC_ALL=C sort -z | xargs -0 sha256sum | sha256sum)
+sources=${sources%% *}
+if [ "$(cat "$BUILD_STAMP" 2>/dev/null)" = "$sources" ] && .venv/bin/flexmech --version >/dev/null 2>&1; then
+  say "flexmech is up to date with the sources (nothing to rebuild; last build log: $LOG)"
+else
+  say "building and installing flexmech (Fortran kernels, f2py; log: $LOG)"
+  mkdir -p build
+  rm -f "$BUILD_STAMP"
+  $PY -m pip install -q --no-build-isolation . >"$LOG" 2>&1 \
+    || { tail -30 "$LOG" >&2; die "the build failed (full log: $LOG)"; }
+  printf '%s' "$sources" > "$BUILD_STAMP"
+fi
 say "ready: $(.venv/bin/flexmech --version)"
 
 case "${1:-}" in

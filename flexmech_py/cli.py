@@ -38,14 +38,20 @@ def _positive_float(text: str) -> float:
     return v
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
-    return v
+def _whole(lowest: int):
+    """argparse type: a whole number >= lowest."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+        if v < lowest:
+            raise argparse.ArgumentTypeError(f"must be >= {lowest}, got {text!r}")
+        return v
+    return parse
+
+
+_positive_int = _whole(1)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -104,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="geometric stiffness (default: the case's solver.geometric_stiffness)")
     st.add_argument("--modes", type=_positive_int, default=4, help="frozen natural frequencies reported (default 4)")
     st.add_argument("--jobs", type=_positive_int, default=None, help="worker processes (default: every core)")
+    st.add_argument("--resolution", type=float, default=None, metavar="R",
+                    help="refine the speed grid down to R rad/s near region edges and peaks of |mu| (default: the "
+                         "grid's median spacing / 16)")
+    st.add_argument("--refine-rounds", type=_whole(0), default=None, metavar="K",
+                    help="at most K refinement rounds after the grid (default 8; 0: the grid only)")
     st.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
     st.add_argument("--out", default=None, help="output folder (default: results/<case name>-stability); "
                                                 "finished speeds are cached in OUT/cache")
@@ -142,33 +153,61 @@ def _warn(messages) -> None:
 
 def _cmd_stability(args) -> int:
     from .case import load_case
-    from .floquet import parse_range, stability_chart, write_stability_csv
+    from .floquet import REFINE_ROUNDS, STABLE_RATE, parse_range, stability_chart, write_stability_csv
+    from .regions import unstable_regions, write_regions_csv
 
     case = load_case(args.case, overrides=args.set)
     speeds = parse_range(args.speed, "--speed")
     out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-stability"
-    out.mkdir(parents=True, exist_ok=True)
     model = args.model or case["solver"]["model"]
     geometric = args.geometric or case["solver"]["geometric_stiffness"]
-    rows, batch = stability_chart(case, speeds, model=model, geometric=geometric, nmodes=args.modes, jobs=args.jobs,
-                                  cache_dir=out / "cache")
+    rows, runs = stability_chart(case, speeds, model=model, geometric=geometric, nmodes=args.modes, jobs=args.jobs,
+                                 cache_dir=out / "cache", resolution=args.resolution,
+                                 refine_rounds=REFINE_ROUNDS if args.refine_rounds is None else args.refine_rounds)
+    out.mkdir(parents=True, exist_ok=True)
     head = (f"case {case['case']['title']!r}; model {model}; geometric_stiffness {geometric}; "
-            f"rayleigh {list(case['solver']['rayleigh'])}; dt <= {case['solver']['dt']:g} s; average acceleration")
-    paths = [out / "stability.csv"]
+            f"rayleigh {list(case['solver']['rayleigh'])}; dt <= {case['solver']['dt']:g} s; average acceleration; "
+            f"unstable: growth rate > {STABLE_RATE:g} 1/s")
+    regions = unstable_regions(rows)
+    paths = [out / "stability.csv", out / "stability_regions.csv"]
     write_stability_csv(rows, paths[0], head)
+    write_regions_csv(regions, paths[1], head)
     if not args.no_plots:
         from .plots import plot_stability
 
-        p = plot_stability(rows, out / "stability.png", title=f"{case['case']['title']}\nmodel {model}, geometric "
-                           f"stiffness {geometric}, Rayleigh {list(case['solver']['rayleigh'])}")
+        p = plot_stability(rows, out / "stability.png", regions=regions, stable_rate=STABLE_RATE,
+                           title=f"{case['case']['title']}\nmodel {model}, geometric stiffness {geometric}, "
+                                 f"Rayleigh {list(case['solver']['rayleigh'])}")
         paths += [p] if p else []
+    return _report_chart(rows, runs, regions, paths)
+
+
+def _report_chart(rows, runs, regions, paths) -> int:
+    """Console summary of a stability chart: its cost and refinement, the unstable regions with their
+    multiplier type, failed speeds (exit code 3), the files written."""
+    import math
+
+    from .floquet import STABLE_RATE
+    from .regions import describe_region
+
     bad = [r for r in rows if "error" in r]
-    unst = [r["speed"] for r in rows if "error" not in r and not r["stable"]]
-    print(f"{len(rows)} speeds ({batch.computed} computed, {batch.cached} cached) in {batch.wall_s:.1f} s on "
-          f"{batch.jobs} process(es); {len(unst)} unstable" + (f", {len(bad)} failed" if bad else ""))
+    digits = max(0, math.ceil(0.5 - math.log10(runs.resolution))) if runs.resolution else 1
+    refined = (f" + {runs.added} added in {runs.rounds} refinement round(s) to {runs.resolution:.3g} rad/s"
+               if runs.rounds else "")
+    print(f"{len(rows)} speeds ({len(rows) - runs.added} on the grid{refined}; {runs.computed} computed, "
+          f"{runs.cached} cached) in {runs.wall_s:.1f} s on {runs.jobs} process(es)"
+          + (f"; {len(bad)} failed" if bad else ""))
+    print(f"unstable (growth rate ln max|mu| / T > {STABLE_RATE:g} 1/s): "
+          + (f"{len(regions)} region(s)" if regions else "no speed"))
+    for reg in regions:
+        print("  " + describe_region(reg, digits))
     for r in bad:
         print(f"  speed {r['speed']:g} rad/s failed: {r['error']}")
     print("wrote " + ", ".join(str(p) for p in paths))
+    if bad:
+        print(f"flexmech: error: {len(bad)} of {len(rows)} speeds failed (listed above); the chart is incomplete",
+              file=sys.stderr)
+        return 3
     return 0
 
 
@@ -191,7 +230,7 @@ def _cmd_steady(args) -> int:
     print(f"period {pc.period:.6g} s in {pc.nsteps} steps; largest Floquet multiplier |mu| = {f['max_abs_multiplier']:.8g} "
           f"({'stable' if f['stable'] else 'UNSTABLE'}); cond(I - Phi) = {f['cond_I_minus_Phi']:.3g}; "
           f"periodicity residual {f['periodicity_residual']:.2g}")
-    _warn(f["warnings"])
+    _warn(res.extra.get("warnings", []))
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0
 

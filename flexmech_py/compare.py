@@ -19,7 +19,47 @@ from .results import _atomic_write
 
 __all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models"]
 
-ANGLE_UNITS = {"rad": 1.0, "deg": np.pi / 180.0}
+#: the units flexmech writes (outputs.output_unit, simulate.py), and the angle units converted to them
+KNOWN_UNITS = ("s", "m", "rad", "rad/s", "rad/s^2", "1", "1/m", "N", "N m", "J")
+CONVERTED_UNITS = {"deg": ("rad", np.pi / 180.0), "deg/s": ("rad/s", np.pi / 180.0),
+                   "deg/s^2": ("rad/s^2", np.pi / 180.0)}
+
+
+def _text(path: Path) -> str:
+    """The file as text; CaseError (one line, naming the first byte that is not text) for anything else."""
+    raw = path.read_bytes()
+    try:
+        text, bad = raw.decode("utf-8"), -1
+    except UnicodeDecodeError as exc:
+        text, bad = "", exc.start
+    nul = raw.find(b"\0")
+    if nul >= 0 or bad >= 0:
+        at = min(x for x in (nul, bad) if x >= 0)
+        raise CaseError("--reference", f"{path} is not a text CSV file (byte {raw[at]:#04x} at offset {at}); give a "
+                                       "comma-separated text file (format: docs/compare.md)")
+    return text
+
+
+def _row(path: Path, lineno: int, line: str, header: list) -> list[float]:
+    """One data row as numbers; CaseError naming the line and the column for a short, long or bad row."""
+    cells = line.split(",")
+    if len(cells) != len(header):
+        values = f"{len(cells)} value" + ("" if len(cells) == 1 else "s")
+        raise CaseError("--reference", f"{path}, line {lineno}: {values}, but the header names "
+                                       f"{len(header)} columns ({', '.join(header)}); every data row needs one "
+                                       "number per column")
+    out = []
+    for name, cell in zip(header, cells):
+        try:
+            v = float(cell)
+        except ValueError:
+            raise CaseError("--reference", f"{path}, line {lineno}, column {name!r}: {cell.strip()!r} is not a "
+                                           "number; data rows must hold numbers only") from None
+        if not np.isfinite(v):
+            raise CaseError("--reference", f"{path}, line {lineno}, column {name!r}: {cell.strip()} is not a finite "
+                                           "number; remove the row or fill in the value")
+        out.append(v)
+    return out
 
 
 def read_reference(path) -> tuple[dict, dict, str]:
@@ -27,30 +67,50 @@ def read_reference(path) -> tuple[dict, dict, str]:
     path = Path(path)
     if not path.is_file():
         raise CaseError("--reference", f"{str(path)!r} does not exist; give a CSV file (format: docs/compare.md)")
-    source, units, body = "", [], []
-    for line in path.read_text(encoding="utf-8").splitlines():
+    source, units, header, rows = "", [], None, []
+    for lineno, line in enumerate(_text(path).splitlines(), start=1):
         if line.startswith("#"):
             key, _, val = line[1:].partition(":")
             if key.strip() == "source":
                 source = val.strip()
             elif key.strip() == "units":
                 units = [u.strip() for u in val.split(",")]
-        elif line.strip():
-            body.append(line)
-    if not body:
+        elif not line.strip():
+            continue
+        elif header is None:
+            header = [h.strip() for h in line.split(",")]
+        else:
+            rows.append(_row(path, lineno, line, header))
+    if header is None:
         raise CaseError("--reference", f"{path}: no header line; the first non-comment line names the columns")
-    header = [h.strip() for h in body[0].split(",")]
-    try:
-        data = np.array([[float(x) for x in row.split(",")] for row in body[1:]], float).reshape(-1, len(header))
-    except ValueError as exc:
-        raise CaseError("--reference", f"{path}: data rows must hold {len(header)} numbers each ({exc})") from None
-    if data.shape[0] < 2:
+    if len(rows) < 2:
         raise CaseError("--reference", f"{path}: needs at least two data rows")
     if units and len(units) != len(header):
         raise CaseError("--reference", f"{path}: the '# units:' line has {len(units)} entries for {len(header)} columns")
+    for name, unit in zip(header, units):
+        if unit and unit not in KNOWN_UNITS and unit not in CONVERTED_UNITS:
+            raise CaseError("--reference", f"{path}: unknown unit {unit!r} of column {name!r} in the '# units:' line; "
+                                           f"use flexmech's units ({', '.join(KNOWN_UNITS)}) or "
+                                           f"{', '.join(CONVERTED_UNITS)} for angles")
     if not source:
         raise CaseError("--reference", f"{path}: add a '# source: <citation>' line saying where the curve comes from")
+    data = np.array(rows, float)
     return ({h: data[:, i] for i, h in enumerate(header)}, dict(zip(header, units)) if units else {}, source)
+
+
+def _unit_factor(column: str, ref_unit: str | None, res_unit: str | None) -> float:
+    """Factor turning the reference column into the result's unit; CaseError when they cannot match."""
+    if not ref_unit or ref_unit == res_unit:
+        return 1.0
+    if ref_unit in CONVERTED_UNITS:
+        to, factor = CONVERTED_UNITS[ref_unit]
+        if res_unit is None or res_unit == to:
+            return factor
+        ref_unit = f"{ref_unit} (an angle)"
+    if res_unit is None:
+        return 1.0
+    raise CaseError("--reference", f"column {column!r} is in {ref_unit} in the reference but in {res_unit} in the "
+                                   "result; convert the reference column or correct its '# units:' entry")
 
 
 def _peak(x, y):
@@ -58,19 +118,21 @@ def _peak(x, y):
     return float(y[i]), float(x[i])
 
 
-def compare_columns(res_cols: dict, ref_cols: dict, x: str = "t", columns=None, ref_units=None) -> dict:
+def compare_columns(res_cols: dict, ref_cols: dict, x: str = "t", columns=None, ref_units=None,
+                    res_units=None) -> dict:
     """Metrics of every compared column: the result interpolated onto the reference abscissa.
 
-    x: ``t`` or ``crank_angle`` (unwrapped; a reference in degrees, by its units line, is converted).
+    x: ``t`` or ``crank_angle`` (unwrapped).  ``ref_units``/``res_units`` ({column: unit}, optional): a reference
+    column in deg, deg/s or deg/s^2 is converted to rad; other units must equal the result's (CaseError).
     Returns {column: {max_error, rms_error (relative to the reference peak), peak_ref, peak_result,
     peak_error (relative), peak_shift (in x units), correlation, points, x_range}}.
     """
-    ref_units = ref_units or {}
+    ref_units, res_units = ref_units or {}, res_units or {}
     for name, cols in (("result", res_cols), ("reference", ref_cols)):
         if x not in cols:
             raise CaseError("--x", f"the {name} has no column {x!r}; columns: {', '.join(cols)}")
     xr = np.asarray(res_cols[x], float)
-    xf = np.asarray(ref_cols[x], float) * (ANGLE_UNITS.get(ref_units.get(x, "rad"), 1.0) if x != "t" else 1.0)
+    xf = np.asarray(ref_cols[x], float) * _unit_factor(x, ref_units.get(x), res_units.get(x, "s" if x == "t" else "rad"))
     if np.any(np.diff(xr) <= 0):
         raise CaseError("--x", f"the result's {x!r} is not increasing (the crank turns backwards?); compare by time")
     order = np.argsort(xf)
@@ -82,7 +144,8 @@ def compare_columns(res_cols: dict, ref_cols: dict, x: str = "t", columns=None, 
     for c in common:
         if c not in res_cols or c not in ref_cols:
             raise CaseError("--columns", f"{c!r} is not in both files")
-        xs, yf = xf[order], np.asarray(ref_cols[c], float)[order]
+        scale_ref = _unit_factor(c, ref_units.get(c), res_units.get(c))
+        xs, yf = xf[order], scale_ref * np.asarray(ref_cols[c], float)[order]
         sel = (xs >= xr[0]) & (xs <= xr[-1])
         if sel.sum() < 2:
             raise CaseError("--x", f"the result ({xr[0]:.4g}..{xr[-1]:.4g}) and the reference "
@@ -140,9 +203,9 @@ def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None)
     if not ts.is_file():
         raise CaseError("RESULT_DIR", f"{str(result_dir)!r} holds no timeseries.csv; give a folder written by "
                                       "`flexmech run`")
-    res_cols, _ = read_timeseries(ts)
+    res_cols, res_units = read_timeseries(ts)
     ref_cols, ref_units, source = read_reference(reference)
-    metrics = compare_columns(res_cols, ref_cols, x=x, columns=columns, ref_units=ref_units)
+    metrics = compare_columns(res_cols, ref_cols, x=x, columns=columns, ref_units=ref_units, res_units=res_units)
     paths = _write(metrics, Path(out_dir) if out_dir else result_dir / "compare", x, "comparison",
                    extra={"reference": str(reference), "source": source, "result": str(result_dir)})
     return metrics, paths

@@ -22,16 +22,18 @@ from __future__ import annotations
 import copy
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
 from .case import SUPERPOSITION_MODELS, Case
 from .errors import CaseError
+from .regions import default_resolution, multiplier_type, refinement_speeds
 from .simulate import Prepared, check_elastic_problem
 
 __all__ = ["PeriodicCase", "FloquetResult", "floquet", "steady_state", "frozen_frequencies", "stability_point",
-           "STABLE_RATE", "ILL_CONDITIONED", "stability_chart",
+           "STABLE_RATE", "ILL_CONDITIONED", "stability_chart", "ChartRuns", "REFINE_ROUNDS",
            "write_stability_csv", "parse_range"]
 
 #: growth rate ln|mu| / T [1/s] above which a speed is reported unstable (an e-folding time of 10 s or
@@ -224,6 +226,7 @@ def steady_state(pc: PeriodicCase, fr: FloquetResult | None = None):
     info = fr.summary()
     info["periodicity_residual"] = float(np.max(np.abs(x_end[:n] - fr.x_star[:n])) / scale)
     res.extra["floquet"] = info
+    res.extra["warnings"] = res.extra.get("warnings", []) + info["warnings"]   # validity, then Floquet
     return res
 
 
@@ -274,37 +277,78 @@ def parse_range(text: str, where: str) -> list[float]:
         raise CaseError(where, f"{text!r} must be START:STOP:N (N >= 1 points) or a list a,b,c") from None
 
 
-STABILITY_COLUMNS = ["speed", "max_abs_mu", "growth_rate", "stable", "resonance_margin", "steps_per_period", "wall_s"]
+STABILITY_COLUMNS = ["speed", "max_abs_mu", "growth_rate", "stable", "mu_re", "mu_im", "multiplier", "round",
+                     "resonance_margin", "steps_per_period", "wall_s"]
+#: refinement rounds after the user's grid (``flexmech stability --refine-rounds``)
+REFINE_ROUNDS = 8
+
+
+@dataclass
+class ChartRuns:
+    """What a chart cost: speeds computed and taken from the cache, wall time, worker processes, and the
+    refinement (``rounds`` run after the user's grid, ``added`` speeds, ``resolution`` [rad/s])."""
+
+    computed: int = 0
+    cached: int = 0
+    wall_s: float = 0.0
+    jobs: int = 1
+    rounds: int = 0
+    added: int = 0
+    resolution: float | None = None
+
+
+def _chart_row(speed: float, r: dict, round_: int) -> dict:
+    if "error" in r:
+        return {"speed": speed, "round": round_, "error": r["error"]}
+    mu = r["multipliers"][0]
+    row = {"speed": speed, "max_abs_mu": r["max_abs_multiplier"], "growth_rate": r["growth_rate_per_s"],
+           "stable": int(r["stable"]), "mu_re": mu["re"], "mu_im": mu["im"],
+           "multiplier": multiplier_type(mu["re"], mu["im"]), "round": round_,
+           "resonance_margin": r["resonance_margin"], "steps_per_period": r["steps_per_period"], "wall_s": r["wall_s"]}
+    for k, (lo, hi) in enumerate(zip(r["freq_min"], r["freq_max"]), start=1):
+        row[f"omega{k}_min"], row[f"omega{k}_max"] = lo, hi
+    return row
 
 
 def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: str | None = None, nmodes: int = 4,
-                    jobs: int | None = None, cache_dir=None, progress: bool = True):
-    """Floquet analysis at every crank speed, in parallel (:func:`~flexmech_py.parallel.run_tasks`).
-    Returns (rows, batch): one dict per speed (an ``error`` entry for a failed one)."""
+                    jobs: int | None = None, cache_dir=None, progress: bool = True, resolution: float | None = None,
+                    refine_rounds: int = REFINE_ROUNDS):
+    """Floquet analysis at every crank speed, in parallel (:func:`~flexmech_py.parallel.run_tasks`), then
+    up to ``refine_rounds`` further rounds on the speeds :func:`~flexmech_py.regions.refinement_speeds`
+    picks (region edges, extrema of |mu| that may hide a pocket) until no interval wider than
+    ``resolution`` [rad/s] (default: :func:`~flexmech_py.regions.default_resolution`) is left to split.
+    Returns (rows, runs): one dict per speed, sorted by speed (an ``error`` entry for a failed one;
+    ``round`` 0 for the user's speeds), and a :class:`ChartRuns`."""
     from .parallel import run_tasks
 
     model = case["solver"]["model"] if model is None else model
     geometric = case["solver"]["geometric_stiffness"] if geometric is None else geometric
     PeriodicCase.check(case, model, geometric)
-    speeds = [float(s) for s in speeds]
+    speeds = sorted({float(s) for s in speeds})
     if not speeds or any(not math.isfinite(s) or s <= 0 for s in speeds):
         raise CaseError("--speed", f"crank speeds must be finite and > 0 rad/s, got {speeds}")
+    resolution = default_resolution(speeds) if resolution is None else float(resolution)
+    if resolution is not None and not (math.isfinite(resolution) and resolution > 0):
+        raise CaseError("--resolution", f"must be a finite speed > 0 rad/s, got {resolution}")
     c = copy.deepcopy(case)
     c["case"].pop("path", None)   # the cache key depends on the case's content, not on where it was read
-    tasks = [{"case": c, "model": model, "geometric": geometric, "speed": s, "nmodes": nmodes} for s in speeds]
-    batch = run_tasks(stability_point, tasks, jobs=jobs, cache_dir=cache_dir, progress=progress, label="speeds")
-    rows = []
-    for s, r in zip(speeds, batch.results):
-        if "error" in r:
-            rows.append({"speed": s, "error": r["error"]})
-            continue
-        row = {"speed": s, "max_abs_mu": r["max_abs_multiplier"], "growth_rate": r["growth_rate_per_s"],
-               "stable": int(r["stable"]), "resonance_margin": r["resonance_margin"],
-               "steps_per_period": r["steps_per_period"], "wall_s": r["wall_s"]}
-        for k, (lo, hi) in enumerate(zip(r["freq_min"], r["freq_max"]), start=1):
-            row[f"omega{k}_min"], row[f"omega{k}_max"] = lo, hi
-        rows.append(row)
-    return rows, batch
+    rows, runs = [], ChartRuns(resolution=resolution)
+    todo, round_ = speeds, 0
+    while todo:
+        tasks = [{"case": c, "model": model, "geometric": geometric, "speed": s, "nmodes": nmodes} for s in todo]
+        batch = run_tasks(stability_point, tasks, jobs=jobs, cache_dir=cache_dir, progress=progress,
+                          label="speeds" if round_ == 0 else f"refinement {round_}")
+        rows += [_chart_row(s, r, round_) for s, r in zip(todo, batch.results)]
+        runs.computed, runs.cached = runs.computed + batch.computed, runs.cached + batch.cached
+        runs.wall_s, runs.jobs = runs.wall_s + batch.wall_s, max(runs.jobs, batch.jobs)
+        if round_ >= refine_rounds or resolution is None:
+            break
+        done = {r["speed"] for r in rows}
+        todo = [s for s in refinement_speeds(rows, resolution) if s not in done]
+        round_ += 1
+        if todo:
+            runs.rounds, runs.added = round_, runs.added + len(todo)
+    return sorted(rows, key=lambda r: r["speed"]), runs
 
 
 def write_stability_csv(rows: list, path, header: str = "") -> None:
@@ -315,8 +359,9 @@ def write_stability_csv(rows: list, path, header: str = "") -> None:
     for r in rows:
         names += [k for k in r if k not in names and k != "error"]
     names.append("error")
-    units = {"speed": "rad/s", "max_abs_mu": "1", "growth_rate": "1/s", "stable": "1", "resonance_margin": "1",
-             "steps_per_period": "1", "wall_s": "s", "error": ""}
+    units = {"speed": "rad/s", "max_abs_mu": "1", "growth_rate": "1/s", "stable": "1", "mu_re": "1", "mu_im": "1",
+             "multiplier": "", "round": "1", "resonance_margin": "1", "steps_per_period": "1", "wall_s": "s",
+             "error": ""}
     lines = [f"# {header}" if header else "# flexmech stability",
              "# units: " + ",".join(units.get(n, "rad/s") for n in names), ",".join(names)]
     for r in rows:

@@ -18,6 +18,7 @@ docs/stability.md ("Guards", "Validity warnings") documents the thresholds and m
 from __future__ import annotations
 
 import copy
+import math
 import time
 
 import numpy as np
@@ -26,9 +27,13 @@ from . import coupled, kernels
 from .errors import MechanismError, SolverError
 from .model import squared_frequencies
 
-__all__ = ["check_validity", "failed", "error_estimate", "frames_before", "partial_or", "ORDER"]
+__all__ = ["check_validity", "failed", "error_estimate", "frames_before", "partial_or", "ORDER", "ERROR_WARN"]
 
 ORDER = 2          # order of accuracy in time of every integrator flexmech ships (Newmark family, HHT, gen.-alpha)
+#: estimated time-step error, relative to the column's peak, above which a run warns (docs/stability.md)
+ERROR_WARN = 0.05
+#: largest |observed order - ORDER| at which the step that meets ERROR_WARN is predicted (as accuracy.py)
+ORDER_TOLERANCE = 0.3
 LINEAR_MODELS = ("hac", "classic", "classic-translational")
 
 
@@ -390,8 +395,17 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
 SKIP_COLUMNS = ("newton_iterations",)   # solver statistics, not outputs
 
 
+def _on_coarse_frames(fine_prep, fine, coarse) -> int:
+    """Stride of ``fine``'s frames that fall on ``coarse``'s (a run of ``fine_prep.coarsened()``)."""
+    stride = 1 if fine_prep.out_every % 2 == 0 else 2
+    nf = coarse.t.size
+    assert np.allclose(fine.t[::stride][:nf], coarse.t, rtol=0, atol=1e-9 * fine_prep.t[-1])
+    return stride
+
+
 def error_estimate(prep, res, geometric=None) -> dict:
-    """Step-doubling estimate of the time-discretization error of every output column of ``res``."""
+    """Step-doubling estimate of the time-discretization error of every output column of ``res``;
+    past ERROR_WARN a warning (with the step that would meet it, :func:`_estimate_warning`)."""
     pc = prep.coarsened()   # the same rigid solution on every second step
     out = {"method": "time", "order": ORDER, "dt": prep.dt}
     if pc is None:
@@ -408,9 +422,8 @@ def error_estimate(prep, res, geometric=None) -> dict:
         return out
     out["kernel_s"] = rc.timing.get("kernel_s", 0.0)
     out["wall_s"] = time.perf_counter() - t0
-    stride = 1 if prep.out_every % 2 == 0 else 2
+    stride = _on_coarse_frames(prep, res, rc)
     nf = rc.t.size
-    assert np.allclose(res.t[::stride][:nf], rc.t, rtol=0, atol=1e-9 * prep.t[-1])
     out["frames_compared"] = int(nf)
     cols, worst = {}, (None, -1.0)
     fac = 1.0 / (2 ** ORDER - 1)
@@ -426,4 +439,57 @@ def error_estimate(prep, res, geometric=None) -> dict:
         if rel > worst[1]:
             worst = (name, rel)
     out.update(columns=cols, worst_column=worst[0], worst_relative=worst[1] if worst[0] else None)
+    over = {n: c["relative"] for n, c in cols.items() if np.isfinite(c["relative"]) and c["relative"] > ERROR_WARN}
+    if over:
+        name = max(over, key=over.get)
+        out["warning"] = _estimate_warning(prep.dt, name, over, _observed_order(prep, pc, res, rc, name, geometric))
+        res.extra.setdefault("warnings", []).append(out["warning"]["message"])
     return out
+
+
+def _observed_order(prep, pc, res, rc, name: str, geometric) -> float | None:
+    """Observed order of ``name``'s time error from the runs at dt, 2 dt and a third one at 4 dt (made only
+    when the estimate passes ERROR_WARN): log2 of max |y_2dt - y_4dt| over max |y_dt - y_2dt| on the 4 dt
+    frames.  None when there is no run at 4 dt (too few steps, or it failed)."""
+    pcc = pc.coarsened()
+    if pcc is None:
+        return None
+    try:
+        r4 = pcc._run_raw(res.model, geometric)
+    except SolverError:
+        return None
+    s2 = _on_coarse_frames(pc, rc, r4)
+    n4 = r4.t.size
+    s1 = _on_coarse_frames(prep, res, rc) * s2
+    y1, y2 = np.asarray(res.columns[name])[::s1][:n4], np.asarray(rc.columns[name])[::s2][:n4]
+    d12, d24 = float(np.max(np.abs(y1 - y2))), float(np.max(np.abs(y2 - r4.columns[name])))
+    return float(np.log2(d24 / d12)) if d12 > 0 and d24 > 0 else None
+
+
+def _round_down(x: float, digits: int = 2) -> float:
+    """x rounded down to ``digits`` significant digits (a step printed shorter must not grow)."""
+    scale = 10.0 ** (math.floor(math.log10(x)) - digits + 1)
+    return math.floor(x / scale * (1 + 1e-12)) * scale
+
+
+def _estimate_warning(dt: float, name: str, over: dict, order: float | None) -> dict:
+    """The warning of an estimate past ERROR_WARN: the worst column, and the step that would meet the
+    threshold, dt (ERROR_WARN / estimate)^(1/p), p = min(observed order, ORDER).  Promised only when the
+    observed order is within ORDER_TOLERANCE of ORDER (the runs are in the asymptotic range); otherwise the
+    order-2 step is a first guess (none when the error does not shrink with the step, p < 1)."""
+    rel = over[name]
+    more = f" ({len(over)} outputs above it)" if len(over) > 1 else ""
+    head = (f"error estimate: the time-step error of {name} is about {100 * rel:.3g} % of its peak (step doubling), "
+            f"above the {100 * ERROR_WARN:g} % threshold{more}; ")
+    seen = f"observed order {order:.2g} from runs at dt, 2 dt and 4 dt" if order is not None else "no run at 4 dt"
+    out = {"column": name, "observed_order": order, "suggested_dt": None}
+    if order is not None and abs(order - ORDER) <= ORDER_TOLERANCE:
+        dt_new = _round_down(dt * (ERROR_WARN / rel) ** (1.0 / min(order, ORDER)))
+        out["suggested_dt"] = dt_new
+        return dict(out, message=head + f"dt = {dt_new:.2g} s instead of {dt:.3g} s would meet it ({seen}): "
+                                        f"--dt {dt_new:.2g} or --set solver.dt={dt_new:.2g}")
+    guess = (f"; were it of order {ORDER}, dt = {dt * (ERROR_WARN / rel) ** (1.0 / ORDER):.2g} s would meet it"
+             if order is None or order >= 1.0 else "; the error does not shrink with the step")
+    return dict(out, message=head + f"the runs are not in the asymptotic range ({seen}, expected {ORDER}), so no step "
+                                    f"can be promised{guess}; check against a run at a much smaller dt "
+                                    "(`flexmech accuracy`)")

@@ -101,51 +101,84 @@ def plot_result(res, out_dir) -> list[Path]:
     return [p for p in paths if p is not None]
 
 
-def plot_stability(rows: list, path, *, title: str = "", nmodes: int = 3, kmax: int = 4, span_modes: int = 2):
-    """Stability chart: top, max|mu| - 1 (log) against crank speed with the intervals where a
-    parametric-resonance condition omega_i + omega_j = k Omega holds somewhere along the cycle shaded
-    and labelled; bottom, the frozen natural-frequency bands along the cycle against speed with the
-    lines k Omega / 2 (a band crossing k Omega / 2 at Omega means 2 omega_i = k Omega there).
-    Returns the path, or None without matplotlib."""
+_MU_STYLE = {"real+": ("^", "tab:red", "+1"), "real-": ("v", "tab:purple", "−1"), "complex": ("o", "tab:orange", "")}
+
+
+def _region_label(part: dict) -> str:
+    if part["type"] != "complex":
+        return _MU_STYLE[part["type"]][2]
+    a, b = part["angle_deg"]
+    return f"±{a:.0f}°" if round(a) == round(b) else f"±{a:.0f}–{b:.0f}°"
+
+
+def _part_spans(regions):
+    """(lo, hi, part) of every part of every region: boundaries halfway between the samples on either side."""
+    for reg in regions:
+        parts = reg["parts"]
+        for k, part in enumerate(parts):
+            left = parts[k - 1]["to"] if k > 0 else reg["below"]
+            right = parts[k + 1]["from"] if k + 1 < len(parts) else reg["above"]
+            yield (0.5 * (left + part["from"]) if left is not None else part["from"],
+                   0.5 * (part["to"] + right) if right is not None else part["to"], part)
+
+
+def _stability_top(ax, ok, regions, stable_rate):
+    """Growth rate ln max|mu| / T (symlog) against speed: the threshold line and the stable band under it,
+    unstable points marked by multiplier type, the unstable regions shaded and labelled with it."""
+    sp = np.array([r["speed"] for r in ok])
+    rate = np.array([r["growth_rate"] for r in ok])
+    stable = np.array([bool(r["stable"]) for r in ok])
+    kind = np.array([r.get("multiplier", "") for r in ok])
+    ax.plot(sp, rate, "k-", lw=0.6)
+    ax.plot(sp[stable], rate[stable], "b.", ms=2, label="stable")
+    for k, (marker, color, sym) in _MU_STYLE.items():
+        sel = ~stable & (kind == k)
+        if sel.any():
+            ax.plot(sp[sel], rate[sel], marker, color=color, ms=4, ls="none",
+                    label=f"unstable, {'complex pair' if k == 'complex' else 'real ' + sym}")
+    ax.set_yscale("symlog", linthresh=1e-3, linscale=0.5)
+    ymax = max(10.0, float(rate.max()))
+    ymin = min(-1e-3, float(rate.min()) * 3)
+    ax.set_ylim(ymin, ymax * 30)
+    if stable_rate is not None:
+        ax.axhspan(ymin, stable_rate, color="tab:green", alpha=0.10, lw=0)
+        ax.axhline(stable_rate, color="tab:green", lw=1.0, ls="--",
+                   label=f"threshold {stable_rate:g} 1/s (|μ| = exp({stable_rate:g}·2π/Ω)): stable below")
+    width = sp.max() - sp.min()
+    n = 0
+    for lo, hi, part in _part_spans(regions or []):
+        color = _MU_STYLE[part["type"]][1]
+        ax.axvspan(lo, hi, color=color, alpha=0.12, lw=0)
+        if hi - lo > 0.015 * width:   # narrow parts: the markers say their type
+            ax.text(0.5 * (lo + hi), ymax * 10 ** (1.0 - 0.45 * (n % 3)), _region_label(part), color=color,
+                    fontsize=7, ha="center")
+            n += 1
+    ax.set_ylabel("growth rate ln max|μ| / T [1/s]")
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=7, loc="lower right")
+
+
+def plot_stability(rows: list, path, *, title: str = "", regions=None, stable_rate: float | None = None,
+                   nmodes: int = 3, kmax: int = 4):
+    """Stability chart: top, the growth rate ln max|mu| / T (symlog) against crank speed with the stability
+    threshold ``stable_rate`` and the stable band under it, the unstable points marked by the type of their dominant
+    multiplier and the unstable ``regions`` (:func:`flexmech_py.regions.unstable_regions`) shaded and
+    labelled with it (+1, -1, or the angle of a complex pair); bottom, the frozen natural-frequency
+    bands along the cycle against speed with the lines k Omega / 2 (a band crossing k Omega / 2 at
+    Omega means 2 omega_i = k Omega there).  Returns the path, or None without matplotlib."""
     if not have_matplotlib():
         return None
     import matplotlib.pyplot as plt
 
-    ok = [r for r in rows if "error" not in r]
+    ok = sorted((r for r in rows if "error" not in r), key=lambda r: r["speed"])
     if not ok:
         return None
     sp = np.array([r["speed"] for r in ok])
-    mu1 = np.array([r["max_abs_mu"] for r in ok]) - 1.0
-    stable = np.array([bool(r["stable"]) for r in ok])
     nm = min(nmodes, sum(1 for k in ok[0] if k.startswith("omega") and k.endswith("_min")))
     lo = np.array([[r[f"omega{k}_min"] for k in range(1, nm + 1)] for r in ok])
     hi = np.array([[r[f"omega{k}_max"] for k in range(1, nm + 1)] for r in ok])
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 8.5), sharex=True, gridspec_kw={"height_ratios": [1, 1.3]})
-    floor = 1e-8
-    ax1.semilogy(sp, np.maximum(mu1, floor), "k-", lw=0.8)
-    ax1.semilogy(sp[~stable], np.maximum(mu1[~stable], floor), "r.", ms=4, label="unstable")
-    ax1.semilogy(sp[stable], np.maximum(mu1[stable], floor), "b.", ms=2, label="stable")
-    ax1.set_ylabel("max |mu| - 1")
-    ax1.grid(True, which="both", alpha=0.25)
-    # predicted resonance intervals: omega_i + omega_j = k Omega somewhere along the cycle, at the speed itself
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    spans, ci = [], 0
-    for k in range(1, kmax + 1):
-        for i in range(min(nm, span_modes)):
-            for j in range(i, min(nm, span_modes)):
-                inside = ((lo[:, i] + lo[:, j]) <= k * sp) & (k * sp <= (hi[:, i] + hi[:, j]))
-                if not inside.any():
-                    continue
-                a, b = sp[inside].min(), sp[inside].max()
-                name = (f"2ω{i + 1}" if i == j else f"ω{i + 1}+ω{j + 1}") + f" = {k}Ω"
-                spans.append((a, b, name, colors[ci % len(colors)]))
-                ci += 1
-    ymax = max(1.0, float(np.nanmax(np.maximum(mu1, floor))))
-    ax1.set_ylim(floor if mu1.min() < 1e-6 else 0.3 * mu1.min(), ymax * 10)
-    for n, (a, b, name, col) in enumerate(spans):
-        ax1.axvspan(a, max(b, a + 1e-9), color=col, alpha=0.15)
-        ax1.text(0.5 * (a + b), ymax * 10 ** (0.3 - 0.55 * (n % 6)), name, color=col, fontsize=7, ha="center")
-    ax1.legend(fontsize=8, loc="lower right")
+    _stability_top(ax1, ok, regions, stable_rate)
     for m in range(nm):
         ax2.fill_between(sp, lo[:, m], hi[:, m], alpha=0.35, label=f"ω{m + 1} along the cycle")
     for i in range(nm):

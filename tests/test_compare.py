@@ -61,14 +61,25 @@ def test_self_comparison_by_time_and_by_crank_angle_in_degrees(run_dir, tmp_path
     ("t,strain_coupler_mid\n0,0\n0.1,1e-3\n", "# source:"),
     ("# source: x\nt,nothing\n0,0\n0.1,1\n", "no column in common"),
     ("# source: x\nt,strain_coupler_mid\n5,0\n6,1\n", "do not overlap"),
-    ("# source: x\nt,strain_coupler_mid\n0,zero\n", "numbers"),
+    ("# source: x\nt,strain_coupler_mid\n0,zero\n0.1,1e-3\n", "line 3, column 'strain_coupler_mid': 'zero' is not a number"),
+    ("# source: x\nt,strain_coupler_mid\n0,0\n0.05,nan\n0.1,1e-3\n", "line 4, column 'strain_coupler_mid': nan is not a finite"),
+    ("# source: x\nt,strain_coupler_mid\n0,0\n0.05,inf\n0.1,1e-3\n", "inf is not a finite"),
+    ("# source: x\nt,strain_coupler_mid\n0,0\n0.05\n0.1,1e-3\n", "line 4: 1 value, but the header names 2 columns"),
+    ("# source: x\nt,strain_coupler_mid\n0,0,7\n0.1,1e-3\n", "line 3: 3 values"),
+    ("# source: x\n# units: s, furlong\nt,strain_coupler_mid\n0,0\n0.1,1e-3\n", "unknown unit 'furlong'"),
+    ("# source: x\n# units: s, m\nt,strain_coupler_mid\n0,0\n0.1,1e-3\n", "is in m in the reference but in 1"),
+    ("# source: x\n# units: deg, 1\nt,strain_coupler_mid\n0,0\n0.1,1e-3\n", "is in deg (an angle) in the reference but in s"),
+    (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe", "is not a text CSV file"),
+    (b"# source: x\nt,strain_coupler_mid\n0,0\n0.1,\xe9\n", "is not a text CSV file (byte 0xe9"),
 ])
 def test_bad_reference_one_line_exit_2(run_dir, tmp_path, capsys, content, needle):
     ref = tmp_path / "bad.csv"
-    ref.write_text(content)
-    rc = main(["compare", str(run_dir), "--reference", str(ref), "--out", str(tmp_path / "c")])
+    ref.write_bytes(content) if isinstance(content, bytes) else ref.write_text(content)
+    out = tmp_path / "c"
+    rc = main(["compare", str(run_dir), "--reference", str(ref), "--out", str(out)])
     err = capsys.readouterr().err
-    assert rc == 2 and needle in err and err.count("\n") == 1
+    assert rc == 2 and needle in err and err.count("\n") == 1 and err.startswith("flexmech: error: "), err
+    assert not out.exists()   # nothing written
 
 
 def test_compare_models_against_nonlinear(cases_dir, tmp_path, capsys):
@@ -81,6 +92,14 @@ def test_compare_models_against_nonlinear(cases_dir, tmp_path, capsys):
     assert (js["coupled"]["columns"]["tip_dy_elastic"]["max_error"]
             < 0.1 * js["classic"]["columns"]["tip_dy_elastic"]["max_error"])
     assert "coupled against nonlinear" in capsys.readouterr().out
+
+
+def test_reference_in_degrees_is_converted_for_any_angle_column():
+    t = np.linspace(0, 1, 11)
+    res, res_units = {"t": t, "joint_angle": 0.5 * t}, {"t": "s", "joint_angle": "rad"}
+    ref = {"t": t, "joint_angle": np.degrees(0.5 * t)}
+    m = compare_columns(res, ref, ref_units={"t": "s", "joint_angle": "deg"}, res_units=res_units)["joint_angle"]
+    assert m["max_error"] < 1e-12 and m["peak_ref"] == pytest.approx(0.5)
 
 
 def test_read_reference_units_and_source(tmp_path):

@@ -149,7 +149,8 @@ def test_resonance_warns_about_the_steady_state(seed):
 def test_stability_chart_instabilities_are_parametric_resonances(seed, tmp_path):
     # three speeds, two workers: 200 and 600 rad/s unstable, 400 rad/s stable (undamped, geometric none)
     speeds = [200.0, 400.0, 600.0]
-    rows, batch = stability_chart(seed, speeds, model="hac", jobs=2, cache_dir=tmp_path / "cache", progress=False)
+    rows, batch = stability_chart(seed, speeds, model="hac", jobs=2, cache_dir=tmp_path / "cache", progress=False,
+                                  refine_rounds=0)
     assert batch.jobs == 2 and batch.computed == 3
     by = {r["speed"]: r for r in rows}
     assert [bool(by[s]["stable"]) for s in speeds] == [False, True, False]
@@ -163,7 +164,8 @@ def test_stability_chart_instabilities_are_parametric_resonances(seed, tmp_path)
         if not r["stable"]:
             assert hit, f"unstable at {s} rad/s without a resonance condition"
     # the cached chart is returned unchanged
-    rows2, batch2 = stability_chart(seed, speeds, model="hac", jobs=1, cache_dir=tmp_path / "cache", progress=False)
+    rows2, batch2 = stability_chart(seed, speeds, model="hac", jobs=1, cache_dir=tmp_path / "cache", progress=False,
+                                    refine_rounds=0)
     assert batch2.cached == 3 and rows2 == rows
     # one point computed in-process agrees with the workers'
     one = stability_point({"case": {**seed, "case": {k: v for k, v in seed["case"].items() if k != "path"}},
@@ -182,12 +184,119 @@ def test_cli_stability_and_steady(tmp_path, capsys):
     if have_matplotlib():
         assert (out / "stability.png").stat().st_size > 10000
     sd = tmp_path / "sd"
+    capsys.readouterr()
     assert main(["steady", str(SEED), "--set", "solver.rayleigh=[200.0, 0.0]", "--out", str(sd), "--no-plots"]) == 0
     import json
     s = json.loads((sd / "summary.json").read_text())
+    # the steady state's validity is reported like a run's: its coupler bends by far more than 2 % of its length
+    err = capsys.readouterr().err.splitlines()
+    assert s["validity_overall"]["max_deflection_over_length"] > 0.02
+    assert "flexmech: warning: the hac model's results after t = 0 s" in err[0] and len(err) == len(s["warnings"])
+    assert any("deflection exceeds 2 % of its length" in w for w in s["warnings"])
     assert s["floquet"]["stable"] and len(s["floquet"]["multipliers"]) == 36
     assert s["t_end"] == pytest.approx(2 * math.pi / 120.0)
     head = (sd / "timeseries.csv").read_text().splitlines()[2].split(",")
     assert head[:3] == ["t", "crank_angle", "crank_speed"]
     assert main(["steady", str(CASES / "fourbar_hac.toml"), "--out", str(tmp_path / "x")]) == 2
     assert "constant_speed" in capsys.readouterr().err
+
+
+def test_principal_parametric_resonance_has_a_real_negative_multiplier(seed):
+    # at 480 rad/s the lowest frozen frequency (229-299 rad/s along the cycle) meets 2 omega_1 = Omega: the
+    # principal region of a Mathieu-like equation, whose multiplier leaves the unit circle at -1
+    pc = PeriodicCase(seed, "hac", speed=480.0)
+    fr = floquet(pc)
+    w1 = frozen_frequencies(pc, fr, nmodes=1)[:, 0]
+    assert 2 * w1.min() < 480.0 < 2 * w1.max()
+    assert fr.mu[0].real < -1.5 and fr.mu[0].imag == 0.0
+    from flexmech_py.regions import multiplier_type
+    assert multiplier_type(fr.mu[0].real, fr.mu[0].imag) == "real-"
+
+
+def test_refinement_finds_the_damped_pocket_a_coarse_grid_misses(seed):
+    # with Rayleigh damping (zeta_1 about 1.6 %) a pocket of the real +1 tongue stays unstable near 231-234 rad/s;
+    # a 10 rad/s grid sees 230 and 240 rad/s stable, its refinement (bisection of the peak at 230) finds it
+    # (dt = 2e-5 s for speed; the multipliers agree with dt = 1e-5 s to 1e-3)
+    c = load_case(SEED, overrides=["solver.rayleigh=[5.0, 5e-5]", "solver.dt=2e-5"])
+    grid = [220.0, 230.0, 240.0, 250.0]
+    rows, runs = stability_chart(c, grid, model="hac", jobs=1, progress=False, resolution=1.0, refine_rounds=0)
+    assert runs.rounds == 0 and all(r["stable"] for r in rows)
+    from flexmech_py.regions import unstable_regions
+    rows, runs = stability_chart(c, grid, model="hac", jobs=1, progress=False, resolution=1.0)
+    assert 0 < runs.rounds <= 8 and runs.added == len(rows) - 4 and runs.added < 20
+    assert [r["round"] for r in rows if r["speed"] in grid] == [0, 0, 0, 0]
+    (reg,) = unstable_regions(rows)
+    assert 230.0 < reg["below"] < reg["from"] <= 232.0 and 234.0 <= reg["to"] < reg["above"] < 236.0
+    assert reg["from"] - reg["below"] <= 1.0 and reg["above"] - reg["to"] <= 1.0
+    assert 1.02 < reg["max_abs_mu"] < 1.04 and reg["parts"][0]["type"] == "real+"
+
+
+def pocket_growth(speed=232.5, dt=1e-5, cycles=80):
+    """(Floquet growth rate, growth rate of a time run) [1/s] at ``speed`` with the damping of docs/stability.md:
+    the time run starts from rest and its distance from the periodic steady state (coupler strain, max
+    over each cycle) is fitted by exp(rate t) over the second half of the cycles."""
+    ov = ["solver.rayleigh=[5.0, 5e-5]", f"drive.speed={speed}", "solver.divergence_limit=1e12",
+          "solver.error_estimate='none'", "solver.output_every=1", f"solver.dt={dt}"]
+    pc = PeriodicCase(load_case(SEED, overrides=ov), "hac")
+    fr = floquet(pc)
+    ys = steady_state(pc, fr)["strain_coupler_mid"]
+    run = simulate(load_case(SEED, overrides=ov + [f"solver.t_end={cycles * pc.period!r}"]), "hac",
+                   dt=pc.dt * (1 + 1e-12))
+    n = pc.nsteps
+    y = run["strain_coupler_mid"]
+    dist = np.array([np.max(np.abs(y[k * n:(k + 1) * n + 1] - ys)) for k in range(cycles)])
+    k = np.arange(cycles // 2, cycles)
+    return fr.growth_rate, float(np.polyfit(k * pc.period, np.log(dist[k]), 1)[0])
+
+
+def test_damped_pocket_grows_in_a_time_run():
+    # the pocket's multiplier is the growth of a plain time run away from the periodic state: the real +1
+    # multiplier 1.029 per period (1.06 1/s; 40 cycles at dt = 2e-5 s here, 80 at 1e-5 s in docs/stability.md)
+    floquet_rate, time_rate = pocket_growth(dt=2e-5, cycles=40)
+    assert 0.9 < floquet_rate < 1.2
+    assert time_rate == pytest.approx(floquet_rate, rel=0.02)
+
+
+def _point_failing_at_600(task):
+    from flexmech_py.errors import SolverError
+
+    if task["speed"] == 600.0:
+        raise SolverError("made to fail for the test", time=0.0, code=2)
+    return stability_point(task)   # the real one, imported before the test replaces it
+
+
+def test_cli_stability_names_regions_exits_3_on_failed_speeds_and_writes_nothing_when_rejected(tmp_path, capsys,
+                                                                                               monkeypatch):
+    out = tmp_path / "st"
+    assert main(["stability", str(SEED), "--speed", "440,460", "--jobs", "1", "--refine-rounds", "0",
+                 "--out", str(out), "--no-plots"]) == 0
+    text = capsys.readouterr().out
+    assert "unstable (growth rate ln max|mu| / T > 0.1 1/s): 1 region(s)" in text
+    assert "440.0-460.0 rad/s" in text and "real -1 side, period doubling" in text
+    with open(out / "stability_regions.csv") as f:
+        reg = list(csv.DictReader(line for line in f if not line.startswith("#")))
+    assert len(reg) == 1 and reg[0]["multiplier"] == "real-" and float(reg[0]["speed_from"]) == 440.0
+    with open(out / "stability.csv") as f:
+        rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
+    assert [r["multiplier"] for r in rows] == ["real-", "real-"] and float(rows[0]["mu_re"]) < -1
+    # rejected: a torque-driven case, or a bad speed: one line, exit 2, no output folder
+    for case, speed in ((CASES / "fourbar_hac.toml", "100:200:3"), (SEED, "0:10:3")):
+        bad = tmp_path / "rejected"
+        assert main(["stability", str(case), "--speed", speed, "--out", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("flexmech: error: ") and not bad.exists()
+    # a speed that fails: listed, the chart written, exit 3
+    import flexmech_py.floquet as fq
+    monkeypatch.setattr(fq, "stability_point", _point_failing_at_600)
+    assert main(["stability", str(SEED), "--speed", "560,600", "--jobs", "1", "--refine-rounds", "0",
+                 "--out", str(tmp_path / "f"), "--no-plots"]) == 3
+    cap = capsys.readouterr()
+    assert "speed 600 rad/s failed: made to fail for the test" in cap.out
+    assert [ln for ln in cap.err.splitlines() if ln.startswith("flexmech:")] == [
+        "flexmech: error: 1 of 2 speeds failed (listed above); the chart is incomplete"]
+    assert "made to fail" in (tmp_path / "f" / "stability.csv").read_text()
+
+
+if __name__ == "__main__":   # the time-run check of the damped pocket quoted in docs/stability.md
+    f, t = pocket_growth()
+    print(f"232.5 rad/s, Rayleigh [5, 5e-5], dt 1e-5 s: Floquet growth {f:.4f} 1/s, 80-cycle time run {t:.4f} 1/s")

@@ -234,3 +234,39 @@ def test_undamped_constraint_torques_are_blamed_on_the_integrator():
                                   overrides=["solver.dt=2e-3", "solver.model='nonlinear'", "solver.integrator='generalized-alpha'",
                                              "solver.error_estimate='none'"]))
     assert ok.t[-1] == pytest.approx(case["solver"]["t_end"])
+
+
+# ----------------------------------------------------------------------------- error-estimate warning
+def _spun_cantilever(dt, final_speed=6.0, t_end=0.8):
+    """A slender cantilever spun up smoothly over 0.4 s (every excited mode resolved: order 2 in dt)."""
+    from conftest import beam_case
+
+    drive = {"type": "kinematic", "law": "spinup", "final_speed": final_speed, "spinup_time": 0.4}
+    return beam_case(n_el=2, drive=drive, t_end=t_end, dt=dt, second_moment=2e-10,
+                     outputs={"tip_v": {"kind": "displacement", "at": "beam.end", "component": "transverse"}})
+
+
+def test_error_estimate_warns_past_the_threshold_with_the_step_that_meets_it():
+    from flexmech_py.guards import ERROR_WARN
+
+    res = fm.simulate(_spun_cantilever(0.016), model="classic")
+    est = res.extra["error_estimate"]
+    assert est["worst_relative"] > 1.5 * ERROR_WARN            # measured 9.2 %
+    w = est["warning"]
+    assert abs(w["observed_order"] - 2) < 0.3 and w["suggested_dt"] < res.dt
+    assert [x for x in res.extra["warnings"] if x.startswith("error estimate:")] == [w["message"]]
+    assert f"--dt {w['suggested_dt']:.2g}" in w["message"] and "above the 5 % threshold" in w["message"]
+    # the promised step meets the threshold, and not by a wide margin (the dt^2 extrapolation is sharp)
+    again = fm.simulate(_spun_cantilever(w["suggested_dt"]), model="classic").extra["error_estimate"]
+    assert 0.6 * ERROR_WARN < again["worst_relative"] <= ERROR_WARN and "warning" not in again
+    assert not any(x.startswith("error estimate:") for x in fm.simulate(_spun_cantilever(0.008), model="classic")
+                   .extra["warnings"])
+
+
+def test_error_estimate_outside_the_asymptotic_range_promises_no_step():
+    # 2 s at 3 rad/s: the free vibration left by the spin-up accumulates a phase error; at dt = 0.016 s the
+    # differences between dt, 2 dt and 4 dt grow only linearly (observed order about 1), so no step is promised
+    res = fm.simulate(_spun_cantilever(0.016, final_speed=3.0, t_end=2.0), model="classic")
+    w = res.extra["error_estimate"]["warning"]
+    assert w["suggested_dt"] is None and abs(w["observed_order"] - 2) > 0.3
+    assert "not in the asymptotic range" in w["message"] and "no step can be promised" in w["message"]
