@@ -13,9 +13,10 @@ The compiled kernels are in :mod:`flexmech_py.kernels`.
 
 __version__ = "0.1.0"
 
-from .case import MODELS, SUPERPOSITION_MODELS, apply_overrides, load_case, validate_case  # noqa: E402
+from .case import MODELS, SUPERPOSITION_MODELS, Case, apply_overrides, load_case, validate_case  # noqa: E402
 from .errors import CaseError, FlexmechError, MechanismError, SolverError  # noqa: E402
+from .mechanism import Mechanism  # noqa: E402
 from .simulate import simulate  # noqa: E402
 
-__all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "MODELS", "SUPERPOSITION_MODELS", "FlexmechError", "CaseError",
-           "MechanismError", "SolverError", "__version__"]
+__all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "Case", "Mechanism", "MODELS",
+           "SUPERPOSITION_MODELS", "FlexmechError", "CaseError", "MechanismError", "SolverError", "__version__"]

@@ -8,7 +8,7 @@ module flexmech_dense
   use flexmech_kinds, only: dp
   implicit none
   private
-  public :: lu_factor, lu_solve, pivot_ratio
+  public :: lu_factor, lu_solve, pivot_ratio, det_sign
 
 contains
 
@@ -106,5 +106,21 @@ contains
     pivot_ratio = 0.0_dp
     if (hi > 0.0_dp) pivot_ratio = lo/hi
   end function pivot_ratio
+
+  !> Sign of the determinant of the matrix factorized by lu_factor (+1, -1; 0 when singular).
+  pure integer function det_sign(a, n, piv)
+    integer, intent(in) :: n, piv(:)
+    real(dp), intent(in) :: a(:, :)
+    integer :: k
+    det_sign = 1
+    do k = 1, n
+      if (a(k, k) == 0.0_dp) then
+        det_sign = 0
+        return
+      end if
+      if (a(k, k) < 0.0_dp) det_sign = -det_sign
+      if (piv(k) /= k) det_sign = -det_sign
+    end do
+  end function det_sign
 
 end module flexmech_dense

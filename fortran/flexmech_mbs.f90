@@ -22,7 +22,7 @@ module flexmech_mbs
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_SINGULAR, STATUS_NONFINITE, &
                              STATUS_SINGULAR_POSITION, STATUS_ASSEMBLY
-  use flexmech_dense, only: lu_factor, lu_solve, pivot_ratio
+  use flexmech_dense, only: lu_factor, lu_solve, pivot_ratio, det_sign
   use flexmech_drivelaw, only: kinematic_law, force_law, LAW_FORCE
   use flexmech_ode, only: ode_problem
   implicit none
@@ -421,17 +421,19 @@ contains
 
   !> Kinematic positions: Newton on the square system Phi(z, t) = 0 (joints and kinematic drives,
   !> nrow = n) from the guess z; then zd, zdd from the Jacobian and lam from Phi_z^T lam = Q - M zdd.
-  !> rcond: reciprocal condition estimate of the scaled Jacobian (rotation columns times lref, angle
-  !> rows times lref).  STATUS_ASSEMBLY when Newton does not converge, STATUS_SINGULAR_POSITION when
-  !> rcond < rcond_min.
-  subroutine mbs_kinematic_sample(sys, z, t, tol, maxit, rcond_min, zd, zdd, lam, rcond, status)
+  !> rcond: the pivot ratio of the scaled Jacobian (rotation columns times lref, angle rows times
+  !> lref); dsign: the sign of its determinant (a change between neighbouring samples means the motion
+  !> crossed a singular position).  STATUS_ASSEMBLY when Newton does not converge,
+  !> STATUS_SINGULAR_POSITION when rcond < rcond_min.
+  subroutine mbs_kinematic_sample(sys, z, t, tol, maxit, rcond_min, zd, zdd, lam, rcond, dsign, status)
     type(mbs_system), intent(inout) :: sys
     real(dp), intent(inout) :: z(:)
     real(dp), intent(in) :: t, tol, rcond_min
     integer, intent(in) :: maxit
     real(dp), intent(out) :: zd(:), zdd(:), lam(:), rcond
-    integer, intent(out) :: status
+    integer, intent(out) :: dsign, status
     rcond = 0.0_dp
+    dsign = 0
     call mbs_solve_positions(sys, z, t, tol, maxit, status)     ! leaves the constraints evaluated at z
     if (status /= STATUS_OK) return
     call square_factor(sys, rcond, status)
@@ -439,6 +441,7 @@ contains
       status = STATUS_SINGULAR_POSITION
       return
     end if
+    dsign = det_sign(sys%aug, sys%n, sys%ipiv)
     zd = sys%nu
     call square_solve(sys, zd, 'N', status)
     call mbs_constraints(sys, z, zd, t)                          ! gamma with the velocities (same Jacobian)
@@ -469,7 +472,10 @@ contains
       if (residual(sys) <= tol) return
       if (it > maxit .or. .not. ieee_is_finite(sum(abs(sys%phi)))) exit
       call square_factor(sys, rc, status)
-      if (status /= STATUS_OK) exit
+      if (status /= STATUS_OK) then     ! the Jacobian lost rank on the way: a singular position
+        status = STATUS_SINGULAR_POSITION
+        return
+      end if
       dz = -sys%phi
       call square_solve(sys, dz, 'N', status)
       if (status /= STATUS_OK) exit

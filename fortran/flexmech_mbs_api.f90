@@ -95,13 +95,13 @@ contains
     end do
   end subroutine mbs_assemble
 
-  !> Kinematic mode at times ts (see flexmech_motion: kinematic_samples); state (1 + 3n).
+  !> Kinematic mode at times ts (see flexmech_motion: kinematic_samples); state (2 + 3n).
   subroutine mbs_kinematic(ni, nr, n, nrow, nj, nd, ns, ispec, rspec, ts, state, tol, rcond_min, zf, zdf, zddf, &
                            lamf, jqf, dvf, nvalid, status, fail_t, rcond_low)
     integer, intent(in) :: ni, nr, n, nrow, nj, nd, ns
     integer, intent(in) :: ispec(ni)
     real(dp), intent(in) :: rspec(nr), ts(ns), tol, rcond_min
-    real(dp), intent(inout) :: state(1 + 3*n)
+    real(dp), intent(inout) :: state(2 + 3*n)
     real(dp), intent(out) :: zf(n, ns), zdf(n, ns), zddf(n, ns), lamf(nrow, ns), jqf(3, nj, ns), dvf(nd, ns)
     integer, intent(out) :: nvalid, status
     real(dp), intent(out) :: fail_t, rcond_low

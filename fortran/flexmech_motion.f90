@@ -3,7 +3,14 @@
 !>
 !> Kinematic mode (every degree of freedom driven): at each sample the square position equations are
 !> solved by Newton from the previous sample extrapolated to second order; velocities, accelerations
-!> and multipliers follow from the Jacobian.  State: [t_prev, z(n), zd(n), zdd(n)].
+!> and multipliers follow from the Jacobian.  The motion stops at a singular position when the scaled
+!> Jacobian's pivot ratio falls below rcond_min, when its determinant changes sign between two samples
+!> (the motion crossed a singular position), or when Newton's correction of the extrapolated guess is
+!> more than half of the step's own motion and more than 1e-3 (rad, or lref) (a jump to another
+!> assembly branch at a change point; on a resolved motion the correction is a small fraction of the
+!> step: about 1e-7 at the seed cases' steps; the absolute floor spares starts from rest, where the
+!> step itself is tiny).
+!> State: [t_prev, det sign (0: none yet), z(n), zd(n), zdd(n)].
 !> Dynamic mode (free degrees of freedom): the index-1 equations M z'' + Phi_z^T lam = Q, Phi_z z'' = gamma
 !> integrated by flexmech_ode; after every accepted step (z, zd) are projected back onto the position
 !> and velocity constraints (so they hold to the projection tolerance over any run length) and the
@@ -32,7 +39,7 @@ contains
                                fail_t, rcond_low)
     type(mbs_system), intent(inout) :: sys
     real(dp), intent(in) :: ts(:), tol, rcond_min
-    real(dp), intent(inout) :: state(:)      !< (1 + 3n) [t_prev, z, zd, zdd]
+    real(dp), intent(inout) :: state(:)      !< (2 + 3n) [t_prev, det sign, z, zd, zdd]
     real(dp), intent(out) :: zf(:, :), zdf(:, :), zddf(:, :), lamf(:, :), jqf(:, :, :), dvf(:, :)
     integer, intent(out) :: nvalid, status
     real(dp), intent(out) :: fail_t, rcond_low
@@ -43,7 +50,7 @@ contains
     scale(3:n:3) = 1.0_dp     ! angles in rad, positions in units of the mechanism's length
     nvalid = 0; fail_t = 0.0_dp; rcond_low = huge(1.0_dp)
     status = STATUS_OK
-    if (sys%nrow /= n .or. size(state) /= 1 + 3*n) then
+    if (sys%nrow /= n .or. size(state) /= 2 + 3*n) then
       status = STATUS_BAD_INPUT
       return
     end if
@@ -67,21 +74,29 @@ contains
     subroutine advance(tn, stat)
       real(dp), intent(in) :: tn
       integer, intent(out) :: stat
-      real(dp) :: change, tk, t0
-      integer :: m, k
+      real(dp) :: change, tk, t0, guess(n)
+      integer :: m, k, dsign
       t0 = state(1)
       dt = tn - t0
-      change = maxval((abs(state(2 + n:1 + 2*n))*abs(dt) + 0.5_dp*abs(state(2 + 2*n:1 + 3*n))*dt*dt)*scale)
+      change = maxval((abs(state(3 + n:2 + 2*n))*abs(dt) + 0.5_dp*abs(state(3 + 2*n:2 + 3*n))*dt*dt)*scale)
       m = min(100000, 1 + int(change/0.05_dp))
       do k = 1, m
         tk = t0 + dt*real(k, dp)/real(m, dp)
         if (k == m) tk = tn
         h = tk - state(1)
-        z = state(2:1 + n) + h*state(2 + n:1 + 2*n) + (0.5_dp*h*h)*state(2 + 2*n:1 + 3*n)
-        call mbs_kinematic_sample(sys, z, tk, tol, POSITION_MAXIT, rcond_min, zd, zdd, lam, rc, stat)
+        guess = state(3:2 + n) + h*state(3 + n:2 + 2*n) + (0.5_dp*h*h)*state(3 + 2*n:2 + 3*n)
+        z = guess
+        call mbs_kinematic_sample(sys, z, tk, tol, POSITION_MAXIT, rcond_min, zd, zdd, lam, rc, dsign, stat)
         rcond_low = min(rcond_low, rc)
         if (stat /= STATUS_OK) return
-        state = [tk, z, zd, zdd]
+        if (nint(state(2)) /= 0) then
+          if (dsign /= nint(state(2)) .or. (maxval(abs(z - guess)*scale) > 1e-3_dp .and. &
+              maxval(abs(z - guess)*scale) > 0.5_dp*maxval(abs(z - state(3:2 + n))*scale))) then
+            stat = STATUS_SINGULAR_POSITION
+            return
+          end if
+        end if
+        state = [tk, real(dsign, dp), z, zd, zdd]
       end do
     end subroutine advance
 

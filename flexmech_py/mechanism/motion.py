@@ -142,7 +142,7 @@ class MotionSource:
     def _restart(self) -> None:
         st, p = self.setup, self.setup.packed
         if st.mode == "kinematic":
-            self._state = np.concatenate([[0.0], st.z0, np.zeros(2 * p.n)])
+            self._state = np.concatenate([[0.0, 0.0], st.z0, np.zeros(2 * p.n)])
             self._t_from = 0.0
             self._sample(np.array([0.0]))       # velocities and accelerations at t = 0 for the extrapolation
             return

@@ -148,7 +148,7 @@ def _add_link(mech: Mechanism, ln: dict, w: str) -> None:
         length = v.num(ln, "length", w, positive=True, required=True)
         angle = v.num(ln, "angle", w, required=True)
     link = mech.add_link(name, _point_or_xy(ln["start"], f"{w}.start"), end, length=length, angle=angle,
-                         points=fr, **props)
+                         points=fr, where=w, **props)
     if not link.length > 1e-12:
         raise CaseError(f"{w}.end", f"link {name!r} has zero length (start and end coincide); move its end")
     if end is not None and "length" in ln:     # both given (as the resolved input has): they must agree
@@ -181,7 +181,7 @@ def _add_body(mech: Mechanism, b: dict, w: str) -> None:
             raise CaseError(f"{w}.points.{k}", "point names must be identifiers other than 'centre'")
     mech.add_body(name, v.num(b, "mass", w, positive=True, required=True),
                   v.num(b, "inertia", w, nonneg=True, required=True), _point_or_xy(b["centre"], f"{w}.centre"),
-                  {k: _point_or_xy(p, f"{w}.points.{k}") for k, p in pts.items()})
+                  {k: _point_or_xy(p, f"{w}.points.{k}") for k, p in pts.items()}, where=w)
 
 
 def _joints(mech: Mechanism, raw) -> None:

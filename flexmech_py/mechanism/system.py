@@ -56,27 +56,31 @@ class Mechanism:
         self.template: dict | None = None          # how a template built it (provenance only)
 
     # ------------------------------------------------------------------ building
-    def add_link(self, name: str, start, end=None, *, length=None, angle=None, **props) -> Link:
+    def add_link(self, name: str, start, end=None, *, length=None, angle=None, where: str | None = None,
+                 **props) -> Link:
         """A link from ``start`` to ``end`` (positions [m] or point references such as "ground.O2"),
-        or from ``start`` with ``length`` [m] and ``angle`` [rad]; ``props``: the Link fields."""
-        p0 = self._at(start, f"links.{name}.start")
+        or from ``start`` with ``length`` [m] and ``angle`` [rad]; ``props``: the Link fields;
+        ``where``: the field prefix of error messages (default ``links.<name>``)."""
+        where = where or f"links.{name}"
+        p0 = self._at(start, f"{where}.start")
         if end is None:
             if length is None or angle is None:
-                raise CaseError(f"links.{name}", "give 'end', or 'length' and 'angle'")
+                raise CaseError(where, "give 'end', or 'length' and 'angle'")
             p1 = p0 + length * np.array([math.cos(angle), math.sin(angle)])
         else:
-            p1 = self._at(end, f"links.{name}.end")
+            p1 = self._at(end, f"{where}.end")
         link = Link(name=name, start=tuple(map(float, p0)), end=tuple(map(float, p1)),
                     nominal_length=None if length is None else float(length), **props)
         self._new_body(link)
         self.links.append(link)
         return link
 
-    def add_body(self, name: str, mass: float, inertia: float, centre, points=None) -> RigidBody:
+    def add_body(self, name: str, mass: float, inertia: float, centre, points=None, where: str | None = None) -> RigidBody:
         """A rigid body with ``mass`` [kg], ``inertia`` about its centre of mass [kg m^2], its
         ``centre`` and named ``points`` (positions [m] or point references)."""
-        c = self._at(centre, f"bodies.{name}.centre")
-        pts = {k: tuple(map(float, self._at(v, f"bodies.{name}.points.{k}"))) for k, v in (points or {}).items()}
+        where = where or f"bodies.{name}"
+        c = self._at(centre, f"{where}.centre")
+        pts = {k: tuple(map(float, self._at(v, f"{where}.points.{k}"))) for k, v in (points or {}).items()}
         body = RigidBody(name=name, mass=float(mass), inertia=float(inertia), centre=tuple(map(float, c)), points=pts)
         self._new_body(body)
         self.rigid_bodies.append(body)
