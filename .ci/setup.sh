@@ -36,7 +36,9 @@ fi
 PY=.venv/bin/python
 $PY -m pip install -q --upgrade pip >/dev/null
 say "installing build tools and dependencies"
+# distributed: the optional Dask executor (pip install 'flexmech[cluster]'), needed by tests/test_cluster.py
 $PY -m pip install -q "meson-python>=0.15" "meson>=1.1" ninja "numpy>=1.23" "scipy>=1.9" "matplotlib>=3.5" "pytest>=7" \
+  "distributed>=2024.1" \
   || die "pip could not install the Python dependencies: check access to the package index"
 say "building and installing flexmech (Fortran kernels, f2py)"
 $PY -m pip install -q --no-build-isolation . >/tmp/flexmech-build.log 2>&1 \

@@ -272,8 +272,9 @@ STABILITY_COLUMNS = ["speed", "max_abs_mu", "growth_rate", "stable", "resonance_
 
 
 def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: str | None = None, nmodes: int = 4,
-                    jobs: int | None = None, cache_dir=None, progress: bool = True):
-    """Floquet analysis at every crank speed, in parallel (:func:`~flexmech_py.parallel.run_tasks`).
+                    jobs: int | None = None, cache_dir=None, progress: bool = True, scheduler=None):
+    """Floquet analysis at every crank speed, in parallel (:func:`~flexmech_py.parallel.run_tasks`:
+    the local pool of ``jobs`` processes, or the Dask ``scheduler``).
     Returns (rows, batch): one dict per speed (an ``error`` entry for a failed one)."""
     from .parallel import run_tasks
 
@@ -286,7 +287,8 @@ def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: 
     c = copy.deepcopy(case)
     c["case"].pop("path", None)   # the cache key depends on the case's content, not on where it was read
     tasks = [{"case": c, "model": model, "geometric": geometric, "speed": s, "nmodes": nmodes} for s in speeds]
-    batch = run_tasks(stability_point, tasks, jobs=jobs, cache_dir=cache_dir, progress=progress, label="speeds")
+    batch = run_tasks(stability_point, tasks, jobs=jobs, cache_dir=cache_dir, progress=progress, label="speeds",
+                      scheduler=scheduler)
     rows = []
     for s, r in zip(speeds, batch.results):
         if "error" in r:
@@ -298,6 +300,8 @@ def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: 
         for k, (lo, hi) in enumerate(zip(r["freq_min"], r["freq_max"]), start=1):
             row[f"omega{k}_min"], row[f"omega{k}_max"] = lo, hi
         rows.append(row)
+    for row, worker in zip(rows, batch.task_worker):
+        row["worker"] = worker
     return rows, batch
 
 
@@ -310,7 +314,7 @@ def write_stability_csv(rows: list, path, header: str = "") -> None:
         names += [k for k in r if k not in names and k != "error"]
     names.append("error")
     units = {"speed": "rad/s", "max_abs_mu": "1", "growth_rate": "1/s", "stable": "1", "resonance_margin": "1",
-             "steps_per_period": "1", "wall_s": "s", "error": ""}
+             "steps_per_period": "1", "wall_s": "s", "worker": "", "error": ""}
     lines = [f"# {header}" if header else "# flexmech stability",
              "# units: " + ",".join(units.get(n, "rad/s") for n in names), ",".join(names)]
     for r in rows:
