@@ -10,9 +10,10 @@ The tasks are flexmech's module functions, sent by name: every worker must have 
 flexmech version installed (checked when connecting).  Results travel back to this
 process, which writes the cache and the tables (:func:`flexmech_py.parallel.run_tasks`).
 A worker that dies loses no result: the scheduler runs its tasks again on another worker.
-Each attempt at a task is announced by its worker as an event; the attempts beyond the
-first are the batch's retries.  A task whose workers died ``distributed.scheduler.
-allowed-failures + 1`` times (default 4) becomes a ``WorkerLost`` error result (not cached).
+The scheduler announces every worker that leaves with the tasks it takes back from it (its
+``remove-worker`` event); those of the batch are its retries.  A task whose workers died
+``distributed.scheduler.allowed-failures + 1`` times (default 4) becomes a ``WorkerLost`` error
+result (not cached).
 """
 
 from __future__ import annotations
@@ -32,7 +33,6 @@ __all__ = ["DaskExecutor", "parse_scheduler", "CONNECT_TIMEOUT_S"]
 CONNECT_TIMEOUT_S = 3.0
 #: seconds to wait for a scheduler without workers to get its first one
 WORKER_WAIT_S = 10.0
-_ATTEMPT_TOPIC = "flexmech-attempt"
 _ADDRESS = re.compile(r"^[a-z][a-z0-9+.-]*://\S+:\d+$")
 
 
@@ -60,14 +60,6 @@ def _import_distributed():
         raise FlexmechError("--scheduler needs the optional package 'distributed': pip install 'flexmech[cluster]' "
                             "(or leave out --scheduler to use the local process pool)") from None
     return distributed
-
-
-def _attempt(func, task, token: str, index: int):
-    """One attempt at a task on a Dask worker: announce it (retries are counted from these), run it."""
-    from distributed import get_worker
-
-    get_worker().log_event(_ATTEMPT_TOPIC, {"batch": token, "task": index})
-    return _call(func, task)
 
 
 def _flexmech_version() -> str:
@@ -135,32 +127,35 @@ class DaskExecutor:
         from distributed import as_completed
         from distributed.scheduler import KilledWorker
 
-        token = uuid.uuid4().hex[:12]
-        attempts = Counter()
+        prefix = f"flexmech-{getattr(func, '__name__', 'task')}-{uuid.uuid4().hex[:12]}-"
+        reruns, given_up = Counter(), 0
 
-        def count(event):
-            _, msg = event
-            if isinstance(msg, dict) and msg.get("batch") == token:
-                attempts[msg["task"]] += 1
+        def count(event):   # the scheduler's word on every worker that left: the tasks it takes back
+            msg = event[1]
+            if isinstance(msg, dict) and msg.get("action") == "remove-worker":
+                for key in (*msg.get("processing-tasks", ()), *msg.get("lost-computed-tasks", ())):
+                    if isinstance(key, str) and key.startswith(prefix):
+                        reruns[key] += 1
 
-        self.client.subscribe_topic(_ATTEMPT_TOPIC, count)
-        name = getattr(func, "__name__", "task")
-        futures = {self.client.submit(_attempt, func, task, token, i, key=f"flexmech-{name}-{token}-{i}"): i
-                   for i, task in todo}
-        try:
-            for fut in as_completed(list(futures), loop=self.client.loop):
+        self.client.subscribe_topic("all", count)
+        futures = {self.client.submit(_call, func, task, key=f"{prefix}{i}"): i for i, task in todo}
+        try:   # results are fetched in the background as tasks end (with_results), not one round trip each
+            for fut, res in as_completed(list(futures), loop=self.client.loop, with_results=True, raise_errors=False):
                 i = futures.pop(fut)
-                try:
-                    finish(i, *fut.result())
-                except KilledWorker:
-                    finish(i, worker_lost(attempts[i]), 0.0, "", store=False)
+                if fut.status != "error":
+                    finish(i, *res)
+                elif isinstance(fut.exception(), KilledWorker):
+                    given_up += 1
+                    finish(i, worker_lost(reruns[fut.key]), 0.0, "", store=False)
+                else:
+                    fut.result()   # a bug in the task: raise it here, with its traceback
                 fut.release()
         except BaseException:
             self.client.cancel(list(futures))
             raise
         finally:
-            self.client.unsubscribe_topic(_ATTEMPT_TOPIC)
-        return sum(n - 1 for n in attempts.values() if n > 1), len(self.client.nthreads())
+            self.client.unsubscribe_topic("all")
+        return sum(reruns.values()) - given_up, len(self.client.nthreads())
 
     def _close_cluster(self) -> None:
         if self._cluster is not None:

@@ -17,12 +17,13 @@ import time
 
 import pytest
 
-from flexmech_py import load_case
+from flexmech_py import load_case, validate_case
 from flexmech_py.cli import main
 from flexmech_py.cluster import DaskExecutor
 from flexmech_py.compare import compare_models
 from flexmech_py.sampling import sample_study
-from flexmech_py.sweep import VARYING_COLUMNS, sweep
+from flexmech_py.parallel import run_tasks
+from flexmech_py.sweep import VARYING_COLUMNS, sweep, sweep_point
 
 from conftest import CASES, interrupt_after_first_result
 
@@ -94,6 +95,23 @@ def test_cluster_samples_and_model_comparison_match_the_local_pool(cluster, tmp_
     assert ml["classic"].keys() == md["classic"].keys() and runs["nonlinear"].timing["kernel_s"] > 0
     for c in ml["classic"]:
         assert ml["classic"][c]["max_error"] == md["classic"][c]["max_error"]
+
+
+def test_cluster_task_errors_are_results_and_bugs_stop_the_batch(cluster):
+    lc, _ = cluster
+    bad = run_tasks(validate_case, [{"links": 1}, {"mechanism": 2}], scheduler=lc.scheduler_address, progress=False)
+    assert bad.failed == [0, 1] and all(r["error_type"] == "CaseError" for r in bad.results)
+    with pytest.raises(KeyError):     # not a FlexmechError: a bug, raised in the client with its type
+        run_tasks(sweep_point, [{}], scheduler=lc.scheduler_address, progress=False)
+
+
+def test_a_task_that_kills_its_workers_is_given_up_on_the_cluster(cluster):
+    lc, client = cluster
+    # os._exit(0) ends the worker process that runs it; Dask gives up after allowed-failures (3) + 1 deaths
+    b = run_tasks(os._exit, [0], scheduler=lc.scheduler_address, progress=False)
+    assert b.failed == [0] and b.results[0]["error_type"] == "WorkerLost" and b.retries == 3
+    assert "died 4 times" in b.results[0]["error"]
+    client.wait_for_workers(2, timeout=60)
 
 
 def test_environment_variable_selects_the_cluster_unless_jobs_is_given(cluster, tmp_path, capsys, monkeypatch):

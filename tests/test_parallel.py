@@ -14,7 +14,7 @@ import pytest
 
 from flexmech_py.case import validate_case
 from flexmech_py.cli import main
-from flexmech_py.parallel import default_jobs, run_tasks, task_key
+from flexmech_py.parallel import MAX_WORKER_DEATHS, default_jobs, run_tasks, task_key
 from flexmech_py.sweep import sweep
 
 from conftest import CASES, interrupt_after_first_result
@@ -135,3 +135,11 @@ def test_ctrl_c_keeps_the_finished_results(tmp_path):
     assert rc == 130 and 1 <= kept < 12
     assert main(argv + ["--out", str(tmp_path / "sw")]) == 0      # the rerun computes only the rest
     assert json.loads((tmp_path / "sw" / "sweep.json").read_text())["cached"] == kept
+
+
+def test_a_task_that_kills_its_worker_every_time_is_given_up():
+    # os._exit(0) ends the worker process that runs it: each pool dies, the tasks are retried
+    # MAX_WORKER_DEATHS - 1 times and then become WorkerLost error entries; the batch completes
+    b = run_tasks(os._exit, [0, 0], jobs=2, progress=False)
+    assert b.failed == [0, 1] and all(r["error_type"] == "WorkerLost" for r in b.results)
+    assert b.retries == 2 * (MAX_WORKER_DEATHS - 1) and "died 3 times" in b.results[0]["error"]
