@@ -10,10 +10,10 @@
     flexmech sweep CASE.toml --param KEY.PATH=START:STOP:N [--param ...] [--model M] [--jobs N] [--out DIR]
     flexmech sweep CASE.toml --sample KEY.PATH=normal:MEAN:SD [--sample ...] --samples N [--seed S] [--method lhs]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
+    flexmech bench [--quick] [--out DIR] [--cases DIR]
 
 The multi-run commands (sweep, stability, accuracy, compare --models) run on the local process
 pool (--jobs N) or, with --scheduler tcp://HOST:PORT | local:N (or FLEXMECH_SCHEDULER), on Dask.
-    flexmech bench [--quick] [--out DIR] [--cases DIR]
 
 Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2; a run whose
 solver stopped writes its partial results, prints the diagnosis that way and exits with code 3, as
