@@ -34,12 +34,13 @@ if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv || die "python3 -m venv failed: apt-get install python3-venv, then re-run"
 fi
 PY=.venv/bin/python
-DEPS=("meson-python>=0.15" "meson>=1.1" ninja "numpy>=1.23" "scipy>=1.9" "matplotlib>=3.5" "pytest>=7")
+# distributed: the optional Dask executor (pip install 'flexmech[cluster]'), needed by tests/test_cluster.py
+DEPS=("meson-python>=0.15" "meson>=1.1" ninja "numpy>=1.23" "scipy>=1.9" "matplotlib>=3.5" "pytest>=7" "distributed>=2024.1")
 DEPS_STAMP=.venv/.flexmech-deps          # the dependency list last installed into .venv
 BUILD_STAMP=.venv/.flexmech-build        # hash of the sources the installed package was built from
 LOG=build/flexmech-build.log             # the last build's log (build/ is git-ignored)
 if [ "$(cat "$DEPS_STAMP" 2>/dev/null)" = "${DEPS[*]}" ] \
-   && $PY -c 'import mesonpy, numpy, scipy, matplotlib, pytest' >/dev/null 2>&1; then
+   && $PY -c 'import mesonpy, numpy, scipy, matplotlib, pytest, distributed' >/dev/null 2>&1; then
   say "build tools and dependencies: already installed"
 else
   $PY -m pip install -q --upgrade pip >/dev/null

@@ -293,7 +293,7 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
                    elements=(1, 2, 4, 8), grid: bool = False, ref_dt_factor: int = 4, ref_elements: int | None = None,
                    columns=None, tolerances=(0.1, 0.01, 0.001), repeat: int = 1, jobs: int | None = None,
                    out_dir="accuracy", progress: bool = True, consistency: float = 0.3, plots: bool = True,
-                   clock: str = "cpu") -> Study:
+                   clock: str = "cpu", scheduler=None) -> Study:
     """Run the error-against-time study of one case file and write its files into ``out_dir``.
 
     ``models``: list (default: the case's ``solver.model``); ``integrators``: list for
@@ -392,9 +392,10 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     batch = run_tasks(run_point, [points[k]["task"] for k in keys], jobs=jobs, cache_dir=out_dir / "cache",
-                      progress=progress, label="accuracy runs")
+                      progress=progress, label="accuracy runs", scheduler=scheduler)
     res = dict(zip(keys, batch.results))
     secs = dict(zip(keys, batch.task_s))
+    workers = dict(zip(keys, batch.task_worker))
 
     def ok(k):
         return k in res and isinstance(res[k], dict) and "error" not in res[k]
@@ -455,7 +456,7 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
                "dt": t_end / p["nsteps"], "dt_over_case_dt": t_end / p["nsteps"] / dt_case, "nsteps": p["nsteps"],
                "elements_per_link": p["elements"] if p["elements"] is not None else (case_mesh or "case"),
                "status": "ok" if ok(k) else "failed", "error_message": "" if ok(k) else rr.get("error", ""),
-               "task_s": secs[k]}
+               "task_s": secs[k], "worker": workers[k]}
         if ok(k):
             row.update(nfree=rr["nfree"], kernel_s=rr["kernel_s"], kernel_cpu_s=rr["kernel_cpu_s"], total_s=rr["total_s"],
                        run_cpu_s=rr["run_cpu_s"], rigid_s=rr["rigid_s"], repeats=len(rr["kernel_s_all"]),
@@ -556,7 +557,7 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
                 "columns": columns, "tolerances": tolerances, "repeat": repeat, "consistency": consistency,
                 "clock": clock}
     batch_info = {"runs": len(keys), "computed": batch.computed, "cached": batch.cached, "failed": len(batch.failed),
-                  "jobs": batch.jobs, "wall_s": batch.wall_s}
+                  "jobs": batch.jobs, "wall_s": batch.wall_s, "retries": batch.retries, "executor": batch.executor}
     study = Study(rows=rows, orders=orders, reference=reference, cheapest=cheapest, columns=columns,
                   batch=batch_info, settings=settings)
     study.paths = _write(study, out_dir, plots, points, keys, ladders)
@@ -587,7 +588,7 @@ def _csv_text(rows: list, fields: list) -> str:
 
 ROW_FIELDS = ["model", "integrator", "ladders", "dt", "dt_over_case_dt", "nsteps", "elements_per_link", "nfree",
               "status", "time_s", "kernel_s", "kernel_cpu_s", "total_s", "run_cpu_s", "rigid_s", "repeats", "kernel_s_all",
-              "task_s"]
+              "task_s", "worker"]
 
 
 def _write(study: Study, out_dir: Path, plots: bool, points, keys, ladders) -> list:

@@ -8,17 +8,23 @@
     flexmech stability CASE.toml --speed START:STOP:N [--model M] [--geometric G] [--jobs N] [--out DIR]
     flexmech steady CASE.toml [--model M] [--geometric G] [--out DIR]
     flexmech sweep CASE.toml --param KEY.PATH=START:STOP:N [--param ...] [--model M] [--jobs N] [--out DIR]
+    flexmech sweep CASE.toml --sample KEY.PATH=normal:MEAN:SD [--sample ...] --samples N [--seed S] [--method lhs]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
     flexmech bench [--quick] [--out DIR] [--cases DIR]
 
+The multi-run commands (sweep, stability, accuracy, compare --models) run on the local process
+pool (--jobs N) or, with --scheduler tcp://HOST:PORT | local:N (or FLEXMECH_SCHEDULER), on Dask.
+
 Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2; a run whose
-solver stopped writes its partial results, prints the diagnosis that way and exits with code 3.
+solver stopped writes its partial results, prints the diagnosis that way and exits with code 3, as
+does a sweep or stability chart in which any run failed (the others are kept).
 Validity warnings go to stderr as ``flexmech: warning: ...`` lines.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -100,6 +106,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--columns", nargs="+", help="columns to compare (default: all in common)")
     c.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value (--models)")
     c.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (--models)")
+    c.add_argument("--jobs", type=_positive_int, default=None,
+                   help="worker processes for --models (default: every core)")
+    _add_scheduler(c)
     c.add_argument("--out", default=None, help="output folder (default: RESULT_DIR/compare, or ./compare)")
 
     st = sub.add_parser("stability", help="Floquet stability chart of a constant-speed case over crank speeds")
@@ -115,6 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "grid's median spacing / 16)")
     st.add_argument("--refine-rounds", type=_whole(0), default=None, metavar="K",
                     help="at most K refinement rounds after the grid (default 8; 0: the grid only)")
+    _add_scheduler(st)
     st.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
     st.add_argument("--out", default=None, help="output folder (default: results/<case name>-stability); "
                                                 "finished speeds are cached in OUT/cache")
@@ -129,21 +139,61 @@ def build_parser() -> argparse.ArgumentParser:
     sd.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>-steady)")
     sd.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
 
-    sw = sub.add_parser("sweep", help="run a case over a parameter grid in parallel (resumable) and tabulate it")
+    sw = sub.add_parser("sweep", help="run a case over a parameter grid or Monte-Carlo samples in parallel "
+                                      "(resumable) and tabulate it")
     sw.add_argument("case", help="TOML case file")
-    sw.add_argument("--param", action="append", required=True, metavar="KEY.PATH=START:STOP:N",
+    sw.add_argument("--param", action="append", default=[], metavar="KEY.PATH=START:STOP:N",
                     help="a grid axis: KEY.PATH=START:STOP:N or KEY.PATH=a,b,c (repeat for a cartesian grid)")
+    sw.add_argument("--sample", action="append", default=[], metavar="KEY.PATH=DIST",
+                    help="a sampled value instead of a grid: KEY.PATH=normal:MEAN:SD, uniform:LO:HI or "
+                         "lognormal:MEAN:SD (repeat for several)")
+    sw.add_argument("--samples", type=_positive_int, default=None, metavar="N", help="number of samples (--sample)")
+    sw.add_argument("--seed", type=int, default=0, metavar="S", help="random seed of the samples (default 0)")
+    sw.add_argument("--method", choices=("lhs", "sobol", "random"), default="lhs",
+                    help="sampling: Latin hypercube (default), scrambled Sobol' (N a power of 2) or plain random")
     sw.add_argument("--model", choices=MODELS, help="model (default: the case's solver.model)")
     sw.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value (all points)")
     sw.add_argument("--jobs", type=_positive_int, default=None, help="worker processes (default: every core)")
-    sw.add_argument("--out", default=None, help="output folder (default: results/<case name>-sweep); "
+    _add_scheduler(sw)
+    sw.add_argument("--out", default=None, help="output folder (default: results/<case name>-sweep, or -samples); "
                                                 "finished runs are cached in OUT/cache")
+    sw.add_argument("--no-plots", action="store_true", help="do not write samples.png (--sample)")
     b = sub.add_parser("bench", help="measure kernel, start-up, memory and solver costs (docs/performance.md)")
     b.add_argument("--quick", action="store_true", help="a reduced ladder (1..8 elements per link, fewer steps)")
     b.add_argument("--out", default="bench", help="output folder for the CSV files and bench.png (default: ./bench)")
     b.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
     _add_accuracy_parser(sub)
     return p
+
+
+def _add_scheduler(p) -> None:
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run on Dask: tcp://HOST:PORT of a running scheduler, or local:N for a LocalCluster of N "
+                        "processes (default: $FLEXMECH_SCHEDULER, else the local process pool; needs "
+                        "pip install 'flexmech[cluster]'; see docs/cluster.md)")
+
+
+def _scheduler(args):
+    """--scheduler, else $FLEXMECH_SCHEDULER unless --jobs asks for the local pool, else None (local pool)."""
+    if args.scheduler:
+        return args.scheduler
+    return None if args.jobs is not None else (os.environ.get("FLEXMECH_SCHEDULER") or None)
+
+
+def _batch_line(b, what: str = "runs") -> str:
+    return (f"{len(b.results)} {what} ({b.computed} computed, {b.cached} cached, {len(b.failed)} failed, "
+            f"{b.retries} retried) in {b.wall_s:.1f} s on {b.executor or f'{b.jobs} process(es)'}")
+
+
+def _report_failures(reasons, total: int, what: str = "runs") -> int:
+    """Each distinct failure reason with its count on stderr; the exit code (3 when any run failed)."""
+    if not reasons:
+        return 0
+    print(f"flexmech: error: {sum(n for _, n in reasons)} of {total} {what} failed (the others are kept):",
+          file=sys.stderr)
+    for reason, n in reasons:
+        print(f"  {n} x {reason}", file=sys.stderr)
+    return 3
 
 
 def _warn(messages) -> None:
@@ -163,7 +213,8 @@ def _cmd_stability(args) -> int:
     geometric = args.geometric or case["solver"]["geometric_stiffness"]
     rows, runs = stability_chart(case, speeds, model=model, geometric=geometric, nmodes=args.modes, jobs=args.jobs,
                                  cache_dir=out / "cache", resolution=args.resolution,
-                                 refine_rounds=REFINE_ROUNDS if args.refine_rounds is None else args.refine_rounds)
+                                 refine_rounds=REFINE_ROUNDS if args.refine_rounds is None else args.refine_rounds,
+                                 scheduler=_scheduler(args))
     out.mkdir(parents=True, exist_ok=True)
     head = (f"case {case['case']['title']!r}; model {model}; geometric_stiffness {geometric}; "
             f"rayleigh {list(case['solver']['rayleigh'])}; dt <= {case['solver']['dt']:g} s; average acceleration; "
@@ -195,20 +246,18 @@ def _report_chart(rows, runs, regions, paths) -> int:
     refined = (f" + {runs.added} added in {runs.rounds} refinement round(s) to {runs.resolution:.3g} rad/s"
                if runs.rounds else "")
     print(f"{len(rows)} speeds ({len(rows) - runs.added} on the grid{refined}; {runs.computed} computed, "
-          f"{runs.cached} cached) in {runs.wall_s:.1f} s on {runs.jobs} process(es)"
-          + (f"; {len(bad)} failed" if bad else ""))
+          f"{runs.cached} cached, {runs.retries} retried) in {runs.wall_s:.1f} s on "
+          f"{runs.executor or f'{runs.jobs} process(es)'}" + (f"; {len(bad)} failed" if bad else ""))
     print(f"unstable (growth rate ln max|mu| / T > {STABLE_RATE:g} 1/s): "
           + (f"{len(regions)} region(s)" if regions else "no speed"))
     for reg in regions:
         print("  " + describe_region(reg, digits))
-    for r in bad:
-        print(f"  speed {r['speed']:g} rad/s failed: {r['error']}")
     print("wrote " + ", ".join(str(p) for p in paths))
-    if bad:
-        print(f"flexmech: error: {len(bad)} of {len(rows)} speeds failed (listed above); the chart is incomplete",
-              file=sys.stderr)
-        return 3
-    return 0
+    speeds = {}   # error message -> the speeds that failed with it
+    for r in bad:
+        speeds.setdefault(r["error"], []).append(f"{r['speed']:g}")
+    reasons = sorted(((f"{e} (speeds {', '.join(v)} rad/s)", len(v)) for e, v in speeds.items()), key=lambda x: -x[1])
+    return _report_failures(reasons, len(rows), "speeds (the chart is incomplete)")
 
 
 def _cmd_steady(args) -> int:
@@ -236,15 +285,44 @@ def _cmd_steady(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
+    if bool(args.param) == bool(args.sample):
+        raise FlexmechError("sweep: give the grid axes (--param KEY.PATH=START:STOP:N ...) or the sampled values "
+                            "(--sample KEY.PATH=normal:MEAN:SD ... --samples N), one of the two")
+    if args.sample:
+        return _cmd_sample(args)
+    if args.samples is not None:
+        raise FlexmechError("--samples: goes with --sample KEY.PATH=DIST, not with a --param grid")
     from .sweep import sweep
 
     out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-sweep"
-    sw = sweep(args.case, args.param, model=args.model, overrides=args.set, jobs=args.jobs, out_dir=out)
-    b = sw["batch"]
-    print(f"{len(b.results)} runs ({b.computed} computed, {b.cached} cached, {len(b.failed)} failed) in "
-          f"{b.wall_s:.1f} s on {b.jobs} process(es)")
+    sw = sweep(args.case, args.param, model=args.model, overrides=args.set, jobs=args.jobs, out_dir=out,
+               scheduler=_scheduler(args))
+    print(_batch_line(sw["batch"]))
     print("wrote " + ", ".join(str(p) for p in sw["paths"]))
-    return 0
+    return _report_failures(sw["failures"], len(sw["rows"]))
+
+
+def _cmd_sample(args) -> int:
+    from .sampling import sample_study
+
+    if args.samples is None:
+        raise FlexmechError("--samples: give the number of samples N with --sample, e.g. --samples 64")
+    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-samples"
+    st = sample_study(args.case, args.sample, n=args.samples, seed=args.seed, method=args.method, model=args.model,
+                      overrides=args.set, jobs=args.jobs, out_dir=out, scheduler=_scheduler(args),
+                      plots=not args.no_plots)
+    _warn(st["warnings"])
+    print(_batch_line(st["batch"]))
+    rank = {}
+    for c in st["correlations"]:
+        rank.setdefault(c["output"], []).append(c)
+    for s in st["statistics"]:
+        if s["column"] in st["key_outputs"] and s["n"]:
+            top = ", ".join(f"{c['input']} {c['spearman']:+.2f}" for c in rank.get(s["column"], [])[:3])
+            print(f"{s['column']}: mean {s['mean']:.4g}, sd {s['sd']:.3g}, 5-95 % [{s['p5']:.4g}, {s['p95']:.4g}]; "
+                  f"rank correlation {top}")
+    print("wrote " + ", ".join(str(p) for p in st["paths"]))
+    return _report_failures(st["failures"], len(st["rows"]))
 
 
 def _csv_list(kind):
@@ -283,6 +361,7 @@ def _add_accuracy_parser(sub) -> None:
                    help="time each run R times and keep the minimum kernel time (default 1)")
     a.add_argument("--jobs", type=_positive_int, default=None, metavar="J",
                    help="worker processes (default: every core; 1 for the least disturbed timings)")
+    _add_scheduler(a)
     a.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
                    help="cost of a run: CPU time (default; robust on a shared machine) or wall time of the kernel")
     a.add_argument("--consistency", type=float, default=0.3,
@@ -304,9 +383,11 @@ def _cmd_accuracy(args) -> int:
                         dt_levels=args.dt_levels, elements=args.elements, grid=args.grid, ref_dt_factor=args.ref_dt_factor,
                         ref_elements=args.ref_elements, columns=args.columns, tolerances=args.tolerances,
                         repeat=args.repeat, jobs=args.jobs, out_dir=out, progress=not args.quiet,
+                        scheduler=_scheduler(args),
                         consistency=args.consistency, plots=not args.no_plots, clock=args.clock)
     b = st.batch
-    print(f"{b['runs']} runs ({b['computed']} computed, {b['cached']} cached, {b['failed']} failed) in {b['wall_s']:.1f} s")
+    print(f"{b['runs']} runs ({b['computed']} computed, {b['cached']} cached, {b['failed']} failed, "
+          f"{b['retries']} retried) in {b['wall_s']:.1f} s on {b['executor']}")
     for m, ref in st.reference.items():
         for c, e in ref["columns"].items():
             if "time" in e:
@@ -351,7 +432,7 @@ def _cmd_compare(args) -> int:
         if bad:
             raise FlexmechError(f"--model-list: unknown model(s) {', '.join(bad)}; choose from {', '.join(MODELS_ALL)}")
         out, runs, paths = compare_models(case, models, args.reference_model, x=args.x, columns=args.columns,
-                                          out_dir=args.out or "compare")
+                                          out_dir=args.out or "compare", jobs=args.jobs, scheduler=_scheduler(args))
         for m, metrics in out.items():
             print(f"{m} against {args.reference_model} (kernel {runs[m].timing['kernel_s']:.3f} s):")
             print(table(metrics))

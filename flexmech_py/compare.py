@@ -9,18 +9,19 @@ files written by flexmech have this format, so any run can serve as a reference.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .errors import CaseError
+from .errors import CaseError, FlexmechError, MechanismError, SolverError
 from .plots import line_figure
 from .results import _atomic_write
 
-__all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models"]
+__all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models", "model_run", "ModelRun"]
 
 #: the units flexmech writes (outputs.output_unit, simulate.py), and the angle units converted to them
-KNOWN_UNITS = ("s", "m", "rad", "rad/s", "rad/s^2", "1", "1/m", "N", "N m", "J")
+KNOWN_UNITS = ("s", "m", "m/s", "m/s^2", "rad", "rad/s", "rad/s^2", "1", "1/m", "N", "N m", "J")
 CONVERTED_UNITS = {"deg": ("rad", np.pi / 180.0), "deg/s": ("rad/s", np.pi / 180.0),
                    "deg/s^2": ("rad/s^2", np.pi / 180.0)}
 
@@ -60,6 +61,7 @@ def _row(path: Path, lineno: int, line: str, header: list) -> list[float]:
                                            "number; remove the row or fill in the value")
         out.append(v)
     return out
+_ERRORS = {"MechanismError": MechanismError, "SolverError": SolverError}
 
 
 def read_reference(path) -> tuple[dict, dict, str]:
@@ -211,12 +213,40 @@ def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None)
     return metrics, paths
 
 
-def compare_models(case: dict, models, reference_model="nonlinear", x="t", columns=None, out_dir="compare"):
-    """Run several models of one case (one shared rigid motion) and compare each with reference_model."""
-    from .simulate import simulate_models
+@dataclass
+class ModelRun:
+    """What :func:`compare_models` keeps of one model's run: frame times, output columns, timings."""
+
+    model: str
+    t: np.ndarray
+    columns: dict
+    timing: dict
+
+
+def model_run(task: dict) -> dict:
+    """Worker of ``compare --models`` (a :func:`~flexmech_py.parallel.run_tasks` task): one model of one
+    case.  ``task``: {"case": validated case, "model": M}; returns the frame times, columns and timings."""
+    from .simulate import simulate
+
+    res = simulate(task["case"], model=task["model"])
+    return {"model": res.model, "t": res.t, "columns": res.columns, "timing": res.timing}
+
+
+def compare_models(case: dict, models, reference_model="nonlinear", x="t", columns=None, out_dir="compare", *,
+                   jobs: int | None = None, scheduler=None, progress: bool = False):
+    """Run several models of one case (each a task of :func:`~flexmech_py.parallel.run_tasks`: the local
+    pool of ``jobs`` processes or the Dask ``scheduler``) and compare each with reference_model.
+    Returns ({model: metrics}, {model: :class:`ModelRun`}, paths)."""
+    from .parallel import run_tasks
 
     models = list(dict.fromkeys(list(models) + [reference_model]))
-    runs = simulate_models(case, models)
+    batch = run_tasks(model_run, [{"case": case, "model": m} for m in models], jobs=jobs, scheduler=scheduler,
+                      progress=progress, label="models")
+    for m, r in zip(models, batch.results):
+        if "error" in r:
+            raise _ERRORS.get(r["error_type"], FlexmechError)(f"model {m}: {r['error']}")
+    runs = {m: ModelRun(m, np.asarray(r["t"]), {c: np.asarray(y) for c, y in r["columns"].items()}, r["timing"])
+            for m, r in zip(models, batch.results)}
     ref = runs[reference_model]
     ref_cols = {"t": ref.t, **ref.columns}
     out, paths = {}, []

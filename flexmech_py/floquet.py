@@ -285,13 +285,16 @@ REFINE_ROUNDS = 8
 
 @dataclass
 class ChartRuns:
-    """What a chart cost: speeds computed and taken from the cache, wall time, worker processes, and the
-    refinement (``rounds`` run after the user's grid, ``added`` speeds, ``resolution`` [rad/s])."""
+    """What a chart cost: speeds computed and taken from the cache, wall time, worker processes (or the
+    Dask ``executor``), tasks re-run after a lost worker, and the refinement (``rounds`` run after the
+    user's grid, ``added`` speeds, ``resolution`` [rad/s])."""
 
     computed: int = 0
     cached: int = 0
     wall_s: float = 0.0
     jobs: int = 1
+    retries: int = 0
+    executor: str = ""
     rounds: int = 0
     added: int = 0
     resolution: float | None = None
@@ -312,13 +315,14 @@ def _chart_row(speed: float, r: dict, round_: int) -> dict:
 
 def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: str | None = None, nmodes: int = 4,
                     jobs: int | None = None, cache_dir=None, progress: bool = True, resolution: float | None = None,
-                    refine_rounds: int = REFINE_ROUNDS):
-    """Floquet analysis at every crank speed, in parallel (:func:`~flexmech_py.parallel.run_tasks`), then
-    up to ``refine_rounds`` further rounds on the speeds :func:`~flexmech_py.regions.refinement_speeds`
-    picks (region edges, extrema of |mu| that may hide a pocket) until no interval wider than
-    ``resolution`` [rad/s] (default: :func:`~flexmech_py.regions.default_resolution`) is left to split.
-    Returns (rows, runs): one dict per speed, sorted by speed (an ``error`` entry for a failed one;
-    ``round`` 0 for the user's speeds), and a :class:`ChartRuns`."""
+                    refine_rounds: int = REFINE_ROUNDS, scheduler=None):
+    """Floquet analysis at every crank speed, in parallel (:func:`~flexmech_py.parallel.run_tasks`: the
+    local pool of ``jobs`` processes, or the Dask ``scheduler``), then up to ``refine_rounds`` further
+    rounds on the speeds :func:`~flexmech_py.regions.refinement_speeds` picks (region edges, extrema of
+    |mu| that may hide a pocket) until no interval wider than ``resolution`` [rad/s] (default:
+    :func:`~flexmech_py.regions.default_resolution`) is left to split.  Returns (rows, runs): one dict
+    per speed, sorted by speed (an ``error`` entry for a failed one; ``round`` 0 for the user's speeds;
+    ``worker`` where it ran), and a :class:`ChartRuns`."""
     from .parallel import run_tasks
 
     model = case["solver"]["model"] if model is None else model
@@ -337,10 +341,11 @@ def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: 
     while todo:
         tasks = [{"case": c, "model": model, "geometric": geometric, "speed": s, "nmodes": nmodes} for s in todo]
         batch = run_tasks(stability_point, tasks, jobs=jobs, cache_dir=cache_dir, progress=progress,
-                          label="speeds" if round_ == 0 else f"refinement {round_}")
-        rows += [_chart_row(s, r, round_) for s, r in zip(todo, batch.results)]
+                          label="speeds" if round_ == 0 else f"refinement {round_}", scheduler=scheduler)
+        rows += [dict(_chart_row(s, r, round_), worker=w) for s, r, w in zip(todo, batch.results, batch.task_worker)]
         runs.computed, runs.cached = runs.computed + batch.computed, runs.cached + batch.cached
         runs.wall_s, runs.jobs = runs.wall_s + batch.wall_s, max(runs.jobs, batch.jobs)
+        runs.retries, runs.executor = runs.retries + batch.retries, batch.executor
         if round_ >= refine_rounds or resolution is None:
             break
         done = {r["speed"] for r in rows}
@@ -361,7 +366,7 @@ def write_stability_csv(rows: list, path, header: str = "") -> None:
     names.append("error")
     units = {"speed": "rad/s", "max_abs_mu": "1", "growth_rate": "1/s", "stable": "1", "mu_re": "1", "mu_im": "1",
              "multiplier": "", "round": "1", "resonance_margin": "1", "steps_per_period": "1", "wall_s": "s",
-             "error": ""}
+             "worker": "", "error": ""}
     lines = [f"# {header}" if header else "# flexmech stability",
              "# units: " + ",".join(units.get(n, "rad/s") for n in names), ",".join(names)]
     for r in rows:

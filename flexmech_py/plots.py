@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_result", "line_figure", "have_matplotlib", "plot_stability", "work_precision_figure"]
+__all__ = ["plot_result", "line_figure", "have_matplotlib", "plot_stability", "work_precision_figure", "plot_samples"]
 
 _warned = False
 
@@ -260,4 +260,51 @@ def work_precision_figure(path, panels, *, title=None):
     fig.tight_layout(rect=(0, 0, (7.2 * ncol) / width, 0.97))
     fig.savefig(path, dpi=100)
     plt.close(fig)
+    return Path(path)
+
+
+def plot_samples(path, inputs: dict, outputs: dict, corr: list, *, title: str = "", max_inputs: int = 4):
+    """Monte-Carlo figure: a row per key output -- its histogram, then its scatter against each input
+    (the ``max_inputs`` inputs with the largest |Spearman| first), the rank correlation in each panel.
+    ``inputs``/``outputs``: {name: values over the successful samples}; ``corr``: rows of
+    :func:`flexmech_py.sampling.correlations`.  Returns the path, or None without matplotlib."""
+    if not have_matplotlib() or not outputs:
+        return None
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    rho = {(c["output"], c["input"]): c["spearman"] for c in corr}
+    strength = {i: max((abs(rho.get((o, i), 0.0)) if rho.get((o, i)) == rho.get((o, i)) else 0.0) for o in outputs)
+                for i in inputs}
+    shown = sorted(inputs, key=lambda i: -strength[i])[:max_inputs]
+    nrow, ncol = len(outputs), 1 + len(shown)
+    fig = Figure(figsize=(2.7 * ncol + 0.6, 2.3 * nrow + 0.8))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrow, ncol, squeeze=False)
+    for r, (oname, y) in enumerate(outputs.items()):
+        ax = axes[r, 0]
+        ax.hist(y, bins=max(5, min(40, int(np.sqrt(y.size)) + 1)), color="0.55", edgecolor="white")
+        ax.axvline(np.mean(y), color="C3", lw=1.0)
+        ax.set_ylabel(oname, fontsize=8)
+        ax.set_title(f"mean {np.mean(y):.4g}, sd {np.std(y, ddof=1) if y.size > 1 else 0:.2g}", fontsize=7)
+        for c, iname in enumerate(shown, start=1):
+            ax = axes[r, c]
+            ax.plot(inputs[iname], y, ".", ms=3, color="C0", alpha=0.7)
+            ax.set_title(f"Spearman {rho.get((oname, iname), float('nan')):+.2f}", fontsize=7)
+            if r == nrow - 1:
+                ax.set_xlabel(iname, fontsize=8)
+        if r == nrow - 1:
+            axes[r, 0].set_xlabel("value (histogram)", fontsize=8)
+    from matplotlib.ticker import MaxNLocator
+
+    for ax in axes.flat:
+        ax.xaxis.set_major_locator(MaxNLocator(4))
+        ax.tick_params(labelsize=7)
+        ax.grid(True, alpha=0.25)
+        ax.xaxis.get_offset_text().set_fontsize(7)
+        ax.yaxis.get_offset_text().set_fontsize(7)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
     return Path(path)

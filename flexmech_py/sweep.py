@@ -2,9 +2,12 @@
 
 Each grid point is the case with ``--set``-style overrides (``KEY.PATH=VALUE``), run by
 :func:`~flexmech_py.parallel.run_tasks` (progress bar, one cached JSON per finished run, errors
-as results).  The output is one summary table, ``sweep.csv`` (a row per point in grid order:
-the parameters, every output column's max |.|, rms and final value, the validity measures,
-the kernel time, the status), and ``sweep.json`` with the grid definition.
+as results; the local process pool or a Dask cluster).  The output is one summary table,
+``sweep.csv`` (a row per point in grid order: the parameters, every output column's max |.|,
+rms and final value, the validity measures, the kernel time, the run's time and worker, the
+status), and ``sweep.json`` with the grid definition.  The first point is validated before
+the batch starts: a bad key or value is one error, not a table of failed runs.  The same
+machinery runs the Monte-Carlo samples of :mod:`flexmech_py.sampling`.
 """
 
 from __future__ import annotations
@@ -13,18 +16,22 @@ import copy
 import json
 import math
 import time
+from collections import Counter
 from itertools import product
 from pathlib import Path
 
 import numpy as np
 
 from .case import _parse_value, apply_overrides, read_case_file, validate_case
-from .errors import CaseError
+from .errors import CaseError, FlexmechError
 
-__all__ = ["parse_param", "grid_points", "sweep", "sweep_point", "TIMING_COLUMNS"]
+__all__ = ["parse_param", "grid_points", "sweep", "sweep_point", "point_overrides", "load_base", "check_first_point",
+           "run_points", "write_table", "failure_reasons", "TIMING_COLUMNS", "VARYING_COLUMNS"]
 
-#: columns that hold measured times (they differ between reruns; everything else is reproducible)
-TIMING_COLUMNS = ("kernel_s", "run_s")
+#: columns that hold measured times (they differ between reruns)
+TIMING_COLUMNS = ("kernel_s", "run_s", "task_s")
+#: every column that may differ between reruns or executors: the times and the worker that ran the point
+VARYING_COLUMNS = TIMING_COLUMNS + ("worker",)
 
 
 def parse_param(text: str) -> tuple[str, list, str]:
@@ -78,6 +85,11 @@ def _override(key: str, value) -> str:
     return f"{key}={json.dumps(value)}"
 
 
+def point_overrides(point: dict) -> list[str]:
+    """The ``KEY.PATH=VALUE`` overrides of one point {key: value}."""
+    return [_override(k, v) for k, v in point.items()]
+
+
 def sweep_point(task: dict) -> dict:
     """Worker of ``flexmech sweep``: one grid point.  ``task``: {"raw": the case file's TOML
     table, "source": its name, "overrides": [KEY.PATH=VALUE ...], "model": M or None}."""
@@ -101,52 +113,93 @@ def sweep_point(task: dict) -> dict:
     return out
 
 
-def sweep(case_path, params: list[str], *, model: str | None = None, overrides=(), jobs: int | None = None,
-          out_dir=None, progress: bool = True) -> dict:
-    """Run the case at every grid point of ``params`` (``KEY.PATH=START:STOP:N`` or ``KEY.PATH=a,b,c``
-    strings) and write ``sweep.csv`` and ``sweep.json`` into ``out_dir`` (finished runs cached in
-    ``out_dir/cache``).  Returns {"rows", "batch", "paths", "grid"}."""
-    from .parallel import run_tasks
-    from .results import _atomic_write, _json_default, versions
-
+def load_base(case_path, overrides=()) -> tuple[Path, dict]:
+    """(path, raw case with ``overrides``) of a case file; a broken base case fails here, once."""
     path = Path(case_path)
     base = apply_overrides(read_case_file(path), list(overrides))
-    validate_case(copy.deepcopy(base), source=str(path))      # a broken base case fails once, here
-    axes = [parse_param(p) for p in params]
-    points = grid_points(axes)
-    tasks = [{"raw": base, "source": path.name, "model": model,
-              "overrides": [_override(k, v) for k, v in pt.items()]} for pt in points]
-    out = Path(out_dir) if out_dir is not None else Path("results") / f"{path.stem}-sweep"
-    out.mkdir(parents=True, exist_ok=True)
-    batch = run_tasks(sweep_point, tasks, jobs=jobs, cache_dir=out / "cache", progress=progress, label="runs")
+    validate_case(copy.deepcopy(base), source=str(path))
+    return path, base
+
+
+def check_first_point(base: dict, source: str, points: list[dict], what: str = "grid point") -> None:
+    """Validate the case at the first point before any run: a mistyped key or a wrong value is one
+    CaseError naming it, not a batch of failed runs."""
+    ovs = point_overrides(points[0])
+    try:
+        validate_case(apply_overrides(base, ovs), source=source)
+    except FlexmechError as exc:
+        raise CaseError(f"the first {what} ({' '.join(ovs)})", str(exc)) from None
+
+
+def run_points(path: Path, base: dict, points: list[dict], *, model, out: Path, executor, progress: bool = True):
+    """Run the case at every point {key: value} on ``executor`` (cache in ``out/cache``).
+    Returns (rows, batch): one row per point, the point's values first."""
+    from .parallel import run_tasks
+
+    tasks = [{"raw": base, "source": path.name, "model": model, "overrides": point_overrides(pt)} for pt in points]
+    batch = run_tasks(sweep_point, tasks, cache_dir=out / "cache", progress=progress, label="runs", scheduler=executor)
     rows = []
-    for pt, r in zip(points, batch.results):
+    for pt, r, sec, worker in zip(points, batch.results, batch.task_s, batch.task_worker):
         row = dict(pt)
         if "error" in r:
             row.update(status="error", error=f"{r.get('error_type', 'error')}: {r['error']}")
         else:
             row.update(r)
             row["error"] = ""
+        row.update(task_s=sec, worker=worker)
         rows.append(row)
-    keys = [k for k, _, _ in axes]
-    names = keys + ["status", "model", "steps", "dt", "kernel_s", "run_s"]
+    return rows, batch
+
+
+def write_table(path: Path, rows: list[dict], keys: list[str], header: str) -> list[str]:
+    """Write the rows as CSV (the point's ``keys`` first, ``error`` last); returns the column names."""
+    from .results import _atomic_write
+
+    names = list(keys) + ["status", "model", "steps", "dt", "kernel_s", "run_s", "task_s", "worker"]
     for r in rows:
         names += [k for k in r if k not in names and k != "error"]
     names.append("error")
-    lines = [f"# flexmech {versions()['flexmech']} sweep of {path.name}: " + "; ".join(f"{k} = {s}" for k, _, s in axes),
-             ",".join(names)]
-    for r in rows:
-        lines.append(",".join(_cell(r.get(n, "")) for n in names))
+    lines = [f"# {header}", ",".join(names)] + [",".join(_cell(r.get(n, "")) for n in names) for r in rows]
+    _atomic_write(path, "\n".join(lines) + "\n")
+    return names
+
+
+def failure_reasons(rows: list[dict]) -> list[tuple[str, int]]:
+    """Each distinct error message of the failed rows with its count, the most frequent first."""
+    return Counter(r["error"] for r in rows if r.get("status") == "error").most_common()
+
+
+def sweep(case_path, params: list[str], *, model: str | None = None, overrides=(), jobs: int | None = None,
+          out_dir=None, progress: bool = True, scheduler=None) -> dict:
+    """Run the case at every grid point of ``params`` (``KEY.PATH=START:STOP:N`` or ``KEY.PATH=a,b,c``
+    strings) and write ``sweep.csv`` and ``sweep.json`` into ``out_dir`` (finished runs cached in
+    ``out_dir/cache``).  ``scheduler``: None (local pool of ``jobs`` processes), a Dask scheduler
+    address or ``local:N`` (:func:`~flexmech_py.parallel.open_executor`).
+    Returns {"rows", "batch", "paths", "grid", "failures"}."""
+    from .parallel import using_executor
+    from .results import _atomic_write, _json_default, versions
+
+    path, base = load_base(case_path, overrides)
+    axes = [parse_param(p) for p in params]
+    points = grid_points(axes)
+    check_first_point(base, path.name, points)
+    out = Path(out_dir) if out_dir is not None else Path("results") / f"{path.stem}-sweep"
+    with using_executor(scheduler, jobs) as executor:    # connect before anything is written
+        out.mkdir(parents=True, exist_ok=True)
+        rows, batch = run_points(path, base, points, model=model, out=out, executor=executor, progress=progress)
+    keys = [k for k, _, _ in axes]
     csv = out / "sweep.csv"
-    _atomic_write(csv, "\n".join(lines) + "\n")
+    names = write_table(csv, rows, keys, f"flexmech {versions()['flexmech']} sweep of {path.name}: "
+                        + "; ".join(f"{k} = {s}" for k, _, s in axes))
     info = {"case": str(path), "model": model, "overrides": list(overrides),
             "params": [{"key": k, "spec": s, "values": v} for k, v, s in axes],
             "points": len(points), "order": "cartesian, first parameter slowest (rows of sweep.csv)",
-            "columns": names, "jobs": batch.jobs, "computed": batch.computed, "cached": batch.cached,
-            "failed": batch.failed, "wall_s": batch.wall_s, "versions": versions()}
+            "columns": names, "jobs": batch.jobs, "executor": batch.executor, "computed": batch.computed,
+            "cached": batch.cached, "retries": batch.retries, "failed": batch.failed, "wall_s": batch.wall_s,
+            "versions": versions()}
     js = out / "sweep.json"
     _atomic_write(js, json.dumps(info, indent=2, default=_json_default) + "\n")
-    return {"rows": rows, "batch": batch, "paths": [csv, js], "grid": points}
+    return {"rows": rows, "batch": batch, "paths": [csv, js], "grid": points, "failures": failure_reasons(rows)}
 
 
 def _cell(v) -> str:

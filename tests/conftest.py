@@ -54,3 +54,20 @@ def assert_free_pendulum_conserves_energy(model: str, elements: int) -> None:
     e = res["energy_kinetic"] + res["energy_potential"]
     assert np.max(res["energy_kinetic"]) > 0.1        # J: it really swings
     assert np.max(np.abs(e - e[0])) < 1e-6 * np.max(res["energy_kinetic"])
+
+
+def interrupt_after_first_result(argv: list, out: Path, cwd: Path) -> tuple[int, int]:
+    """Run ``flexmech ARGV --out OUT`` in a subprocess, press Ctrl-C (SIGINT) as soon as the first
+    result is in OUT/cache; returns (exit code, results left in the cache)."""
+    import signal
+    import subprocess
+    import time
+
+    p = subprocess.Popen([sys.executable, "-m", "flexmech_py", *argv, "--out", str(out)], cwd=cwd,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not list((out / "cache").glob("*.json")) and time.monotonic() < deadline and p.poll() is None:
+        time.sleep(0.005)
+    p.send_signal(signal.SIGINT)
+    rc = p.wait(timeout=60)
+    return rc, len(list((out / "cache").glob("*.json")))

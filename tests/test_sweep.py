@@ -15,7 +15,7 @@ from flexmech_py import load_case
 from flexmech_py.cli import main
 from flexmech_py.errors import CaseError
 from flexmech_py.simulate import simulate
-from flexmech_py.sweep import TIMING_COLUMNS, grid_points, parse_param, sweep
+from flexmech_py.sweep import VARYING_COLUMNS, grid_points, parse_param, sweep
 
 from conftest import CASES
 
@@ -78,19 +78,40 @@ def test_sweep_table_resume_and_reproducibility(tmp_path):
     sw2 = sweep(SEED, params, overrides=SHORT, jobs=1, out_dir=out, progress=False)
     assert sw2["batch"].computed == 1 and sw2["batch"].cached == 3
     rows2 = _read(out / "sweep.csv")
-    for a, c in zip(rows, rows2):   # identical numbers; only measured times differ
-        assert {k: v for k, v in a.items() if k not in TIMING_COLUMNS} == \
-               {k: v for k, v in c.items() if k not in TIMING_COLUMNS}
+    for a, c in zip(rows, rows2):   # identical numbers; only measured times and the worker differ
+        assert {k: v for k, v in a.items() if k not in VARYING_COLUMNS} == \
+               {k: v for k, v in c.items() if k not in VARYING_COLUMNS}
+    # per-run time and worker (host:pid) of every row, computed or cached
+    assert all(float(r["task_s"]) > 0 and ":" in r["worker"] for r in rows2)
 
 
-def test_sweep_failed_points_are_rows(tmp_path, capsys):
+def test_sweep_failed_points_are_rows_and_exit_3(tmp_path, capsys):
     # 3 elements per link put no node at the coupler's midpoint the outputs ask for: that point fails
     out = tmp_path / "bad"
-    assert main(["sweep", str(SEED), "--param", "mesh.elements_per_link=2,3", "--set", "solver.t_end=0.005",
-                 "--jobs", "1", "--out", str(out)]) == 0
+    assert main(["sweep", str(SEED), "--param", "mesh.elements_per_link=2,3,3", "--set", "solver.t_end=0.005",
+                 "--jobs", "1", "--out", str(out)]) == 3
     rows = _read(out / "sweep.csv")
-    assert [r["status"] for r in rows] == ["ok", "error"]
+    assert [r["status"] for r in rows] == ["ok", "error", "error"]
     assert "not at a mesh node" in rows[1]["error"] and rows[1]["strain_coupler_mid_maxabs"] == ""
-    assert "1 failed" in capsys.readouterr().out
-    # a broken base case is an error before any run
-    assert main(["sweep", str(SEED), "--param", "drive.speed=1,2", "--set", "solver.dt=-1", "--out", str(out)]) == 2
+    io = capsys.readouterr()
+    assert "2 failed" in io.out
+    # each distinct reason once, with its count
+    err = [line for line in io.err.splitlines() if not line.startswith("runs: ")]   # not the progress bar
+    assert err[0] == "flexmech: error: 2 of 3 runs failed (the others are kept):"
+    assert len(err) == 2 and err[1].startswith("  2 x ") and "not at a mesh node" in err[1]
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--param", "drive.sped=100,120"], "the first grid point (drive.sped=100): drive.sped: unknown key"),
+    (["--param", "drive.speed=fast,slow"], "the first grid point (drive.speed=\"fast\")"),
+    (["--param", "drive.speed=1,2", "--set", "solver.dt=-1"], "solver.dt"),     # a broken base case
+    (["--param", "drive.speed=1,2", "--sample", "links.coupler.length=normal:0.28:0.001"], "one of the two"),
+    (["--param", "drive.speed=1,2", "--scheduler", "nowhere"], "--scheduler: 'nowhere' must be"),
+    (["--param", "drive.speed=1,2", "--scheduler", "local:2", "--jobs", "2"], "--jobs"),
+])
+def test_sweep_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, argv, needle):
+    out = tmp_path / "never"
+    assert main(["sweep", str(SEED), *argv, "--set", "solver.t_end=0.005", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("flexmech: error: ") and needle in err, err
+    assert not out.exists()
