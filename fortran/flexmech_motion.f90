@@ -6,10 +6,11 @@
 !> and multipliers follow from the Jacobian.  The motion stops at a singular position when the scaled
 !> Jacobian's pivot ratio falls below rcond_min, when its determinant changes sign between two samples
 !> (the motion crossed a singular position), or when Newton's correction of the extrapolated guess is
-!> more than half of the step's own motion and more than 1e-3 (rad, or lref) (a jump to another
-!> assembly branch at a change point; on a resolved motion the correction is a small fraction of the
-!> step: about 1e-7 at the seed cases' steps; the absolute floor spares starts from rest, where the
-!> step itself is tiny).
+!> more than 1e-3 (rad, or lref) and more than half of the step's own motion while the extrapolation
+!> predicted a motion of its own (a jump to another assembly branch at a change point, where the
+!> velocities extrapolated from the near-singular configuration are wrong; on a resolved motion the
+!> correction is about 1e-7 of the step at the seed cases' steps, and a start from rest, whose
+!> extrapolation predicts no motion, is not mistaken for a jump).
 !> State: [t_prev, det sign (0: none yet), z(n), zd(n), zdd(n)].
 !> Dynamic mode (free degrees of freedom): the index-1 equations M z'' + Phi_z^T lam = Q, Phi_z z'' = gamma
 !> integrated by flexmech_ode; after every accepted step (z, zd) are projected back onto the position
@@ -70,11 +71,12 @@ contains
 
     !> From the state to time tn, in as many substeps as keep the second-order extrapolation of every
     !> coordinate within 0.05 rad (0.05 lref for positions) of the last solution, so Newton follows
-    !> the assembly branch however far apart the samples are.
+    !> the assembly branch however far apart the samples are; a substep that crosses a singular
+    !> position stops the motion (see the module's header).
     subroutine advance(tn, stat)
       real(dp), intent(in) :: tn
       integer, intent(out) :: stat
-      real(dp) :: change, tk, t0, guess(n)
+      real(dp) :: change, tk, t0, guess(n), corr, moved, predicted
       integer :: m, k, dsign
       t0 = state(1)
       dt = tn - t0
@@ -90,8 +92,11 @@ contains
         rcond_low = min(rcond_low, rc)
         if (stat /= STATUS_OK) return
         if (nint(state(2)) /= 0) then
-          if (dsign /= nint(state(2)) .or. (maxval(abs(z - guess)*scale) > 1e-3_dp .and. &
-              maxval(abs(z - guess)*scale) > 0.5_dp*maxval(abs(z - state(3:2 + n))*scale))) then
+          corr = maxval(abs(z - guess)*scale)
+          moved = maxval(abs(z - state(3:2 + n))*scale)
+          predicted = maxval(abs(guess - state(3:2 + n))*scale)
+          if (dsign /= nint(state(2)) .or. &
+              (corr > 1e-3_dp .and. corr > 0.5_dp*moved .and. predicted > 0.1_dp*moved)) then
             stat = STATUS_SINGULAR_POSITION
             return
           end if
