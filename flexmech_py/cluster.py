@@ -25,7 +25,7 @@ import uuid
 from collections import Counter
 
 from .errors import CaseError, FlexmechError
-from .parallel import _call, worker_lost
+from .worker import call_task, default_jobs, worker_lost
 
 __all__ = ["DaskExecutor", "parse_scheduler", "CONNECT_TIMEOUT_S"]
 
@@ -41,7 +41,6 @@ def parse_scheduler(text: str) -> tuple[str, object]:
     ``tcp://HOST:PORT`` (any Dask protocol, e.g. ``tls://``); CaseError otherwise."""
     text = str(text).strip()
     if text == "local" or text.startswith("local:"):
-        from .parallel import default_jobs
 
         n = text.partition(":")[2]
         if n and (not n.isdigit() or int(n) < 1):
@@ -138,7 +137,7 @@ class DaskExecutor:
                         reruns[key] += 1
 
         self.client.subscribe_topic("all", count)
-        futures = {self.client.submit(_call, func, task, key=f"{prefix}{i}"): i for i, task in todo}
+        futures = {self.client.submit(call_task, func, task, key=f"{prefix}{i}"): i for i, task in todo}
         try:   # results are fetched in the background as tasks end (with_results), not one round trip each
             for fut, res in as_completed(list(futures), loop=self.client.loop, with_results=True, raise_errors=False):
                 i = futures.pop(fut)

@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from .guards import THRESHOLDS, deflection_over_length
 from .simulate import Prepared
 
 __all__ = ["CONFIGS", "gap_study", "validity_time", "gap_table"]
@@ -19,28 +20,6 @@ __all__ = ["CONFIGS", "gap_study", "validity_time", "gap_table"]
 CONFIGS = [("hac", "none", "seed"), ("classic", "none", "seed"), ("classic-translational", "none", "seed"),
            ("classic", "quasi_static", "seed"), ("classic", "current", "seed"), ("classic", "quasi_static", "torque"),
            ("coupled", "none", "seed")]
-THRESHOLDS = {"compression_over_euler": 1.0, "displacement_over_length": 0.02}   # buckling; "a few per cent"
-
-
-def deflection_over_length(res) -> np.ndarray:
-    """(nlinks, nf) largest distance of a link's nodes from the chord through its end nodes, over its
-    length: the bending deflection, whatever the model (total positions = rigid-body solution + u)."""
-    fe = res.fe
-    km = res.motion
-    out = np.zeros((len(fe.case["links"]), res.t.size))
-    for li, ln in enumerate(fe.case["links"]):
-        L = ln["length"]
-        c, s = np.cos(km.phi[:, li]), np.sin(km.phi[:, li])
-        pos = [np.array([km.ox[:, li] + f * L * c, km.oy[:, li] + f * L * s])
-               + res.u[fe.trans_dof[fe.node_of[li][k]]] for k, f in enumerate(fe.node_frac[li])]
-        chord = pos[-1] - pos[0]
-        ell = np.hypot(chord[0], chord[1])
-        for p in pos[1:-1]:
-            d = p - pos[0]
-            out[li] = np.maximum(out[li], np.abs(chord[0] * d[1] - chord[1] * d[0]) / ell / L)
-    return out
-
-
 def validity_time(res) -> tuple[float, float]:
     """First times [s] at which (a) any link's bending deflection from its chord exceeds 2 % of its
     length and (b) any link's compressive axial force exceeds its Euler load (inf if never).  (b)

@@ -2,7 +2,7 @@
 
 - :func:`check_validity` (every run, cheap): per link the largest bending deflection from the
   chord over the link length, the largest extreme-fibre strain, the largest compressive axial force
-  over the Euler load, and when each first passes its threshold (``gap.THRESHOLDS``: deflection
+  over the Euler load, and when each first passes its threshold (``THRESHOLDS``: deflection
   2 % of L, compression 1 x the Euler load; a link's ``yield_strain`` when the case gives one).
   Writes ``validity`` (per link), ``validity_overall`` and ``warnings`` into ``Result.extra``.
 - :func:`failed` (a run that stopped): names the time, the quantity and the likely cause (step
@@ -52,6 +52,28 @@ def _fmt_t(x) -> str:
 
 
 # ----------------------------------------------------------------------------- validity
+THRESHOLDS = {"compression_over_euler": 1.0, "displacement_over_length": 0.02}   # buckling; "a few per cent"
+
+
+def deflection_over_length(res) -> np.ndarray:
+    """(nlinks, nf) largest distance of a link's nodes from the chord through its end nodes, over its
+    length: the bending deflection, whatever the model (total positions = rigid-body solution + u)."""
+    fe = res.fe
+    km = res.motion
+    out = np.zeros((len(fe.case["links"]), res.t.size))
+    for li, ln in enumerate(fe.case["links"]):
+        L = ln["length"]
+        c, s = np.cos(km.phi[:, li]), np.sin(km.phi[:, li])
+        pos = [np.array([km.ox[:, li] + f * L * c, km.oy[:, li] + f * L * s])
+               + res.u[fe.trans_dof[fe.node_of[li][k]]] for k, f in enumerate(fe.node_frac[li])]
+        chord = pos[-1] - pos[0]
+        ell = np.hypot(chord[0], chord[1])
+        for p in pos[1:-1]:
+            d = p - pos[0]
+            out[li] = np.maximum(out[li], np.abs(chord[0] * d[1] - chord[1] * d[0]) / ell / L)
+    return out
+
+
 def link_strains(res) -> np.ndarray:
     """(nlinks, nf) largest extreme-fibre strain of every link over its mesh nodes:
     c |kappa| + |N| / EA (bending strain of the outer fibre plus the axial strain of the adjacent
@@ -73,8 +95,6 @@ def link_strains(res) -> np.ndarray:
 def check_validity(res) -> dict:
     """Validity measures of a run (or of its partial frames); fills ``res.extra`` and returns
     ``validity_overall``."""
-    from .gap import THRESHOLDS, deflection_over_length   # gap imports simulate: import here
-
     fe, t, links = res.fe, res.t, res.case["links"]
     per_link = res.extra.get("validity") or coupled.validity(fe, res.axial, res.u)
     defl = deflection_over_length(res)
@@ -276,8 +296,6 @@ def _shortest_period(prep, model: str, res, data) -> float | None:
 
 def _half_step_check(prep, model: str, geometric, t_fail: float) -> dict:
     """Rerun at dt/2 up to 1.5 t_fail (at least 20 steps past it): does the failure stay?"""
-    from .simulate import Prepared
-
     case = copy.deepcopy(prep.case)
     t_check = min(case["solver"]["t_end"], 1.5 * t_fail + 20 * prep.dt)
     case["solver"]["t_end"] = t_check
@@ -285,7 +303,7 @@ def _half_step_check(prep, model: str, geometric, t_fail: float) -> dict:
     t0 = time.perf_counter()
     out = {"dt": None, "checked_until_s": t_check, "failed_at_s": None}
     try:
-        p2 = Prepared(case, dt=prep.dt / 2, out_every=max(1, nsteps // 50))
+        p2 = type(prep)(case, dt=prep.dt / 2, out_every=max(1, nsteps // 50))   # a Prepared
         out["dt"] = p2.dt
         p2._run_raw(model, geometric)
     except SolverError as exc:

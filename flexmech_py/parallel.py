@@ -39,7 +39,6 @@ import hashlib
 import json
 import multiprocessing
 import os
-import socket
 import sys
 import time
 from collections import Counter, deque
@@ -48,6 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import CaseError, FlexmechError
+from .worker import call_task, default_jobs, worker_lost, worker_name  # noqa: F401 (re-exported)
 from .results import _atomic_write, _json_default
 
 __all__ = ["run_tasks", "Batch", "LocalPool", "open_executor", "using_executor", "default_jobs", "task_key",
@@ -80,40 +80,11 @@ class Batch:
         return [i for i, r in enumerate(self.results) if isinstance(r, dict) and "error" in r]
 
 
-def default_jobs() -> int:
-    """The cores this process may run on."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
 def task_key(func, task: dict) -> str:
     """Cache key of one task: a hash of the function's qualified name and the task's canonical JSON."""
     text = json.dumps({"func": f"{func.__module__}.{func.__qualname__}", "task": task}, sort_keys=True,
                       separators=(",", ":"), allow_nan=True)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
-
-
-def worker_name() -> str:
-    """The process running a task, as ``host:pid`` (the same form for every executor)."""
-    return f"{socket.gethostname()}:{os.getpid()}"
-
-
-def _call(func, task):
-    """Run one task in a worker: (result, seconds, worker)."""
-    t0 = time.perf_counter()
-    try:
-        res = func(task)
-    except FlexmechError as exc:
-        res = {"error": str(exc), "error_type": type(exc).__name__}
-    return res, time.perf_counter() - t0, worker_name()
-
-
-def worker_lost(deaths: int) -> dict:
-    """The error result of a task whose worker died ``deaths`` times while running it."""
-    return {"error": f"its worker process died {deaths} times while running it (out of memory, or a crash in "
-                     "the compiled kernels?); rerun the command to try it again", "error_type": "WorkerLost"}
 
 
 class _Progress:
@@ -183,7 +154,7 @@ class LocalPool:
         nproc = min(self.jobs, max(1, len(todo)))
         if nproc == 1:
             for i, task in todo:
-                finish(i, *_call(func, task))
+                finish(i, *call_task(func, task))
             return 0, 1
         with _single_threaded_workers():
             queue, deaths, retries, idle_breaks = deque(todo), Counter(), 0, 0
@@ -228,7 +199,7 @@ def _pool_pass(func, queue: deque, finish, nproc: int) -> list:
                 while queue and len(flying) <= nproc and not broken:
                     i, task = queue.popleft()
                     try:
-                        flying[pool.submit(_call, func, task)] = (i, task)
+                        flying[pool.submit(call_task, func, task)] = (i, task)
                     except BrokenProcessPool:   # a worker died while the pool was idle
                         queue.appendleft((i, task))
                         broken = True

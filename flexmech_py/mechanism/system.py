@@ -3,7 +3,7 @@
 Nothing here knows a mechanism type: a four-bar or a serial chain is a Mechanism built by
 :mod:`flexmech_py.mechanism.templates`.  Build one from Python with the ``add_*`` methods or from a
 plain dict (:func:`flexmech_py.mechanism.schema.mechanism_from_spec`, the case-file tables); write it
-back with :meth:`Mechanism.spec`.  Rigid-body analysis lives in ``analysis`` and ``motion``.
+back with :func:`flexmech_py.mechanism.schema.mechanism_spec`.  Rigid-body analysis lives in ``analysis`` and ``motion``.
 """
 
 from __future__ import annotations
@@ -244,10 +244,3 @@ class Mechanism:
         if floating:
             raise CaseError("joints", f"{', '.join(map(repr, floating))} {'is' if len(floating) == 1 else 'are'} not "
                                       "connected to the ground through any chain of joints (a floating body); add a joint")
-
-    # ------------------------------------------------------------------ writing
-    def spec(self) -> dict:
-        """The mechanism as case-file tables (mechanism.ground, links, bodies, joints, drives, initial)."""
-        from .schema import mechanism_spec
-
-        return mechanism_spec(self)
