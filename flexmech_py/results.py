@@ -112,7 +112,15 @@ class Result:
         if self.failure:
             lines.insert(1, f"PARTIAL: the run stopped at t = {self.failure['time_s']:.6g} s; frames up to "
                             f"t = {self.t[-1]:.6g} s")
-        return "\n".join(lines + self._validity_lines() + self._estimate_lines())
+        return "\n".join(lines + self._assembly_lines() + self._validity_lines() + self._estimate_lines())
+
+    def _assembly_lines(self) -> list[str]:
+        mech = self.extra.get("mechanism")
+        if not mech or mech["assembly"]["max_moved_m"] <= 0.0:
+            return []
+        a = mech["assembly"]
+        return [f"assembly: the loops were closed from the drawn configuration; points moved by up to "
+                f"{a['max_moved_m']:.3g} m ({a['point']}; all in summary.json, mechanism.assembly)"]
 
     def _validity_lines(self) -> list[str]:
         val, ov = self.extra.get("validity"), self.extra.get("validity_overall")

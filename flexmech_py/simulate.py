@@ -256,12 +256,27 @@ class Prepared:
             guards.check_validity(exc.partial)
             raise guards.failed(self, model, geometric, exc, diagnose=diagnose) from None
         guards.check_validity(res)
+        self._report_mechanism(res)
         if estimate is None:
             estimate = self.case["solver"].get("error_estimate", "time") != "none"
         res.extra["error_estimate"] = guards.error_estimate(self, res, geometric) if estimate else {"method": "none"}
         if self.rigid_failure is not None:
             raise guards.rigid_failure(res, self.rigid_failure)
         return res
+
+    def _report_mechanism(self, res: Result) -> None:
+        """summary.json's ``mechanism`` entry (degrees of freedom, mode, the joints of q, how far the
+        assembly moved the drawn points) and the mechanism's own warnings beside the validity ones."""
+        st = self.setup
+        floor = 1e-12 * st.packed.lref            # the assembly's own tolerance: below it, nothing moved
+        point, moved = st.max_moved
+        if moved <= floor:
+            point, moved = "", 0.0
+        res.extra["mechanism"] = {"degrees_of_freedom": st.dof, "rigid_motion": st.mode, "coordinates": st.primary,
+                                  "assembly": {"max_moved_m": moved, "point": point,
+                                               "moved_m": {k: v for k, v in st.moved.items() if v > floor}},
+                                  "rigid_steps": self.source.stats.get("steps", 0)}
+        res.extra["warnings"] = list(st.warnings) + list(res.extra.get("warnings", []))
 
     def _run_raw(self, model: str, geometric: str | None, u0=None, v0=None) -> Result:
         t_start = time.perf_counter()
