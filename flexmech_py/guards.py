@@ -59,6 +59,8 @@ def link_strains(res) -> np.ndarray:
     fe = res.fe
     out = np.zeros((len(res.case["links"]), res.t.size))
     for li, ln in enumerate(res.case["links"]):
+        if ln.get("rigid"):
+            continue
         els = fe.link_elements(li)
         n = len(els)
         ea = ln["youngs_modulus"] * ln["area"]
@@ -86,6 +88,8 @@ def check_validity(res) -> dict:
                "valid_until_s": None}
     events = []   # (time, link, kind, peak)
     for li, ln in enumerate(links):
+        if ln.get("rigid"):
+            continue
         name = ln["name"]
         v = per_link[name]
         comp = np.maximum(0.0, -res.axial[fe.link_elements(li)].min(axis=0)) / v["euler_load_N"]
@@ -302,7 +306,7 @@ def _undamped_constraints(prep, model: str, data) -> bool:
     sol = prep.case["solver"]
     cm = (data or {}).get("cm")
     return (model not in LINEAR_MODELS and sol.get("integrator", "newmark") == "newmark"
-            and abs(sol.get("gamma", 0.5) - 0.5) < 1e-12 and cm is not None and len(cm.constraints) > 0)
+            and abs(sol.get("gamma", 0.5) - 0.5) < 1e-12 and cm is not None and len(cm.rows) > 0)
 
 
 def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True) -> SolverError:

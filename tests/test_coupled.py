@@ -37,7 +37,7 @@ def test_kernel_matrices_are_the_derivatives_of_the_residual(cases_dir):
     case = fm.load_case(cases_dir / "manipulator_bricout.toml",
                         overrides=["solver.t_end=0.001", "initial.speeds=[3.0, -2.0]"])
     p = Prepared(case)
-    cm = CoupledModel.from_case(case, p.fe)
+    cm = CoupledModel.from_case(case)
     q, v = cm.initial_state(p.rm.select(slice(0, 1)))
     rng = np.random.default_rng(0)
     free = np.flatnonzero(cm.free_of > 0)
@@ -195,9 +195,9 @@ def test_weld_keeps_the_relative_angle(cases_dir):
     assert beta_ref == pytest.approx(0.5)
     # tangents welded: the joint angle at the tangents equals the initial one (drift from the rigid
     # solution, whose elbow is a free revolute, is large; the weld itself is exact)
-    from flexmech_py.coupled import joint_angles
+    from flexmech_py.coupled_outputs import joint_angles
     p = Prepared(case)
-    cm = CoupledModel.from_case(case, p.fe)
+    cm = CoupledModel.from_case(case)
     q0, v0 = cm.initial_state(p.rm.select(slice(0, 1)))
     qf, vf, af, lf, ef, _ = cm.run(q0, v0, p.t, cm.constraint_values(p.rm), p.dt, out_every=p.out_every)
     ang = joint_angles(cm, qf)["joint_2"]
