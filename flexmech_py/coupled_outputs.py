@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernels
-from .coupled import CON_ANGLE, CON_POINT, CON_PROJECTION, CoupledModel
+from .coupled import CON_ANGLE, CON_POINT, CoupledModel
 from .mechanism.motion import LinkMotion
 from .outputs import _axial_output, _load_output
 
