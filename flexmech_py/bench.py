@@ -130,16 +130,6 @@ def _case(path, nsteps: int, out_every: int, extra=()):
     return case
 
 
-def _coupled_band(cm) -> int:
-    kb = 0
-    for si in range(cm.ld.shape[1]):
-        f = cm.free_of[cm.ld[: 3 * cm.n_el[si] + 3, si] - 1]
-        f = f[f > 0]
-        if f.size:
-            kb = max(kb, int(f.max() - f.min()))
-    return kb
-
-
 # ---------------------------------------------------------------------------------------- sections
 
 def bench_startup(seed: Path, reps: int) -> dict:
@@ -239,15 +229,15 @@ def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
             fe = p.fe
             if model in ("coupled", "nonlinear"):
                 cm = p.coupled[model]
-                n, kb = int(cm.free_of.max()), _coupled_band(cm)
+                n, kb = int(cm.free_of.max()), cm.mesh.bandwidth
                 it = res.extra["coupled"]["newton"]["mean_per_step"]
                 if kb > 5 + 4:   # the kernel's automatic choice: condensed when the arrowheads widen the band
                     interior = [3 * int(k) - 1 for k in cm.n_el]
                     nb = n - sum(interior)
-                    fl = flops_condensed(interior, nb, min(nb - 1, 7), it, len(cm.constraints))
+                    fl = flops_condensed(interior, nb, min(nb - 1, 7), it, len(cm.rows))
                     kb = 5
                 else:
-                    fl = flops_newton(n, kb, kb, it, len(cm.constraints))
+                    fl = flops_newton(n, kb, kb, it, len(cm.rows))
             else:
                 n, kb, it = fe.nfree, fe.bandwidth, float("nan")
                 fl = flops_superposition(fe.nel, len(fe.n_el), n, kb, model)

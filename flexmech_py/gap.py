@@ -29,6 +29,8 @@ def validity_time(res) -> tuple[float, float]:
     comp = np.zeros(res.t.size, bool)
     if res.axial is not None:
         for li, ln in enumerate(fe.case["links"]):
+            if ln.get("rigid"):
+                continue
             ne = np.pi ** 2 * ln["youngs_modulus"] * ln["second_moment"] / ln["length"] ** 2
             comp |= (-res.axial[fe.link_elements(li)]).max(axis=0) > THRESHOLDS["compression_over_euler"] * ne
 

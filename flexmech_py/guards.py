@@ -62,6 +62,8 @@ def deflection_over_length(res) -> np.ndarray:
     km = res.motion
     out = np.zeros((len(fe.case["links"]), res.t.size))
     for li, ln in enumerate(fe.case["links"]):
+        if ln.get("rigid"):
+            continue
         L = ln["length"]
         c, s = np.cos(km.phi[:, li]), np.sin(km.phi[:, li])
         pos = [np.array([km.ox[:, li] + f * L * c, km.oy[:, li] + f * L * s])
@@ -81,6 +83,8 @@ def link_strains(res) -> np.ndarray:
     fe = res.fe
     out = np.zeros((len(res.case["links"]), res.t.size))
     for li, ln in enumerate(res.case["links"]):
+        if ln.get("rigid"):
+            continue
         els = fe.link_elements(li)
         n = len(els)
         ea = ln["youngs_modulus"] * ln["area"]
@@ -106,6 +110,8 @@ def check_validity(res) -> dict:
                "valid_until_s": None}
     events = []   # (time, link, kind, peak)
     for li, ln in enumerate(links):
+        if ln.get("rigid"):
+            continue
         name = ln["name"]
         v = per_link[name]
         comp = np.maximum(0.0, -res.axial[fe.link_elements(li)].min(axis=0)) / v["euler_load_N"]
@@ -320,7 +326,7 @@ def _undamped_constraints(prep, model: str, data) -> bool:
     sol = prep.case["solver"]
     cm = (data or {}).get("cm")
     return (model not in LINEAR_MODELS and sol.get("integrator", "newmark") == "newmark"
-            and abs(sol.get("gamma", 0.5) - 0.5) < 1e-12 and cm is not None and len(cm.constraints) > 0)
+            and abs(sol.get("gamma", 0.5) - 0.5) < 1e-12 and cm is not None and len(cm.rows) > 0)
 
 
 def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True) -> SolverError:

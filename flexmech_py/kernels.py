@@ -28,6 +28,7 @@ except ImportError as exc:  # pragma: no cover - only on a broken install
 
 api = _flexmech.flexmech_api
 mbs = _flexmech.flexmech_mbs_api
+cpl = _flexmech.flexmech_coupled_api
 
 STATUS_MESSAGES = {
     1: "the system matrix is singular (a zero-stiffness or zero-mass mode: check joints and constraints)",

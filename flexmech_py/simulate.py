@@ -11,6 +11,7 @@ import numpy as np
 from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients
 from .errors import CaseError, MechanismError, SolverError
 from . import coupled, guards
+from . import coupled_outputs as cpl_out
 from .coupled import CoupledModel
 from .mechanism import MotionSource, prepare_motion
 from .mechanism.motion import LinkMotion, RigidMotion
@@ -119,10 +120,7 @@ class Prepared:
         self._t = None
         chunk = self.CHUNK_STEPS if chunk_steps is None else int(chunk_steps)
         self.chunk_steps = self.out_every * max(1, math.ceil(chunk / self.out_every))
-        self.fe = FEModel.from_case(case)
-        for name, sp in case["outputs"].items():  # node references must fall on the mesh: check before running
-            if isinstance(sp.get("at"), str):
-                self.fe.node_ref(sp["at"], f"outputs.{name}.at")
+        self._fe = None
         t0, c0 = time.perf_counter(), time.thread_time()
         self.source = motion_source(case)
         self.setup = self.source.setup
@@ -135,6 +133,7 @@ class Prepared:
         self.gravity = case["loads"]["gravity"]
         self._checked = False
         self._full = None
+        self._rm = None
         self.coupled = {}
         self.t_prepare = time.perf_counter() - t_start
 
@@ -169,16 +168,31 @@ class Prepared:
             self._t = np.linspace(0.0, self.case["solver"]["t_end"], self.nsteps + 1)
         return self._t
 
+    @property
+    def fe(self) -> FEModel:
+        """The superposition models' FE model (built on first use; the coupled models build their own)."""
+        if self._fe is None:
+            fe = FEModel.from_case(self.case)
+            for name, sp in self.case["outputs"].items():  # node references must fall on the mesh
+                if isinstance(sp.get("at"), str):
+                    fe.node_ref(sp["at"], f"outputs.{name}.at")
+            self._fe = fe
+        return self._fe
+
     def _full_grid(self):
         if self._full is None:
-            rm = self.source(self.t)
+            rm = self.rm
             self._full = (rm, rm.kernel_samples(self.gravity)) + elastic_torque_loads(self.case, self.fe, rm)
         return self._full
 
     @property
     def rm(self) -> RigidMotion:
         """Rigid motion on the whole time grid (computed on first use)."""
-        return self._full_grid()[0]
+        if self._full is not None:
+            return self._full[0]
+        if self._rm is None:
+            self._rm = self.source(self.t)
+        return self._rm
 
     @property
     def rig(self) -> np.ndarray:
@@ -227,7 +241,7 @@ class Prepared:
             pc.case = Case(self.case, solver=dict(self.case["solver"], t_end=float(self.times(2 * nc, 2 * nc)[0])))
         pc.nsteps, pc.dt, pc.out_every = nc, 2.0 * self.dt, oc
         pc.chunk_steps = oc * max(1, math.ceil(self.chunk_steps / 2 / oc))
-        pc._t, pc._full = None, None
+        pc._t, pc._full, pc._rm = None, None, None
         if oe % 2 == 0:
             pc.rm_frames = self.rm_frames
         else:
@@ -280,11 +294,11 @@ class Prepared:
 
     def _run_raw(self, model: str, geometric: str | None, u0=None, v0=None) -> Result:
         t_start = time.perf_counter()
-        case, fe = self.case, self.fe
         if model in ("coupled", "nonlinear"):
             if u0 is not None or v0 is not None:
                 raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
             return self._run_coupled(t_start, model)
+        case, fe = self.case, self.fe
         if not self._checked:
             check_elastic_problem(fe, self.rm_frames.kernel_samples(self.gravity)[:, :, :1], self.setup.dof)
             self._checked = True
@@ -355,11 +369,11 @@ class Prepared:
 
 
     def _run_coupled(self, t_start: float, model: str) -> Result:
-        """The one-pass coupled model (one chord frame per link) or the nonlinear co-rotational model
-        (one per element); the rigid-body solution on the grid is their reference."""
-        case, fe, sol = self.case, self.fe, self.case["solver"]
+        """The one-pass coupled model (one chord frame per flexible link) or the nonlinear co-rotational
+        model (one per element); the rigid-body solution on the grid is their reference."""
+        case, sol = self.case, self.case["solver"]
         if model not in self.coupled:
-            self.coupled[model] = CoupledModel.from_case(case, fe, split=(model == "nonlinear"))
+            self.coupled[model] = CoupledModel.from_case(case, split=(model == "nonlinear"))
         cm = self.coupled[model]
         q0, v0 = cm.initial_state(self.rm.select(slice(0, 1)))
         cval = cm.constraint_values(self.rm)
@@ -379,34 +393,49 @@ class Prepared:
             iters = exc.data["iters"]
         t_kernel, c_kernel = time.perf_counter() - t0, time.thread_time() - c0
         idx = slice(0, self.out_every * (qf.shape[1] - 1) + 1, self.out_every)
-        ref = self.rm.motion.select(idx)
-        chord = coupled.chord_motion(cm, qf, vf, af)
-        u_dev = coupled.deviation(cm, qf, ref)
-        rig_chord = np.asfortranarray(np.stack([chord.phi, chord.omega, chord.alpha, chord.ax - self.gravity[0],
-                                                chord.ay - self.gravity[1]]).transpose(0, 2, 1))
-        columns = evaluate_outputs(fe, case["outputs"], u_dev, ref, rig_chord, "classic", rm=self.rm.select(idx),
-                                   joint_motion=chord, curvature=lambda li, frac: coupled.curvature(cm, qf, li, frac),
-                                   axial=(axial := coupled.axial_forces(cm, qf)))
+        rmf = self.rm.select(idx)
+        ref = rmf.motion
+        fr = cpl_out.model_frames(cm, qf, vf, af, lf, self.t[idx], self.gravity, sol["rayleigh"])
+        u_dev = cpl_out.deviation(cm, qf, ref)
+        axial = cpl_out.axial_forces(cm, qf)
+        columns = cpl_out.evaluate(cm, case["outputs"], fr, rmf, ref, u_dev, axial, superposition_fe=lambda: self.fe)
         units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
         energy = {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}
         for k, y in energy.items():
             columns[k], units[k] = y, "J"
         columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
-        for (_, _, kind, _), lam in zip(cm.constraints, lf):
-            if kind == "drive":   # the torque the kinematic drive applies (the constraint torque is -lambda)
-                columns["drive_torque"], units["drive_torque"] = -lam, "N m"
+        columns.update(_drive_columns(cm, fr, units))
         self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": 0.0}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
                   "total_s": self.t_prepare + time.perf_counter() - t_start}
         extra = {"integrator": integrator_summary(sol),
-                 "coupled": coupled.diagnostics(cm, qf, ef, chord, ref, iters, self.nsteps),
-                 "validity": coupled.validity(fe, axial, u_dev)}
-        res = Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=fe,
-                     q=self.rm.q[idx], qd=self.rm.qd[idx], qdd=self.rm.qdd[idx], u=u_dev, v=np.zeros_like(u_dev),
+                 "coupled": cpl_out.diagnostics(cm, fr, ef, rmf, iters, self.nsteps, cval[:, :, idx]),
+                 "validity": coupled.validity(cm.mesh, axial, u_dev)}
+        rig_chord = np.asfortranarray(np.stack([fr.chord.phi, fr.chord.omega, fr.chord.alpha,
+                                                fr.chord.ax - self.gravity[0],
+                                                fr.chord.ay - self.gravity[1]]).transpose(0, 2, 1))
+        res = Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=cm.mesh,
+                     q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_dev, v=np.zeros_like(u_dev),
                      a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
                      axial=axial, motion=ref)
-        res.curvature = lambda li, frac: coupled.curvature(cm, qf, li, frac)
+        res.curvature = lambda li, frac: cpl_out.curvature(cm, qf, li, frac)
         return guards.partial_or(res, failure, "coupled", cm=cm)
+
+
+def _drive_columns(cm, fr, units: dict) -> dict:
+    """The kinematic drives' torque (force on a prismatic joint) from the model's multipliers, as extra
+    columns: ``drive_torque`` (``drive_force``) for a single drive, ``drive_torque_<joint>`` for
+    several; a name the case's outputs already use is left to them."""
+    kin = [d for d in cm.case.mechanism.drives if d.kinematic]
+    out = {}
+    for d in kin:
+        angular = cm.case.mechanism.joint(d.joint).angular
+        name = ("drive_torque" if angular else "drive_force") + ("" if len(kin) == 1 else f"_{d.joint}")
+        if name in cm.case["outputs"]:
+            continue
+        out[name] = cpl_out.drive_force(cm, fr, d.joint)
+        units[name] = "N m" if angular else "N"
+    return out
 
 
 def integrator_summary(sol: dict) -> dict:

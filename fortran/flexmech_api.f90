@@ -13,20 +13,6 @@
 !>   rayleigh(2)       Rayleigh damping [a_M 1/s, a_K s]
 !> Rigid samples rig(5,nlinks,...) : [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] per link.
 !> Every routine returns `status` (codes in flexmech_lapack; 5 = Newton failure, 6 = divergence limit).
-!>
-!> Coupled (one-pass) model, cpl_* routines (docs/theory.md, "Coupled model"):
-!>   free_of(ndof)          free-DOF number of each DOF, 0 = constrained or prescribed
-!>   n_el(nlinks)           elements per link
-!>   ld(maxld, nlinks)      all-DOF numbers of each link's local vector
-!>                          [xs ys xe ye th_0 (p_k v_k th_k, k = 1..n-1) th_n], length 3n+3
-!>   prop(4, nlinks)        [L m, rho*A kg/m, E*A N, E*I N m^2]
-!>   pm_link(npm), pm_prop(2, npm)            point masses: link, [mass kg, zeta m]
-!>   ri_link(nri), ri_node(nri), ri_j(nri)    rotary inertias: link, node k (0..n), J kg m^2
-!>   tq_link(2, ntq), tq_end(2, ntq)          torques: [on-link b, reaction link a (0 = ground)], ends (0 start, 1 end)
-!>   tq_coef(nh2, ntq)      tau = c0 + sum_h s_h sin(h theta) + c_h cos(h theta), theta = psi_b - psi_a
-!>   con_link(2, nc), con_end(2, nc)          rotation constraints (first ncon): sum of signed tangent angles
-!>                          psi_b - psi_a = cval(1, i, step) [rad], with cval(2:3) its rate and acceleration
-!>   grav(2) [m/s^2], ray(2) Rayleigh [1/s, s] on the elastic DOFs
 module flexmech_api
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status
@@ -35,12 +21,10 @@ module flexmech_api
   use flexmech_assembly, only: band_rows, band_to_dense
   use flexmech_ked, only: ked_system
   use flexmech_newmark, only: newmark_run, consistent_acceleration, initial_axial_forces
-  use flexmech_coupled, only: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_set_solver
   implicit none
   private
   public :: element_matrices, element_curvatures, ked_run, ked_matrices, ked_loads, ked_bandwidth
   public :: ked_geometric_matrix
-  public :: cpl_run, cpl_dense, cpl_set_solver
   public :: bench_solve, bench_peak   ! benchmark-only (flexmech bench), at the end of this module
 
 contains
@@ -284,90 +268,6 @@ contains
     call sys%assemble(rig, 0.0_dp, 1.0_dp, z, z, ab, r, static=.true.)
     kgm = kgm - band_to_dense(ab, sys%kl, sys%ku, nfree)
   end subroutine ked_geometric_matrix
-
-  !> Run the coupled model (generalized-alpha-Newton; Newmark for alpha_m = alpha_f = 0).  q, v, a, pa
-  !> (ndof): on entry the initial state (constrained entries hold their fixed values; the free
-  !> accelerations a are made consistent; pa is the pseudo-acceleration, set to a when init_pseudo /= 0
-  !> (a fresh start), else used as given (continuing a run)), on exit the last state reached.
-  !> div_limit [m] > 0: the run stops with status 6 when coupled_elastic_measure (flexmech_coupled)
-  !> exceeds it; seg_link(nlinks) is the mechanism link of each segment (segments of a link listed
-  !> consecutively from its start).  nvalid: number of valid frames.
-  subroutine cpl_run(ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes, nc, ncon, &
-                     free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, tq_link, tq_end, tq_coef, &
-                     con_link, con_end, cval, grav, ray, presc_dof, presc, dt, alpha_m, alpha_f, beta, gamma, &
-                     out_every, tol, maxit, init_pseudo, div_limit, seg_link, &
-                     q, v, a, pa, qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
-    integer, intent(in) :: ndof, nlinks, maxld, npm, nri, ntq, nh2, np, nsteps, nframes
-    integer, intent(in) :: nc      !< size of the constraint arrays (>= 1; f2py cannot pass empty arrays)
-    integer, intent(in) :: ncon    !< number of active rotation constraints (0..nc)
-    integer, intent(in) :: con_link(2, nc), con_end(2, nc)
-    real(dp), intent(in) :: cval(3, nc, nsteps + 1)
-    integer, intent(in) :: free_of(ndof), n_el(nlinks), ld(maxld, nlinks)
-    real(dp), intent(in) :: prop(4, nlinks)
-    integer, intent(in) :: pm_link(npm)
-    real(dp), intent(in) :: pm_prop(2, npm)
-    integer, intent(in) :: ri_link(nri), ri_node(nri)
-    real(dp), intent(in) :: ri_j(nri)
-    integer, intent(in) :: tq_link(2, ntq), tq_end(2, ntq)
-    real(dp), intent(in) :: tq_coef(nh2, ntq), grav(2), ray(2)
-    integer, intent(in) :: presc_dof(np)
-    real(dp), intent(in) :: presc(3, np, nsteps + 1)
-    real(dp), intent(in) :: dt, alpha_m, alpha_f, beta, gamma, tol, div_limit
-    integer, intent(in) :: out_every, maxit, init_pseudo
-    integer, intent(in) :: seg_link(nlinks)
-    real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof), pa(ndof)
-    real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
-    real(dp), intent(out) :: lf(nc, nframes)   !< constraint multipliers (the constraint torque is -lf) [N m]
-    integer, intent(out) :: status, fail_step, iters, nvalid
-    type(coupled_system) :: sys
-    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
-    call coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
-                       tq_link, tq_end, tq_coef, ncon, con_link, con_end, grav, ray, status)
-    if (status /= STATUS_OK) return
-    if (any(presc_dof < 1) .or. any(presc_dof > ndof)) then
-      status = STATUS_BAD_INPUT
-      return
-    end if
-    call coupled_run(sys, presc_dof, presc, cval, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
-                     init_pseudo, div_limit, seg_link, q, v, a, pa, qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
-  end subroutine cpl_run
-
-  !> Linear solver of every later cpl_run in this process: mode -1 (default) automatic, 1 condensed
-  !> onto the segment-end positions, 0 the whole band (docs/theory.md section 11).  status 4 for
-  !> another mode.
-  subroutine cpl_set_solver(mode, status)
-    integer, intent(in) :: mode
-    integer, intent(out) :: status
-    call coupled_set_solver(mode, status)
-  end subroutine cpl_set_solver
-
-  !> Residual (all DOFs), M, C_v, K_t (dense, free DOFs) and [kinetic, potential] energy at one state.
-  subroutine cpl_dense(ndof, nlinks, maxld, npm, nri, ntq, nh2, nfree, &
-                       free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, tq_link, tq_end, tq_coef, &
-                       grav, ray, q, v, a, res, mm, cm, km, energy, status)
-    integer, intent(in) :: ndof, nlinks, maxld, npm, nri, ntq, nh2, nfree
-    integer, intent(in) :: free_of(ndof), n_el(nlinks), ld(maxld, nlinks)
-    real(dp), intent(in) :: prop(4, nlinks)
-    integer, intent(in) :: pm_link(npm)
-    real(dp), intent(in) :: pm_prop(2, npm)
-    integer, intent(in) :: ri_link(nri), ri_node(nri)
-    real(dp), intent(in) :: ri_j(nri)
-    integer, intent(in) :: tq_link(2, ntq), tq_end(2, ntq)
-    real(dp), intent(in) :: tq_coef(nh2, ntq), grav(2), ray(2)
-    real(dp), intent(in) :: q(ndof), v(ndof), a(ndof)
-    real(dp), intent(out) :: res(ndof), mm(nfree, nfree), cm(nfree, nfree), km(nfree, nfree), energy(2)
-    integer, intent(out) :: status
-    type(coupled_system) :: sys
-    res = 0.0_dp; mm = 0.0_dp; cm = 0.0_dp; km = 0.0_dp; energy = 0.0_dp
-    call coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
-                       tq_link, tq_end, tq_coef, 0, reshape([1, 0], [2, 1]), reshape([0, 0], [2, 1]), grav, ray, status)
-    if (status /= STATUS_OK) return
-    if (sys%nfree /= nfree) then
-      status = STATUS_BAD_INPUT
-      return
-    end if
-    call coupled_dense(sys, q, v, a, res, mm, cm, km, energy)
-  end subroutine cpl_dense
 
   ! ---------------------------------------------------------------- benchmark-only routines (flexmech bench)
 

@@ -1,23 +1,33 @@
 !> One-pass model with mutual rigid-elastic coupling (seed Section 3, Gibbs-Appell),
-!> in the chord-frame form derived in docs/theory.md (section "Coupled model").
+!> in the chord-frame form derived in docs/theory.md (section "Coupled model"), on any planar
+!> mechanism: beam segments, rigid bodies, and constraint rows on markers (flexmech_markers).
 !>
-!> Generalized coordinates of a link l of length L with n elements (local vector, nld = 3n+3):
-!>   [xs, ys, xe, ye, th_0, p_1, v_1, th_1, ..., p_{n-1}, v_{n-1}, th_{n-1}, th_n]
-!>   xs..ye   absolute positions [m] of the link's start and end ("rigid" DOFs; shared at joints)
+!> Bodies and their generalized coordinates (all-DOF vector; ground DOFs fixed):
+!> - a beam segment of length L with n elements (local vector, nld = 3n+3):
+!>     [xs, ys, xe, ye, th_0, p_1, v_1, th_1, ..., p_{n-1}, v_{n-1}, th_{n-1}, th_n]
+!>   xs..ye   absolute positions [m] of the segment's start and end (shared by segments that meet
+!>            there: consecutive segments of a link, links joined end to end by a revolute or weld)
 !>   p_k, v_k elastic axial / transverse displacement [m] of interior node k in the chord frame
 !>   th_k     elastic rotation [rad] of node k relative to the chord
-!> The chord c = r_e - r_s defines the link frame: phi = atan2(c), omega = g.c', g = Omega c/|c|^2.
-!> A material point at zeta (0..L along the link, w = zeta/L) is at
-!>   r = (1-w) r_s + w r_e + R(phi) N(xi) delta_e ,
-!> with delta_e the element's local elastic DOFs (end-node translations are zero by definition).
+!>   The chord c = r_e - r_s defines the segment frame: phi = atan2(c), omega = g.c', g = Omega c/|c|^2.
+!>   A material point at fraction w of the segment (element e at xi) is at
+!>     r = (1-w) r_s + w r_e + R(phi) N(xi) delta_e ,
+!>   with delta_e the element's local elastic DOFs (end-node translations are zero by definition).
+!>   The coupled model has one segment per link, the nonlinear model one per element.
+!> - a rigid body: [x_C, y_C, phi], mass diag(m, m, J_C) (rigid links and the case's rigid bodies).
 !> Gibbs-Appell: dG/da + dU/dq = Q with G = 1/2 int |r''|^2 dm, i.e. int J^T r'' dm + dU/dq = Q,
 !> J = dr'/dq' = dr''/dq''.  Strain energy: 1/2 (EA/L)(|c| - L)^2 + 1/2 delta^T k delta.
+!> Joints and kinematic drives are constraint rows on markers with Lagrange multipliers (the
+!> constraint forces; rows of kinds CON_POINT, CON_ANGLE, CON_PROJECTION of flexmech_markers);
+!> force drives are generalized forces tau(theta, t) d theta/dq on a joint coordinate theta (a row
+!> evaluated but not enforced; law: flexmech_drivelaw's force_law).
 !> Integration: generalized-alpha (Arnold & Bruls 2007; Newmark (beta, gamma) for am = af = 0) in
 !> acceleration form with Newton iterations on the true acceleration a_{n+1}, the equations and the
 !> constraints holding exactly at t_{n+1} (see flexmech_newmark and docs/theory.md section 15); the
 !> iteration matrix S = M + gamma' dt C_v + beta' dt^2 K_t is built once per step (modified Newton):
 !> M and C_v exact, K_t = elastic + chord + elastic inertial terms (the configuration
-!> dependence of the inertia through the chord is left out of S; it is in the residual).
+!> dependence of the inertia through the chord, the constraint curvature and the force laws'
+!> dependence on the configuration are left out of S; they are in the residual).
 module flexmech_coupled
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
@@ -25,10 +35,14 @@ module flexmech_coupled
                              STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
   use flexmech_beam, only: beam_mass, beam_stiffness
   use flexmech_assembly, only: band_rows, band_to_dense
+  use flexmech_drivelaw, only: force_law
+  use flexmech_markers, only: marker_state, segment_marker, body_marker, ground_marker, constraint_row, &
+                              CON_POINT, CON_ANGLE, CON_PROJECTION, MAXCOL
   implicit none
   private
-  public :: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_elastic_measure, STATUS_NEWTON
-  public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED
+  public :: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, coupled_elastic_measure
+  public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED, STATUS_NEWTON, COUPLED_NSPEC_HEADER
+  public :: MK_GROUND, MK_NODE, MK_BODY
 
   !> Linear solver of the iteration matrix in coupled_run (docs/theory.md section 11, "The solve"):
   !> SOLVER_CONDENSED eliminates every segment's elastic DOFs (a band of half width <= 5) onto the
@@ -39,6 +53,10 @@ module flexmech_coupled
   !> (the nonlinear model) the whole band is narrow and its one LAPACK call beats one per segment.
   integer, parameter :: SOLVER_AUTO = -1, SOLVER_BAND = 0, SOLVER_CONDENSED = 1
   integer :: solver_mode = SOLVER_AUTO
+  !> Marker kinds: a ground point, a node of a segment, a point of a rigid body.
+  integer, parameter :: MK_GROUND = 0, MK_NODE = 1, MK_BODY = 2
+  integer, parameter :: COUPLED_NSPEC_HEADER = 12   !< integers before the first block of ispec
+  integer, parameter :: NPAR = 4                    !< parameters per force law (flexmech_drivelaw)
 
   real(dp), parameter :: gx(4) = [ &
     0.5_dp - 0.5_dp*0.8611363115940526_dp, 0.5_dp - 0.5_dp*0.3399810435848563_dp, &
@@ -46,17 +64,23 @@ module flexmech_coupled
   real(dp), parameter :: gw(4) = 0.5_dp*[0.3478548451374538_dp, 0.6521451548625461_dp, &
                                           0.6521451548625461_dp, 0.3478548451374538_dp]
 
+  !> The system (layout of its flat description: coupled_build).
   type :: coupled_system
-    integer :: nlinks = 0, ndof = 0, nfree = 0, maxld = 0, kl = 0, ku = 0, npm = 0, nri = 0, ntq = 0, nh = 0
-    integer, allocatable :: n_el(:), ld(:, :), free_of(:)
-    real(dp), allocatable :: prop(:, :)          !< (4, nlinks) [L, rho*A, E*A, E*I]
-    real(dp), allocatable :: me(:, :, :), ke(:, :, :)  !< (6, 6, nlinks) local element mass, stiffness
-    integer, allocatable :: pm_link(:), ri_link(:), ri_node(:)
-    real(dp), allocatable :: pm_prop(:, :), ri_j(:)
-    integer, allocatable :: tq_link(:, :), tq_end(:, :)   !< (2, ntq): [b, a] links (a = 0: ground), ends 0/1
-    real(dp), allocatable :: tq_coef(:, :)                !< (1 + 2 nh, ntq)
-    integer :: ncon = 0
-    integer, allocatable :: con_link(:, :), con_end(:, :)   !< (2, ncon) like the torques
+    integer :: nseg = 0, nrb = 0, ndof = 0, nfree = 0, maxn = 0, maxld = 0, kl = 0, ku = 0
+    integer :: npm = 0, nri = 0, nmk = 0, nc = 0, nd = 0, nh = 0, nth = 0
+    integer, allocatable :: n_el(:), ld(:, :), free_of(:), el_off(:), rb_dof(:, :)
+    real(dp), allocatable :: prop(:, :)          !< (4, nseg) [L, rho*A, E*A, E*I]
+    real(dp), allocatable :: wn(:, :)            !< (maxn+1, nseg) node fractions of each segment (0 .. 1)
+    real(dp), allocatable :: me(:, :, :), ke(:, :, :)  !< (6, 6, elements) local element mass, stiffness
+    real(dp), allocatable :: rb_m(:, :)          !< (3, nrb) [m, J_C, J_C in the iteration matrix]
+    integer, allocatable :: pm_seg(:), pm_el(:), ri_seg(:), ri_node(:)
+    real(dp), allocatable :: pm_prop(:, :), ri_j(:)   !< (2, npm) [xi in its element, mass]; (nri) J
+    integer, allocatable :: mk_kind(:), mk_idx(:), mk_node(:)   !< (nmk) MK_*, segment or body, node
+    real(dp), allocatable :: mk_pos(:, :)        !< (2, nmk) ground position, or body-frame point from the COM
+    integer, allocatable :: con(:, :)            !< (4, nc) [kind CON_*, marker a, marker b, aux]
+    real(dp), allocatable :: con_dir(:, :)       !< (2, nc) direction of CON_PROJECTION in a's frame
+    integer, allocatable :: dv(:, :)             !< (5, nd) force drives [kind, marker a, marker b, table first, knots]
+    real(dp), allocatable :: dv_dir(:, :), dv_par(:, :), dv_harm(:, :), dv_th(:, :, :), tab_t(:), tab_c(:, :)
     real(dp) :: grav(2) = 0.0_dp, ray(2) = 0.0_dp
   end type coupled_system
 
@@ -66,6 +90,7 @@ module flexmech_coupled
   !>   bb(4, 4, l)   S_BB block of the segment            bi(4, ni)  S_BI (rows: local 1..4)
   !>   ib(ni, 4)     S_IB (columns: local 1..4)           ai(ldi, ni) S_II, LAPACK band storage with
   !>                 kl = ku = kbi (row 2 kbi + 1 + i - j), factorized in place (ipi) by the condensed solve
+  !>   dg(nfree)     diagonal of the rigid bodies (their DOFs are boundary DOFs coupled to nothing else)
   !> Condensed solve (cond = .true.: every interior DOF free and local to one segment):
   !>   z = S_II^-1 S_IB per segment, Schur complement sb = S_BB - S_BI z over the nb free boundary DOFs
   !>   (band kbb, LAPACK storage, ipb), workspaces yi(ni, nrhs), yb(nb, nrhs).
@@ -73,55 +98,143 @@ module flexmech_coupled
     integer :: ni = 0, kbi = 0, ldi = 0, nb = 0, kbb = 0, ldb = 0, nrhs = 0
     logical :: cond = .false.
     integer, allocatable :: off(:), ifree(:), bfree(:, :), bglob(:), ipi(:), ipb(:)
-    real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :)
+    real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :), dg(:)
   end type link_mats
 
 contains
 
-  !> Build the system from flat arrays (see flexmech_api); status STATUS_BAD_INPUT on bad indices.
-  subroutine coupled_build(sys, free_of, n_el, ld, prop, pm_link, pm_prop, ri_link, ri_node, ri_j, &
-                           tq_link, tq_end, tq_coef, ncon, con_link, con_end, grav, ray, status)
+  !> Build the system from its flat description; status STATUS_BAD_INPUT on bad sizes or indices.
+  !> ispec (integers, 1-based indices):
+  !>   [nseg, nrb, ndof, maxn, npm, nri, nmk, nc, nd, nh, nth, ntab,
+  !>    n_el(nseg), ld(3 maxn + 3, nseg), rb_dof(3, nrb), free_of(ndof), pm_seg(npm), pm_el(npm),
+  !>    ri_seg(nri), ri_node(nri), mk_kind(nmk), mk_idx(nmk), mk_node(nmk), con(4, nc), dv(5, nd)]
+  !> rspec (reals):
+  !>   [prop(4, nseg), wn(maxn + 1, nseg), rb_m(3, nrb), pm_prop(2, npm), ri_j(nri), mk_pos(2, nmk),
+  !>    con_dir(2, nc), dv_dir(2, nd), dv_par(4, nd), dv_harm(2 nh, nd), dv_th(3, nth, nd),
+  !>    tab_t(ntab), tab_c(4, ntab), grav(2), ray(2)]
+  !> free_of: free-DOF number of each DOF (0 = fixed); ld: all-DOF numbers of each segment's local
+  !> vector (entries past 3 n + 3 unused); ri_node: node 0..n of the segment the inertia turns with;
+  !> mk_idx: the segment (MK_NODE) or body (MK_BODY) of a marker, mk_node its node (MK_NODE);
+  !> con aux: the component 1/2 of a CON_POINT row; 1 for a row whose value moves (a kinematic drive:
+  !> its work is counted), else 0; dv kind: CON_ANGLE (torque on a revolute) or CON_PROJECTION (force
+  !> along a prismatic guide), table first knot and number of knots (0: none); dv_par, dv_harm,
+  !> dv_th, tab_*: the force law (flexmech_drivelaw: force_law); grav [m/s^2]; ray Rayleigh [1/s, s].
+  subroutine coupled_build(ispec, rspec, sys, status)
+    integer, intent(in) :: ispec(:)
+    real(dp), intent(in) :: rspec(:)
     type(coupled_system), intent(out) :: sys
-    integer, intent(in) :: free_of(:), n_el(:), ld(:, :), pm_link(:), ri_link(:), ri_node(:), tq_link(:, :), tq_end(:, :)
-    integer, intent(in) :: ncon, con_link(:, :), con_end(:, :)   !< rotation constraints: the first ncon columns
-    real(dp), intent(in) :: prop(:, :), pm_prop(:, :), ri_j(:), tq_coef(:, :), grav(2), ray(2)
     integer, intent(out) :: status
-    integer :: l, nl, lo, hi, i, f
+    integer :: o, s, e, i, nl, f, lo, hi, ntab, ns, ml, k
+    real(dp) :: le
     status = STATUS_BAD_INPUT
-    sys%nlinks = size(n_el); sys%ndof = size(free_of); sys%maxld = size(ld, 1)
-    sys%nfree = maxval([0, free_of])
-    if (sys%nfree < 1 .or. any(n_el < 1) .or. any(3*n_el + 3 > sys%maxld)) return
-    if (any(prop(1:4, :) <= 0.0_dp)) return
-    do l = 1, sys%nlinks
-      nl = 3*n_el(l) + 3
-      if (any(ld(1:nl, l) < 1) .or. any(ld(1:nl, l) > sys%ndof)) return
+    if (size(ispec) < COUPLED_NSPEC_HEADER) return
+    if (any(ispec(1:COUPLED_NSPEC_HEADER) < 0)) return
+    sys%nseg = ispec(1); sys%nrb = ispec(2); sys%ndof = ispec(3); sys%maxn = ispec(4); sys%npm = ispec(5)
+    sys%nri = ispec(6); sys%nmk = ispec(7); sys%nc = ispec(8); sys%nd = ispec(9); sys%nh = ispec(10)
+    sys%nth = ispec(11); ntab = ispec(12)
+    ns = sys%nseg; ml = 3*sys%maxn + 3; sys%maxld = ml
+    if (ns < 1 .or. sys%maxn < 1 .or. sys%ndof < 1) return
+    if (size(ispec) /= COUPLED_NSPEC_HEADER + ns*(1 + ml) + 3*sys%nrb + sys%ndof + 2*sys%npm + 2*sys%nri &
+        + 3*sys%nmk + 4*sys%nc + 5*sys%nd) return
+    if (size(rspec) /= ns*(4 + sys%maxn + 1) + 3*sys%nrb + 2*sys%npm + sys%nri + 2*sys%nmk + 2*sys%nc &
+        + (2 + NPAR + 2*sys%nh + 3*sys%nth)*sys%nd + 5*ntab + 4) return
+    o = COUPLED_NSPEC_HEADER
+    sys%n_el = ispec(o + 1:o + ns); o = o + ns
+    sys%ld = reshape(ispec(o + 1:o + ml*ns), [ml, ns]); o = o + ml*ns
+    sys%rb_dof = reshape(ispec(o + 1:o + 3*sys%nrb), [3, sys%nrb]); o = o + 3*sys%nrb
+    sys%free_of = ispec(o + 1:o + sys%ndof); o = o + sys%ndof
+    sys%pm_seg = ispec(o + 1:o + sys%npm); o = o + sys%npm
+    sys%pm_el = ispec(o + 1:o + sys%npm); o = o + sys%npm
+    sys%ri_seg = ispec(o + 1:o + sys%nri); o = o + sys%nri
+    sys%ri_node = ispec(o + 1:o + sys%nri); o = o + sys%nri
+    sys%mk_kind = ispec(o + 1:o + sys%nmk); o = o + sys%nmk
+    sys%mk_idx = ispec(o + 1:o + sys%nmk); o = o + sys%nmk
+    sys%mk_node = ispec(o + 1:o + sys%nmk); o = o + sys%nmk
+    sys%con = reshape(ispec(o + 1:o + 4*sys%nc), [4, sys%nc]); o = o + 4*sys%nc
+    sys%dv = reshape(ispec(o + 1:o + 5*sys%nd), [5, sys%nd])
+    o = 0
+    sys%prop = reshape(rspec(o + 1:o + 4*ns), [4, ns]); o = o + 4*ns
+    sys%wn = reshape(rspec(o + 1:o + (sys%maxn + 1)*ns), [sys%maxn + 1, ns]); o = o + (sys%maxn + 1)*ns
+    sys%rb_m = reshape(rspec(o + 1:o + 3*sys%nrb), [3, sys%nrb]); o = o + 3*sys%nrb
+    sys%pm_prop = reshape(rspec(o + 1:o + 2*sys%npm), [2, sys%npm]); o = o + 2*sys%npm
+    sys%ri_j = rspec(o + 1:o + sys%nri); o = o + sys%nri
+    sys%mk_pos = reshape(rspec(o + 1:o + 2*sys%nmk), [2, sys%nmk]); o = o + 2*sys%nmk
+    sys%con_dir = reshape(rspec(o + 1:o + 2*sys%nc), [2, sys%nc]); o = o + 2*sys%nc
+    sys%dv_dir = reshape(rspec(o + 1:o + 2*sys%nd), [2, sys%nd]); o = o + 2*sys%nd
+    sys%dv_par = reshape(rspec(o + 1:o + NPAR*sys%nd), [NPAR, sys%nd]); o = o + NPAR*sys%nd
+    sys%dv_harm = reshape(rspec(o + 1:o + 2*sys%nh*sys%nd), [2*sys%nh, sys%nd]); o = o + 2*sys%nh*sys%nd
+    sys%dv_th = reshape(rspec(o + 1:o + 3*sys%nth*sys%nd), [3, sys%nth, sys%nd]); o = o + 3*sys%nth*sys%nd
+    sys%tab_t = rspec(o + 1:o + ntab); o = o + ntab
+    sys%tab_c = reshape(rspec(o + 1:o + 4*ntab), [4, ntab]); o = o + 4*ntab
+    sys%grav = rspec(o + 1:o + 2); sys%ray = rspec(o + 3:o + 4)
+    ! checks of indices and values
+    if (any(sys%n_el < 1) .or. any(sys%n_el > sys%maxn) .or. any(sys%free_of < 0)) return
+    sys%nfree = maxval([0, sys%free_of])
+    if (sys%nfree < 1 .or. any(sys%prop <= 0.0_dp)) return
+    do s = 1, ns
+      nl = 3*sys%n_el(s) + 3
+      if (any(sys%ld(1:nl, s) < 1) .or. any(sys%ld(1:nl, s) > sys%ndof)) return
+      do e = 1, sys%n_el(s)
+        if (.not. sys%wn(e + 1, s) > sys%wn(e, s)) return
+      end do
     end do
-    if (any(pm_link < 1) .or. any(pm_link > sys%nlinks) .or. any(ri_link < 1) .or. any(ri_link > sys%nlinks)) return
-    if (any(tq_link < 0) .or. any(tq_link > sys%nlinks) .or. any(tq_link(1, :) < 1)) return
-    if (mod(size(tq_coef, 1), 2) /= 1) return
-    if (ncon < 0 .or. ncon > size(con_link, 2)) return
-    if (ncon > 0) then
-      if (any(con_link(:, 1:ncon) < 0) .or. any(con_link(:, 1:ncon) > size(n_el)) .or. any(con_link(1, 1:ncon) < 1)) return
+    if (any(sys%rb_dof < 1) .or. any(sys%rb_dof > sys%ndof)) return
+    if (sys%nrb > 0) then
+      if (any(sys%rb_m(1, :) <= 0.0_dp) .or. any(sys%rb_m(2, :) < 0.0_dp) .or. any(sys%rb_m(3, :) <= 0.0_dp)) return
     end if
-    sys%ncon = ncon
-    sys%con_link = con_link(:, 1:max(ncon, 0)); sys%con_end = con_end(:, 1:max(ncon, 0))
-    sys%n_el = n_el; sys%ld = ld; sys%prop = prop; sys%free_of = free_of
-    sys%npm = size(pm_link); sys%pm_link = pm_link; sys%pm_prop = pm_prop
-    sys%nri = size(ri_link); sys%ri_link = ri_link; sys%ri_node = ri_node; sys%ri_j = ri_j
-    sys%ntq = size(tq_link, 2); sys%tq_link = tq_link; sys%tq_end = tq_end; sys%tq_coef = tq_coef
-    sys%nh = (size(tq_coef, 1) - 1)/2
-    sys%grav = grav; sys%ray = ray
-    allocate (sys%me(6, 6, sys%nlinks), sys%ke(6, 6, sys%nlinks))
-    do l = 1, sys%nlinks
-      sys%me(:, :, l) = beam_mass(prop(2, l), prop(1, l)/n_el(l))
-      sys%ke(:, :, l) = beam_stiffness(prop(3, l), prop(4, l), prop(1, l)/n_el(l))
+    do i = 1, sys%npm
+      if (sys%pm_seg(i) < 1 .or. sys%pm_seg(i) > ns) return
+      if (sys%pm_el(i) < 1 .or. sys%pm_el(i) > sys%n_el(max(1, sys%pm_seg(i)))) return
+    end do
+    do i = 1, sys%nri
+      if (sys%ri_seg(i) < 1 .or. sys%ri_seg(i) > ns) return
+      if (sys%ri_node(i) < 0 .or. sys%ri_node(i) > sys%n_el(sys%ri_seg(i))) return
+    end do
+    do i = 1, sys%nmk
+      select case (sys%mk_kind(i))
+      case (MK_NODE)
+        if (sys%mk_idx(i) < 1 .or. sys%mk_idx(i) > ns) return
+        if (sys%mk_node(i) < 0 .or. sys%mk_node(i) > sys%n_el(sys%mk_idx(i))) return
+      case (MK_BODY)
+        if (sys%mk_idx(i) < 1 .or. sys%mk_idx(i) > sys%nrb) return
+      case (MK_GROUND)
+      case default
+        return
+      end select
+    end do
+    do i = 1, sys%nc
+      if (sys%con(1, i) < CON_POINT .or. sys%con(1, i) > CON_PROJECTION) return
+      if (any(sys%con(2:3, i) < 1) .or. any(sys%con(2:3, i) > sys%nmk)) return
+      if (sys%con(1, i) == CON_POINT .and. (sys%con(4, i) < 1 .or. sys%con(4, i) > 2)) return
+    end do
+    do i = 1, sys%nd
+      if (sys%dv(1, i) /= CON_ANGLE .and. sys%dv(1, i) /= CON_PROJECTION) return
+      if (any(sys%dv(2:3, i) < 1) .or. any(sys%dv(2:3, i) > sys%nmk)) return
+      if (sys%dv(5, i) > 0) then
+        if (sys%dv(4, i) < 1 .or. sys%dv(4, i) + sys%dv(5, i) - 1 > ntab .or. sys%dv(5, i) < 2) return
+      end if
+    end do
+    ! element matrices, element by element (segments may have elements of different lengths)
+    allocate (sys%el_off(ns))
+    sys%el_off(1) = 0
+    do s = 2, ns
+      sys%el_off(s) = sys%el_off(s - 1) + sys%n_el(s - 1)
+    end do
+    allocate (sys%me(6, 6, sum(sys%n_el)), sys%ke(6, 6, sum(sys%n_el)))
+    do s = 1, ns
+      do e = 1, sys%n_el(s)
+        le = sys%prop(1, s)*(sys%wn(e + 1, s) - sys%wn(e, s))
+        k = sys%el_off(s) + e
+        sys%me(:, :, k) = beam_mass(sys%prop(2, s), le)
+        sys%ke(:, :, k) = beam_stiffness(sys%prop(3, s), sys%prop(4, s), le)
+      end do
     end do
     sys%kl = 0
-    do l = 1, sys%nlinks
-      nl = 3*n_el(l) + 3
+    do s = 1, ns
+      nl = 3*sys%n_el(s) + 3
       lo = huge(1); hi = 0
       do i = 1, nl
-        f = free_of(ld(i, l))
+        f = sys%free_of(sys%ld(i, s))
         if (f > 0) then
           lo = min(lo, f); hi = max(hi, f)
         end if
@@ -132,26 +245,67 @@ contains
     status = STATUS_OK
   end subroutine coupled_build
 
-  !> Dense residual (all DOFs), iteration-matrix parts over the free DOFs and energies at one state
-  !> (for tests and analysis): mm = M, cm = C_v, km = K_t, energy = [kinetic, potential].
-  subroutine coupled_dense(sys, q, v, a, res, mm, cm, km, energy)
+  !> State of marker m at the all-DOF state (q, v) (flexmech_markers).
+  pure subroutine get_marker(sys, m, q, v, ms)
     type(coupled_system), intent(in) :: sys
-    real(dp), intent(in) :: q(:), v(:), a(:)
-    real(dp), intent(out) :: res(:), mm(:, :), cm(:, :), km(:, :), energy(2)
-    real(dp), allocatable :: ab(:, :)
-    type(link_mats) :: lm
-    call lm_setup(sys, 1, lm)
-    allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree))
-    call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, lm, energy)
-    call lm_to_band(sys, lm, ab)
-    mm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree)
-    call assemble(sys, q, v, a, .true., 1.0_dp, 0.0_dp, res, lm, energy)
-    call lm_to_band(sys, lm, ab)
-    cm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
-    call assemble(sys, q, v, a, .true., 0.0_dp, 1.0_dp, res, lm, energy)
-    call lm_to_band(sys, lm, ab)
-    km = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
-  end subroutine coupled_dense
+    integer, intent(in) :: m
+    real(dp), intent(in) :: q(:), v(:)
+    type(marker_state), intent(out) :: ms
+    integer :: s, n, b
+    select case (sys%mk_kind(m))
+    case (MK_NODE)
+      s = sys%mk_idx(m); n = sys%n_el(s)
+      call segment_marker(q, v, sys%ld(1:3*n + 3, s), n, sys%mk_node(m), sys%wn(sys%mk_node(m) + 1, s), ms)
+    case (MK_BODY)
+      b = sys%mk_idx(m)
+      call body_marker(q(sys%rb_dof(:, b)), v(sys%rb_dof(:, b)), sys%rb_dof(:, b), sys%mk_pos(:, m), ms)
+    case default
+      call ground_marker(sys%mk_pos(:, m), ms)
+    end select
+  end subroutine get_marker
+
+  !> A row of kind `kind` (aux, direction d) between markers mka and mkb at (q, v): value g, rate gd,
+  !> velocity part acc0 of its second derivative, gradient grad over the all-DOF columns cols(1:nc)
+  !> (marker a's columns first: ma%n of them); the marker states ma, mb.
+  pure subroutine eval_row(sys, kind, aux, d, mka, mkb, q, v, g, gd, acc0, nc, cols, grad, ma, mb)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: kind, aux, mka, mkb
+    real(dp), intent(in) :: d(2), q(:), v(:)
+    real(dp), intent(out) :: g, gd, acc0, grad(2*MAXCOL)
+    integer, intent(out) :: nc, cols(2*MAXCOL)
+    type(marker_state), intent(out) :: ma, mb
+    call get_marker(sys, mka, q, v, ma)
+    call get_marker(sys, mkb, q, v, mb)
+    call constraint_row(kind, aux, d, ma, mb, g, gd, acc0, nc, cols, grad)
+  end subroutine eval_row
+
+  !> Coordinate theta of force drive i at (q, v) (its gradient over cols(1:nc), marker states) and the
+  !> law's generalized force tau(theta, t) [N m or N].
+  pure subroutine drive_load(sys, i, q, v, t, tau, theta, nc, cols, grad, ma, mb)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: i
+    real(dp), intent(in) :: q(:), v(:), t
+    real(dp), intent(out) :: tau, theta, grad(2*MAXCOL)
+    integer, intent(out) :: nc, cols(2*MAXCOL)
+    type(marker_state), intent(out) :: ma, mb
+    real(dp) :: gd, acc0
+    integer :: k, nk
+    call eval_row(sys, sys%dv(1, i), 0, sys%dv_dir(:, i), sys%dv(2, i), sys%dv(3, i), q, v, theta, gd, acc0, nc, &
+                  cols, grad, ma, mb)
+    k = sys%dv(4, i); nk = sys%dv(5, i)
+    if (nk > 0) then
+      tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(k:k + nk - 1), &
+                      sys%tab_c(:, k:k + nk - 1), theta, t)
+    else
+      tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(1:0), sys%tab_c(:, 1:0), &
+                      theta, t)
+    end if
+  end subroutine drive_load
+
+  pure real(dp) function wrap(x)
+    real(dp), intent(in) :: x
+    wrap = atan2(sin(x), cos(x))
+  end function wrap
 
   !> Position in the link vector of the elastic DOFs of element e (1..n): [p, v, th, p, v, th], 0 = none.
   pure function elem_index(n, e) result(idx)
@@ -197,23 +351,22 @@ contains
     al = al0 + g(1)*cdd(1) + g(2)*cdd(2)
   end subroutine chord
 
-  !> Contribution of one mass point (weight dm at link fraction w, element e at xi) to the link
+  !> Contribution of one mass point (weight dm at segment fraction w, element e of length le at xi) to the segment
   !> residual and iteration matrix.  Adds dm * J^T (r'' - grav) to r and, if want, to segment l's
   !> blocks of S (lm) dm J^T (J + cc dr''/dv + ck dr''/d(elastic q)) (the point's parts of M, C_v,
   !> K_t); returns the kinetic energy 1/2 dm |r'|^2.
-  subroutine mass_point(sys, l, q, v, a, e, xi, w, dm, want, cc, ck, r, lm, ekin, epot)
+  subroutine mass_point(sys, l, q, v, a, e, xi, w, le, dm, want, cc, ck, r, lm, ekin, epot)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l, e
-    real(dp), intent(in) :: q(:), v(:), a(:), xi, w, dm, cc, ck
+    real(dp), intent(in) :: q(:), v(:), a(:), xi, w, le, dm, cc, ck
     logical, intent(in) :: want
     real(dp), intent(inout) :: r(:), ekin, epot
     type(link_mats), intent(inout) :: lm
     integer :: n, idx(6), i, j, nl, ncl, cl(10)
-    real(dp) :: cs, sn, ell, g(2), om, al0, al, le, nm(2, 6), de(6), dv(6), da(6)
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, nm(2, 6), de(6), dv(6), da(6)
     real(dp) :: ul(2), uld(2), uldd(2), rot(2, 2), ru(2), rou(2), roud(2), rd(2), rdd(2)
     real(dp) :: jac(2, 10), bv(2, 10), bq(2, 10), ac(2, 2), w0(2), cdot(2), c(2), rn(2), bc(2), blk(10, 10)
     n = sys%n_el(l); nl = 3*n + 3
-    le = sys%prop(1, l)/n
     idx = elem_index(n, e)
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     nm = shape_fn(xi, le)
@@ -283,27 +436,30 @@ contains
     real(dp), intent(out) :: r(:), ekin, epot
     type(link_mats), intent(inout) :: lm
     integer :: n, nl, e, k, i, j, idx(6), cl5(5)
-    real(dp) :: len, le, rho_a, ea, c(2), ell, f, cc(2, 2), de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
+    real(dp) :: len, le, dw, rho_a, ea, c(2), ell, f, cc(2, 2), de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
     real(dp) :: cs, sn, g(2), om, al0, al, dpsi(sys%maxld), w0(2), d5(5), blk(5, 5)
     n = sys%n_el(l); nl = 3*n + 3
-    len = sys%prop(1, l); rho_a = sys%prop(2, l); ea = sys%prop(3, l); le = len/n
+    len = sys%prop(1, l); rho_a = sys%prop(2, l); ea = sys%prop(3, l)
     r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
     do e = 1, n          ! distributed mass
+      dw = sys%wn(e + 1, l) - sys%wn(e, l)
+      le = len*dw
       do k = 1, 4
-        call mass_point(sys, l, q, v, a, e, gx(k), ((e - 1) + gx(k))/n, gw(k)*rho_a*le, want, ccv, ckt, r, lm, &
-                        ekin, epot)
+        call mass_point(sys, l, q, v, a, e, gx(k), sys%wn(e, l) + gx(k)*dw, le, gw(k)*rho_a*le, want, ccv, ckt, r, &
+                        lm, ekin, epot)
       end do
     end do
-    do i = 1, sys%npm    ! point masses on this link
-      if (sys%pm_link(i) /= l) cycle
-      xi = sys%pm_prop(2, i)/le
-      e = min(n, max(1, int(xi) + 1))
-      call mass_point(sys, l, q, v, a, e, xi - (e - 1), sys%pm_prop(2, i)/len, sys%pm_prop(1, i), want, &
+    do i = 1, sys%npm    ! point masses on this segment
+      if (sys%pm_seg(i) /= l) cycle
+      e = sys%pm_el(i)
+      xi = sys%pm_prop(1, i)
+      dw = sys%wn(e + 1, l) - sys%wn(e, l)
+      call mass_point(sys, l, q, v, a, e, xi, sys%wn(e, l) + xi*dw, len*dw, sys%pm_prop(2, i), want, &
                       ccv, ckt, r, lm, ekin, epot)
     end do
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     do i = 1, sys%nri    ! rotary inertias turning with this link: psi = phi + th_k
-      if (sys%ri_link(i) /= l) cycle
+      if (sys%ri_seg(i) /= l) cycle
       k = th_index(n, sys%ri_node(i))
       dpsi(1:nl) = 0.0_dp
       dpsi(1:2) = -g; dpsi(3:4) = g; dpsi(k) = 1.0_dp
@@ -348,9 +504,9 @@ contains
           de(i) = 0.0_dp; dv(i) = 0.0_dp
         end if
       end do
-      fe = matmul(sys%ke(:, :, l), de)
+      fe = matmul(sys%ke(:, :, sys%el_off(l) + e), de)
       epot = epot + 0.5_dp*dot_product(de, fe)
-      ce = sys%ray(1)*sys%me(:, :, l) + sys%ray(2)*sys%ke(:, :, l)
+      ce = sys%ray(1)*sys%me(:, :, sys%el_off(l) + e) + sys%ray(2)*sys%ke(:, :, sys%el_off(l) + e)
       if (sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp) fe = fe + matmul(ce, dv)
       do i = 1, 6
         if (idx(i) > 0) r(idx(i)) = r(idx(i)) + fe(i)
@@ -360,7 +516,7 @@ contains
           if (idx(j) == 0) cycle
           do i = 1, 6
             if (idx(i) == 0) cycle
-            call lm_add(lm, l, idx(i), idx(j), ckt*sys%ke(i, j, l) + ccv*ce(i, j))
+            call lm_add(lm, l, idx(i), idx(j), ckt*sys%ke(i, j, sys%el_off(l) + e) + ccv*ce(i, j))
           end do
         end do
       end if
@@ -377,68 +533,24 @@ contains
     end if
   end function th_index
 
-  !> Tangent angle psi = phi + th(end) of link l at end (0 start, 1 end), and d psi / d q_local.
-  subroutine tangent_angle(sys, l, iend, q, psi, dpsi)
+  !> Assemble the global residual R (all DOFs) at time t and, if want, the iteration matrix
+  !> S = M + cc*C_v + ck*K_t over the free DOFs (segment blocks and the rigid bodies' diagonal, in lm).
+  !> R holds the inertia, elastic, damping, gravity and force-drive terms (not the constraint forces).
+  !> Returns energies [kinetic, potential (strain + gravity)].
+  subroutine assemble(sys, q, v, a, t, want, cc, ck, res, lm, energy)
     type(coupled_system), intent(in) :: sys
-    integer, intent(in) :: l, iend
-    real(dp), intent(in) :: q(:)
-    real(dp), intent(out) :: psi, dpsi(:)
-    real(dp) :: c(2), l2
-    integer :: k
-    c = q(3:4) - q(1:2); l2 = c(1)**2 + c(2)**2
-    k = th_index(sys%n_el(l), iend*sys%n_el(l))
-    psi = atan2(c(2), c(1)) + q(k)
-    dpsi = 0.0_dp
-    dpsi(1:2) = -[-c(2), c(1)]/l2; dpsi(3:4) = [-c(2), c(1)]/l2; dpsi(k) = 1.0_dp
-  end subroutine tangent_angle
-
-  !> Torque of law i at joint angle theta [N m].
-  pure real(dp) function torque(sys, i, theta)
-    type(coupled_system), intent(in) :: sys
-    integer, intent(in) :: i
-    real(dp), intent(in) :: theta
-    integer :: h
-    torque = sys%tq_coef(1, i)
-    do h = 1, sys%nh
-      torque = torque + sys%tq_coef(1 + h, i)*sin(h*theta) + sys%tq_coef(1 + sys%nh + h, i)*cos(h*theta)
-    end do
-  end function torque
-
-  !> Joint angles of every torque joint (psi_b - psi_a) for the global state q.
-  subroutine joint_angles(sys, q, theta)
-    type(coupled_system), intent(in) :: sys
-    real(dp), intent(in) :: q(:)
-    real(dp), intent(out) :: theta(:)
-    integer :: i, s, l
-    real(dp) :: psi, dpsi(sys%maxld)
-    do i = 1, sys%ntq
-      theta(i) = 0.0_dp
-      do s = 1, 2
-        l = sys%tq_link(s, i)
-        if (l == 0) cycle
-        call tangent_angle(sys, l, sys%tq_end(s, i), q(sys%ld(1:3*sys%n_el(l) + 3, l)), psi, dpsi)
-        theta(i) = theta(i) + merge(1.0_dp, -1.0_dp, s == 1)*psi
-      end do
-    end do
-  end subroutine joint_angles
-
-  !> Assemble the global residual R (all DOFs) and, if want, the band iteration matrix
-  !> S = M + cc*C_v + ck*K_t over the free DOFs.  Returns energies [kinetic, strain].
-  subroutine assemble(sys, q, v, a, want, cc, ck, res, lm, energy)
-    type(coupled_system), intent(in) :: sys
-    real(dp), intent(in) :: q(:), v(:), a(:), cc, ck
+    real(dp), intent(in) :: q(:), v(:), a(:), t, cc, ck
     logical, intent(in) :: want
     real(dp), intent(out) :: res(:), energy(2)
     type(link_mats), intent(inout) :: lm
-    integer :: l, nl, i, s, idx(sys%maxld)
-    real(dp) :: rl(sys%maxld), ql(sys%maxld), vl(sys%maxld), al(sys%maxld)
-    real(dp) :: ek, ep, psi, dpsi(sys%maxld), theta(max(1, sys%ntq)), tau
+    integer :: l, nl, idx(sys%maxld)
+    real(dp) :: rl(sys%maxld), ql(sys%maxld), vl(sys%maxld), al(sys%maxld), ek, ep
     res = 0.0_dp
     energy = 0.0_dp
     if (want) then
-      lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp
+      lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp; lm%dg = 0.0_dp
     end if
-    do l = 1, sys%nlinks
+    do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3
       idx(1:nl) = sys%ld(1:nl, l)
       ql(1:nl) = q(idx(1:nl)); vl(1:nl) = v(idx(1:nl)); al(1:nl) = a(idx(1:nl))
@@ -446,18 +558,72 @@ contains
       res(idx(1:nl)) = res(idx(1:nl)) + rl(1:nl)
       energy = energy + [ek, ep]
     end do
-    call joint_angles(sys, q, theta)
-    do i = 1, sys%ntq      ! applied torques: generalized forces tau (d psi_b - d psi_a)
-      tau = torque(sys, i, theta(i))
-      do s = 1, 2
-        l = sys%tq_link(s, i)
-        if (l == 0) cycle
-        nl = 3*sys%n_el(l) + 3
-        call tangent_angle(sys, l, sys%tq_end(s, i), q(sys%ld(1:nl, l)), psi, dpsi(1:nl))
-        res(sys%ld(1:nl, l)) = res(sys%ld(1:nl, l)) - merge(1.0_dp, -1.0_dp, s == 1)*tau*dpsi(1:nl)
+    call bodies_eval(sys, q, v, a, want, res, lm, energy)
+    call drive_loads(sys, q, v, t, res)
+  end subroutine assemble
+
+  !> Rigid bodies: residual m (a_C - grav), J alpha; S gets diag(m, m, J_S) (J_S > 0 also for a body
+  !> of zero inertia whose angle a constraint holds); energies 1/2 m |v_C|^2 + 1/2 J omega^2, -m grav.r_C.
+  subroutine bodies_eval(sys, q, v, a, want, res, lm, energy)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: res(:), energy(2)
+    type(link_mats), intent(inout) :: lm
+    integer :: b, k, d(3), f
+    real(dp) :: m, jc
+    do b = 1, sys%nrb
+      d = sys%rb_dof(:, b)
+      m = sys%rb_m(1, b); jc = sys%rb_m(2, b)
+      res(d(1:2)) = res(d(1:2)) + m*(a(d(1:2)) - sys%grav)
+      res(d(3)) = res(d(3)) + jc*a(d(3))
+      energy(1) = energy(1) + 0.5_dp*(m*(v(d(1))**2 + v(d(2))**2) + jc*v(d(3))**2)
+      energy(2) = energy(2) - m*dot_product(sys%grav, q(d(1:2)))
+      if (.not. want) cycle
+      do k = 1, 3
+        f = sys%free_of(d(k))
+        if (f > 0) lm%dg(f) = lm%dg(f) + merge(m, sys%rb_m(3, b), k < 3)
       end do
     end do
-  end subroutine assemble
+  end subroutine bodies_eval
+
+  !> Force drives: res -= tau(theta, t) d theta/dq on the drives' joint coordinates.
+  subroutine drive_loads(sys, q, v, t, res)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), t
+    real(dp), intent(inout) :: res(:)
+    integer :: i, j, nc, cols(2*MAXCOL)
+    real(dp) :: tau, theta, grad(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    do i = 1, sys%nd
+      call drive_load(sys, i, q, v, t, tau, theta, nc, cols, grad, ma, mb)
+      do j = 1, nc
+        res(cols(j)) = res(cols(j)) - tau*grad(j)
+      end do
+    end do
+  end subroutine drive_loads
+
+  !> Dense residual (all DOFs, without constraint forces), iteration-matrix parts over the free DOFs and
+  !> energies at one state and time t (for tests and analysis): mm = M, cm = C_v, km = K_t,
+  !> energy = [kinetic, potential].  A rigid body's diagonal in mm is [m, m, J_S].
+  subroutine coupled_dense(sys, q, v, a, t, res, mm, cm, km, energy)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), a(:), t
+    real(dp), intent(out) :: res(:), mm(:, :), cm(:, :), km(:, :), energy(2)
+    real(dp), allocatable :: ab(:, :)
+    type(link_mats) :: lm
+    call lm_setup(sys, 1, lm)
+    allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree))
+    call assemble(sys, q, v, a, t, .true., 0.0_dp, 0.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
+    mm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree)
+    call assemble(sys, q, v, a, t, .true., 1.0_dp, 0.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
+    cm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+    call assemble(sys, q, v, a, t, .true., 0.0_dp, 1.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
+    km = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+  end subroutine coupled_dense
 
   !> Select the linear solver of coupled_run (SOLVER_AUTO, SOLVER_BAND or SOLVER_CONDENSED;
   !> module-wide, for tests and benchmarks).  status = STATUS_BAD_INPUT for another value.
@@ -479,9 +645,9 @@ contains
     integer :: l, n, nl, e, k, f, idx(6), lo, hi
     integer, allocatable :: cnt(:), bnum(:)
     logical, allocatable :: isb(:)
-    allocate (lm%off(sys%nlinks), lm%bfree(4, sys%nlinks))
+    allocate (lm%off(sys%nseg), lm%bfree(4, sys%nseg))
     lm%ni = 0; lm%kbi = 0
-    do l = 1, sys%nlinks
+    do l = 1, sys%nseg
       n = sys%n_el(l); nl = 3*n + 3
       lm%off(l) = lm%ni
       lm%ni = lm%ni + nl - 4
@@ -492,11 +658,11 @@ contains
     end do
     lm%ldi = 3*lm%kbi + 1
     lm%nrhs = max(1, nrhs)
-    allocate (lm%bb(4, 4, sys%nlinks), lm%bi(4, lm%ni), lm%ib(lm%ni, 4), lm%ai(lm%ldi, lm%ni), lm%ifree(lm%ni))
+    allocate (lm%bb(4, 4, sys%nseg), lm%bi(4, lm%ni), lm%ib(lm%ni, 4), lm%ai(lm%ldi, lm%ni), lm%ifree(lm%ni))
     allocate (cnt(sys%nfree), isb(sys%nfree), bnum(sys%nfree))
     cnt = 0; isb = .false.
     lm%cond = .true.
-    do l = 1, sys%nlinks
+    do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3
       do k = 1, 4
         f = sys%free_of(sys%ld(k, l))
@@ -512,6 +678,14 @@ contains
         end if
       end do
     end do
+    do l = 1, sys%nrb        ! rigid-body DOFs: boundary DOFs with a diagonal block
+      do k = 1, 3
+        f = sys%free_of(sys%rb_dof(k, l))
+        if (f > 0) isb(f) = .true.
+      end do
+    end do
+    allocate (lm%dg(sys%nfree))
+    lm%dg = 0.0_dp
     ! condensation needs: interior DOFs free, in one segment only, never an end position; every free
     ! DOF interior or boundary
     if (any(cnt > 1) .or. any(cnt > 0 .and. isb) .or. any(cnt == 0 .and. .not. isb)) lm%cond = .false.
@@ -526,7 +700,7 @@ contains
       bnum(f) = k; lm%bglob(k) = f
     end do
     lm%kbb = 0
-    do l = 1, sys%nlinks
+    do l = 1, sys%nseg
       lo = huge(1); hi = 0
       do k = 1, 4
         f = sys%free_of(sys%ld(k, l))
@@ -577,7 +751,7 @@ contains
   end subroutine lm_add_block
 
   !> Scatter the segment blocks into the band matrix ab (LAPACK storage, kl = ku = sys%kl) over the
-  !> free DOFs: the reference solve and coupled_dense.
+  !> free DOFs (and the rigid bodies' diagonal): the reference solve and coupled_dense.
   subroutine lm_to_band(sys, lm, ab)
     type(coupled_system), intent(in) :: sys
     type(link_mats), intent(in) :: lm
@@ -585,7 +759,7 @@ contains
     integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d, fidx(sys%maxld)
     ab = 0.0_dp
     d = sys%kl + sys%ku + 1
-    do l = 1, sys%nlinks
+    do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3; m = nl - 4; o = lm%off(l)
       fidx(1:nl) = sys%free_of(sys%ld(1:nl, l))
       do j = 1, 4
@@ -613,6 +787,9 @@ contains
         end do
       end do
     end do
+    do fi = 1, sys%nfree
+      ab(d, fi) = ab(d, fi) + lm%dg(fi)
+    end do
   end subroutine lm_to_band
 
   !> Condensed factorization: per segment S_II = LU (in place) and z = S_II^-1 S_IB; the Schur
@@ -625,7 +802,7 @@ contains
     real(dp) :: val
     d = 2*lm%kbb + 1
     lm%sb = 0.0_dp
-    do l = 1, sys%nlinks
+    do l = 1, sys%nseg
       m = 3*sys%n_el(l) - 1; o = lm%off(l)
       call dgbtrf(m, m, lm%kbi, lm%kbi, lm%ai(1, o + 1), lm%ldi, lm%ipi(o + 1), info)
       status = lapack_status(info)
@@ -645,6 +822,9 @@ contains
           lm%sb(d + bi - bj, bj) = lm%sb(d + bi - bj, bj) + val
         end do
       end do
+    end do
+    do bi = 1, lm%nb
+      lm%sb(d, bi) = lm%sb(d, bi) + lm%dg(lm%bglob(bi))
     end do
     call dgbtrf(lm%nb, lm%nb, lm%kbb, lm%kbb, lm%sb, lm%ldb, lm%ipb, info)
     status = lapack_status(info)
@@ -669,7 +849,7 @@ contains
         lm%yb(i, k) = xx(lm%bglob(i), k)
       end do
     end do
-    do l = 1, sys%nlinks
+    do l = 1, sys%nseg
       m = 3*sys%n_el(l) - 1; o = lm%off(l)
       call dgbtrs('N', m, lm%kbi, lm%kbi, nrhs, lm%ai(1, o + 1), lm%ldi, lm%ipi(o + 1), lm%yi(o + 1, 1), lm%ni, info)
       do k = 1, nrhs
@@ -680,7 +860,7 @@ contains
       end do
     end do
     call dgbtrs('N', lm%nb, lm%kbb, lm%kbb, nrhs, lm%sb, lm%ldb, lm%ipb, lm%yb, lm%nb, info)
-    do l = 1, sys%nlinks
+    do l = 1, sys%nseg
       m = 3*sys%n_el(l) - 1; o = lm%off(l)
       do k = 1, nrhs
         do j = 1, 4
@@ -699,32 +879,6 @@ contains
     end do
     if (.not. ieee_is_finite(sum(abs(lm%yb(:, 1:nrhs))) + sum(abs(lm%yi(:, 1:nrhs))))) status = STATUS_NONFINITE
   end subroutine lm_solve
-
-  !> Angle sum of constraint ic, sum_s sign_s psi_s (psi = phi + th_end, ground = 0), its gradient
-  !> over the free DOFs, and the velocity part of its second time derivative.
-  subroutine constraint_eval(sys, ic, q, v, angle, grad, acc0)
-    type(coupled_system), intent(in) :: sys
-    integer, intent(in) :: ic
-    real(dp), intent(in) :: q(:), v(:)
-    real(dp), intent(out) :: angle, grad(:), acc0
-    integer :: s, l, nl, k
-    real(dp) :: psi, dpsi(sys%maxld), sg, cs, sn, ell, g(2), om, al0, al, zero(sys%maxld)
-    angle = 0.0_dp; grad = 0.0_dp; acc0 = 0.0_dp; zero = 0.0_dp
-    do s = 1, 2
-      l = sys%con_link(s, ic)
-      if (l == 0) cycle
-      sg = merge(1.0_dp, -1.0_dp, s == 1)
-      nl = 3*sys%n_el(l) + 3
-      call tangent_angle(sys, l, sys%con_end(s, ic), q(sys%ld(1:nl, l)), psi, dpsi(1:nl))
-      angle = angle + sg*psi
-      do k = 1, nl
-        if (sys%free_of(sys%ld(k, l)) > 0) grad(sys%free_of(sys%ld(k, l))) = grad(sys%free_of(sys%ld(k, l))) &
-                                                                             + sg*dpsi(k)
-      end do
-      call chord(q(sys%ld(1:nl, l)), v(sys%ld(1:nl, l)), zero(1:nl), cs, sn, ell, g, om, al0, al)
-      acc0 = acc0 + sg*al0
-    end do
-  end subroutine constraint_eval
 
   !> Elastic deformation measure of the divergence guard [m]: over the links (seg_link(s) = link of
   !> segment s; a link's segments listed consecutively from its start), the largest of
@@ -746,10 +900,10 @@ contains
     real(dp) :: r0(2), c(2), ltot, acc, w0
     dmax = 0.0_dp
     s0 = 1
-    do while (s0 <= sys%nlinks)
+    do while (s0 <= sys%nseg)
       l = seg_link(s0)
       s1 = s0
-      do while (s1 < sys%nlinks)
+      do while (s1 < sys%nseg)
         if (seg_link(s1 + 1) /= l) exit
         s1 = s1 + 1
       end do
@@ -772,48 +926,47 @@ contains
   end function coupled_elastic_measure
 
   !> Generalized-alpha-Newton integration of the coupled model (Newmark for alpha_m = alpha_f = 0).
-  !> q, v, a: (ndof) all-DOF state, constrained entries hold their values (prescribed ones are
-  !> overwritten from presc each step).  Rotation constraints (sys%ncon): sum_s sign psi_s = cval(1,i,k),
-  !> enforced at the position level with Lagrange multipliers lam (the constraint torques).
+  !> q, v, a: (ndof) all-DOF state, fixed entries hold their values.  Constraint rows (sys%nc):
+  !> g_i(q) = cval(1, i, k) at step k (angles wrapped to the principal value), enforced at the position
+  !> level with Lagrange multipliers lam (the constraint forces: the residual holds G^T lam).
+  !> t0: time of the first step [s] (the force laws depend on time); nsteps = size(cval, 3) - 1.
   !> a is the true acceleration (made consistent with the equations and constraints at the start),
   !> p the pseudo-acceleration (init_pseudo /= 0: p = a at the start, a fresh run; else p as given,
   !> continuing a run).  On return (q, v, a, p) is the last state reached.
-  !> Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes), lf (ncon, nframes) multipliers,
-  !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the inputs (torques and
-  !> prescribed rotations), max Newton iterations since the last frame]; nvalid frames are valid.
+  !> Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes), lf (nc, nframes) multipliers,
+  !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the inputs (force drives and
+  !> moving constraint rows), max Newton iterations since the last frame]; nvalid frames are valid.
   !> Divergence guard: coupled_elastic_measure > div_limit [m] after a step stops the run with
   !> STATUS_DIVERGED (fail_step = that step).
-  subroutine coupled_run(sys, presc_dof, presc, cval, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
+  subroutine coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
                          init_pseudo, div_limit, seg_link, q, v, a, p, qf, vf, af, lf, ef, status, fail_step, &
                          iters, nvalid)
     type(coupled_system), intent(in) :: sys
-    integer, intent(in) :: presc_dof(:)          !< (np) prescribed DOFs (all-DOF numbers)
-    real(dp), intent(in) :: presc(:, :, :)       !< (3, np, nsteps+1) [q, v, a] of prescribed DOFs
-    real(dp), intent(in) :: cval(:, :, :)        !< (3, ncon, nsteps+1) [angle, rate, acceleration] of constraints
-    real(dp), intent(in) :: dt, tol
+    real(dp), intent(in) :: cval(:, :, :)        !< (3, >= nc, nsteps+1) [value, rate, acceleration] of the rows
+    real(dp), intent(in) :: t0, dt, tol
     real(dp), intent(in) :: alpha_m, alpha_f, beta, gamma   !< generalized-alpha parameters
     integer, intent(in) :: out_every, maxit, init_pseudo
     real(dp), intent(in) :: div_limit              !< divergence limit [m]
-    integer, intent(in) :: seg_link(:)             !< (number of segments) link of each segment
+    integer, intent(in) :: seg_link(:)             !< (nseg) link of each segment
     real(dp), intent(inout) :: q(:), v(:), a(:), p(:)
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
-    real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), theta0(:), theta1(:), w(:)
-    real(dp), allocatable :: gt(:, :), x(:, :), amat(:, :), lam(:), dlam(:), gval(:), acc0(:), ang0(:), ang1(:), lam0(:)
+    real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
+    real(dp), allocatable :: lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
-    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref
+    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
     logical :: converged, refactor, use_cond
     type(link_mats) :: lm
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0
-    nsteps = size(presc, 3) - 1
+    nsteps = size(cval, 3) - 1
     nf = sys%nfree
-    nc = sys%ncon
+    nc = sys%nc
     refactor = .false.
-    if (out_every < 1 .or. dt <= 0.0_dp .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
-        (nc > 0 .and. size(cval, 3) /= nsteps + 1) .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
+    if (out_every < 1 .or. dt <= 0.0_dp .or. nsteps < 0 .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
+        size(cval, 2) < nc .or. size(lf, 1) < nc .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
         alpha_m >= 1.0_dp .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. &
-        size(seg_link) /= sys%nlinks .or. size(p) /= sys%ndof) then
+        size(seg_link) /= sys%nseg .or. size(p) /= sys%ndof) then
       status = STATUS_BAD_INPUT
       return
     end if
@@ -835,62 +988,40 @@ contains
     else
       allocate (ab(band_rows(sys%kl, sys%ku), nf))
     end if
-    allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf))
-    allocate (w(sys%ndof))
+    allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf))
     w = 0.0_dp
-    allocate (theta0(max(1, sys%ntq)), theta1(max(1, sys%ntq)), freeidx(nf))
     allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
-              dlam(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), ang0(max(1, nc)), ang1(max(1, nc)), ipc(max(1, nc)), &
-              lam0(max(1, nc)))
-    allocate (gnz(10, max(1, nc)), ngnz(max(1, nc)))
+              dlam(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
+              lam0(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
+              tau0(max(1, sys%nd)))
+    gt = 0.0_dp
     do i = 1, sys%ndof
       if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
     end do
     call gradient_pattern()
-    lam = 0.0_dp
-    call set_prescribed(1)
-    ! consistent initial acceleration: [M G; G^T 0] [a; lam] = [-R(q0, v0, 0); cval'' - acc0]
-    a(freeidx) = 0.0_dp
-    call assemble(sys, q, v, a, .true., 0.0_dp, 0.0_dp, res, lm, energy)
-    rf = -res(freeidx)
-    call factor()
+    call initial_acceleration()
     if (status /= STATUS_OK) return
-    call constraints(1)
-    if (status /= STATUS_OK) return
-    call band_solve_rhs(rf)
-    if (nc > 0) then
-      do i = 1, nc
-        dlam(i) = gdot(i, rf) - (cval(3, i, 1) - acc0(i))
-      end do
-      call small_solve(dlam)
-      do i = 1, nc
-        rf = rf - x(:, i)*dlam(i)
-      end do
-      lam(1:nc) = dlam(1:nc)
-    end if
-    if (status /= STATUS_OK) return
-    a(freeidx) = rf
     if (init_pseudo /= 0) p = a
     work = 0.0_dp
-    call joint_angles(sys, q, theta0)
-    call con_angles(ang0)
+    call drive_state(t0, th0, tau0)
+    call row_values(g0)
     lam0 = lam
     frame = 1
-    qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; lf(:, 1) = lam(1:size(lf, 1))
+    qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; lf(1:nc, 1) = lam(1:nc)
     ef(:, 1) = [energy(1), energy(2), 0.0_dp, 0.0_dp]
     nvalid = 1
     itmax_frame = 0
     do n = 1, nsteps
+      t = t0 + n*dt
       w(freeidx) = alpha_f*a(freeidx) - alpha_m*p(freeidx)     ! zero for Newmark
       qs = q + dt*v + (dt*dt*(0.5_dp - beta))*p + (dt*dt*beta*c1)*w
       vs = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
-      call set_prescribed(n + 1)
       converged = .false.
       da_prev = huge(1.0_dp)
       do it = 1, maxit
         q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
         v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
-        call assemble(sys, q, v, a, it == 1, gammap*dt, betap*dt*dt, res, lm, energy)
+        call assemble(sys, q, v, a, t, it == 1, gammap*dt, betap*dt*dt, res, lm, energy)
         if (it == 1) then
           call factor()
           if (status /= STATUS_OK) exit
@@ -938,21 +1069,11 @@ contains
         fail_step = n
         return
       end if
-      call joint_angles(sys, q, theta1)
-      do i = 1, sys%ntq    ! work of the torques, trapezoidal in the joint angle
-        work = work + 0.5_dp*(torque(sys, i, theta0(i)) + torque(sys, i, theta1(i)))*wrap(theta1(i) - theta0(i))
-      end do
-      theta0 = theta1
-      call con_angles(ang1)
-      do i = 1, nc         ! work of the prescribed rotations (the constraint torque is -lam), trapezoidal
-        work = work - 0.5_dp*(lam0(i) + lam(i))*wrap(ang1(i) - ang0(i))
-      end do
-      ang0 = ang1
-      lam0 = lam
+      call step_work(t)
       if (mod(n, out_every) == 0) then
-        call assemble(sys, q, v, a, .false., 0.0_dp, 0.0_dp, res, lm, energy)
+        call assemble(sys, q, v, a, t, .false., 0.0_dp, 0.0_dp, res, lm, energy)
         frame = frame + 1
-        qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a; lf(:, frame) = lam(1:size(lf, 1))
+        qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a; lf(1:nc, frame) = lam(1:nc)
         ef(:, frame) = [energy(1), energy(2), work, real(itmax_frame, dp)]
         nvalid = frame
         itmax_frame = 0
@@ -961,26 +1082,64 @@ contains
 
   contains
 
-    !> Free DOFs on which constraint ic's gradient can be nonzero (the end positions and the
-    !> end rotation of its one or two segments), without repetitions: gnz(1:ngnz(ic), ic).
+    !> Free DOFs on which row ic's gradient can be nonzero (the columns of its two markers), without
+    !> repetitions: gnz(1:ngnz(ic), ic).
     subroutine gradient_pattern()
-      integer :: ic, s, l, k, f, loc(5)
+      integer :: ic, k, f, ncl, cols(2*MAXCOL)
+      real(dp) :: gv, gd, ac, grad(2*MAXCOL)
+      type(marker_state) :: ma, mb
       ngnz = 0
       do ic = 1, nc
-        do s = 1, 2
-          l = sys%con_link(s, ic)
-          if (l == 0) cycle
-          loc = [1, 2, 3, 4, th_index(sys%n_el(l), sys%con_end(s, ic)*sys%n_el(l))]
-          do k = 1, 5
-            f = sys%free_of(sys%ld(loc(k), l))
-            if (f == 0) cycle
-            if (any(gnz(1:ngnz(ic), ic) == f)) cycle
-            ngnz(ic) = ngnz(ic) + 1
-            gnz(ngnz(ic), ic) = f
-          end do
+        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
+                      q, v, gv, gd, ac, ncl, cols, grad, ma, mb)
+        do k = 1, ncl
+          f = sys%free_of(cols(k))
+          if (f == 0) cycle
+          if (any(gnz(1:ngnz(ic), ic) == f)) cycle
+          ngnz(ic) = ngnz(ic) + 1
+          gnz(ngnz(ic), ic) = f
         end do
       end do
     end subroutine gradient_pattern
+
+    !> Consistent initial acceleration and multipliers at t0: [M G; G^T 0] [a; lam] = [-R(q, v, 0);
+    !> cval'' - acc0], by iterative refinement with S = M (a rigid body's J_S stands for a zero inertia
+    !> in S; the refinement removes its effect).
+    subroutine initial_acceleration()
+      integer :: k, j
+      real(dp) :: dn, an, dn_prev
+      dn_prev = huge(1.0_dp)
+      a(freeidx) = 0.0_dp
+      lam = 0.0_dp
+      do k = 1, max(1, maxit)
+        call assemble(sys, q, v, a, t0, k == 1, 0.0_dp, 0.0_dp, res, lm, energy)
+        if (k == 1) then
+          call factor()
+          if (status /= STATUS_OK) return
+        end if
+        call constraints(1)
+        if (status /= STATUS_OK) return
+        rf = -res(freeidx)
+        call band_solve_rhs(rf)
+        if (status /= STATUS_OK) return
+        if (nc > 0) then
+          do j = 1, nc
+            dlam(j) = gdot(j, rf) - (cval(3, j, 1) - acc0(j) - gdot(j, a(freeidx)))
+          end do
+          call small_solve(dlam)
+          if (status /= STATUS_OK) return
+          do j = 1, nc
+            rf = rf - x(:, j)*dlam(j)
+          end do
+          lam(1:nc) = lam(1:nc) + dlam(1:nc)
+        end if
+        a(freeidx) = a(freeidx) + rf
+        dn = sqrt(sum(rf**2)); an = sqrt(sum(a(freeidx)**2))
+        if (dn <= 1.0e-3_dp*tol*(an + 1.0e-30) .or. dn > 0.5_dp*dn_prev) exit   ! converged, or round-off
+        dn_prev = dn
+      end do
+      call assemble(sys, q, v, a, t0, .false., 0.0_dp, 0.0_dp, res, lm, energy)
+    end subroutine initial_acceleration
 
     !> G(:, ic)^T y over the gradient's nonzero pattern.
     pure real(dp) function gdot(ic, y)
@@ -993,46 +1152,74 @@ contains
       end do
     end function gdot
 
-    pure real(dp) function wrap(x)
-      real(dp), intent(in) :: x
-      wrap = atan2(sin(x), cos(x))
-    end function wrap
-
-    subroutine set_prescribed(k)
-      integer, intent(in) :: k
-      integer :: j
-      do j = 1, size(presc_dof)
-        q(presc_dof(j)) = presc(1, j, k); v(presc_dof(j)) = presc(2, j, k); a(presc_dof(j)) = presc(3, j, k)
-      end do
-    end subroutine set_prescribed
-
-    subroutine con_angles(ang)
-      real(dp), intent(out) :: ang(:)
-      integer :: ic
-      real(dp) :: a1
+    !> Values of the rows (the constraint functions, not their errors).
+    subroutine row_values(gv)
+      real(dp), intent(out) :: gv(:)
+      integer :: ic, ncl, cols(2*MAXCOL)
+      real(dp) :: gd, ac, grad(2*MAXCOL)
+      type(marker_state) :: ma, mb
       do ic = 1, nc
-        call constraint_eval(sys, ic, q, v, ang(ic), gt(:, ic), a1)
+        if (sys%con(1, ic) == CON_POINT .or. sys%con(4, ic) /= 1) cycle   ! only moving rows do work
+        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
+                      q, v, gv(ic), gd, ac, ncl, cols, grad, ma, mb)
       end do
-    end subroutine con_angles
+    end subroutine row_values
 
-    !> Constraint gradients (X = S^-1 G and the Schur matrix when S was just factorized), values
-    !> g = angle - cval (principal value), velocity part of the angle acceleration, and G^T lam in res.
+    !> Coordinates and generalized forces of the force drives at time tt.
+    subroutine drive_state(tt, th, tau)
+      real(dp), intent(in) :: tt
+      real(dp), intent(out) :: th(:), tau(:)
+      integer :: i2, ncl, cols(2*MAXCOL)
+      real(dp) :: grad(2*MAXCOL)
+      type(marker_state) :: ma, mb
+      do i2 = 1, sys%nd
+        call drive_load(sys, i2, q, v, tt, tau(i2), th(i2), ncl, cols, grad, ma, mb)
+      end do
+    end subroutine drive_state
+
+    !> Work of the inputs over the step just taken, trapezoidal: force drives tau d theta, moving rows
+    !> (kinematic drives, whose generalized force is -lam) -lam d g.
+    subroutine step_work(tt)
+      real(dp), intent(in) :: tt
+      real(dp) :: th1(max(1, sys%nd)), tau1(max(1, sys%nd)), g1(max(1, nc)), dth
+      integer :: i2
+      call drive_state(tt, th1, tau1)
+      do i2 = 1, sys%nd
+        dth = th1(i2) - th0(i2)
+        if (sys%dv(1, i2) == CON_ANGLE) dth = wrap(dth)
+        work = work + 0.5_dp*(tau0(i2) + tau1(i2))*dth
+      end do
+      th0 = th1; tau0 = tau1
+      call row_values(g1)
+      do i2 = 1, nc
+        if (sys%con(1, i2) == CON_POINT .or. sys%con(4, i2) /= 1) cycle
+        dth = g1(i2) - g0(i2)
+        if (sys%con(1, i2) == CON_ANGLE) dth = wrap(dth)
+        work = work - 0.5_dp*(lam0(i2) + lam(i2))*dth
+      end do
+      g0 = g1
+      lam0 = lam
+    end subroutine step_work
+
+    !> Constraint gradients (X = S^-1 G and the Schur matrix when S was just factorized), errors
+    !> gval = g - cval (angles: principal value), velocity parts acc0 of g'', and G^T lam in res.
     subroutine constraints(k)
       integer, intent(in) :: k
-      integer :: ic, s, l, nl, j
-      real(dp) :: ang, psi, dpsi(sys%maxld), sg
+      integer :: ic, j, f, ncl, cols(2*MAXCOL)
+      real(dp) :: gv, gd, grad(2*MAXCOL)
+      type(marker_state) :: ma, mb
       do ic = 1, nc
-        call constraint_eval(sys, ic, q, v, ang, gt(:, ic), acc0(ic))
-        gval(ic) = wrap(ang - cval(1, ic, k))
-        do s = 1, 2            ! residual += G^T lam (over all DOFs)
-          l = sys%con_link(s, ic)
-          if (l == 0) cycle
-          sg = merge(1.0_dp, -1.0_dp, s == 1)
-          nl = 3*sys%n_el(l) + 3
-          call tangent_angle(sys, l, sys%con_end(s, ic), q(sys%ld(1:nl, l)), psi, dpsi(1:nl))
-          do j = 1, nl
-            res(sys%ld(j, l)) = res(sys%ld(j, l)) + sg*lam(ic)*dpsi(j)
-          end do
+        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
+                      q, v, gv, gd, acc0(ic), ncl, cols, grad, ma, mb)
+        gval(ic) = gv - cval(1, ic, k)
+        if (sys%con(1, ic) == CON_ANGLE) gval(ic) = wrap(gval(ic))
+        do j = 1, ngnz(ic)
+          gt(gnz(j, ic), ic) = 0.0_dp
+        end do
+        do j = 1, ncl
+          res(cols(j)) = res(cols(j)) + lam(ic)*grad(j)
+          f = sys%free_of(cols(j))
+          if (f > 0) gt(f, ic) = gt(f, ic) + grad(j)
         end do
       end do
       if (nc > 0 .and. refactor) then
@@ -1083,5 +1270,79 @@ contains
     end subroutine small_solve
 
   end subroutine coupled_run
+
+  !> Post-processing of frames (qf, vf, af (ndof, nf), multipliers lf (>= nc, nf), times tf (nf)):
+  !>   mks(9, nmk, nf)   every marker's [x, y, psi, x', y', psi', x'', y'', psi'']
+  !>   mv(3, nm, nf)     [value, rate, acceleration] of the measure rows meas(4, nm) = [kind, marker a,
+  !>                     marker b, aux], directions meas_dir(2, nm) (same kinds as the constraints)
+  !>   dvals(nd, nf)     the force drives' generalized forces tau(theta, t)
+  !>   rend(4, nseg, nf) per segment, the residual at its end positions of everything acting on the
+  !>                     segment (inertia, elastic forces, gravity, the force drives' and the constraint
+  !>                     rows' generalized forces on its DOFs, split by marker owner): the force the
+  !>                     rest of the mechanism exerts on the segment there through shared DOFs
+  subroutine coupled_post(sys, qf, vf, af, lf, tf, meas, meas_dir, mks, mv, dvals, rend)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), tf(:), meas_dir(:, :)
+    integer, intent(in) :: meas(:, :)
+    real(dp), intent(out) :: mks(:, :, :), mv(:, :, :), dvals(:, :), rend(:, :, :)
+    integer :: k, m, i, l, nl, ncl, cols(2*MAXCOL)
+    real(dp) :: g, gd, acc0, grad(2*MAXCOL), tau, rl(sys%maxld), ek, ep
+    type(marker_state) :: ma, mb
+    type(link_mats) :: lm
+    call lm_setup(sys, 1, lm)
+    mks = 0.0_dp; mv = 0.0_dp; dvals = 0.0_dp; rend = 0.0_dp
+    do k = 1, size(qf, 2)
+      do m = 1, sys%nmk
+        call get_marker(sys, m, qf(:, k), vf(:, k), ma)
+        mks(1:6, m, k) = [ma%r, ma%psi, ma%rd, ma%psid]
+        mks(7:8, m, k) = ma%ra0 + matmul(ma%dr(:, 1:ma%n), af(ma%col(1:ma%n), k))
+        mks(9, m, k) = ma%psia0 + dot_product(ma%dpsi(1:ma%n), af(ma%col(1:ma%n), k))
+      end do
+      do i = 1, size(meas, 2)
+        call eval_row(sys, meas(1, i), meas(4, i), meas_dir(:, i), meas(2, i), meas(3, i), qf(:, k), vf(:, k), &
+                      g, gd, acc0, ncl, cols, grad, ma, mb)
+        mv(:, i, k) = [g, gd, acc0 + dot_product(grad(1:ncl), af(cols(1:ncl), k))]
+      end do
+      do l = 1, sys%nseg
+        nl = 3*sys%n_el(l) + 3
+        call link_eval(sys, l, qf(sys%ld(1:nl, l), k), vf(sys%ld(1:nl, l), k), af(sys%ld(1:nl, l), k), .false., &
+                       0.0_dp, 0.0_dp, rl, lm, ek, ep)
+        rend(:, l, k) = rl(1:4)
+      end do
+      do i = 1, sys%nd
+        call drive_load(sys, i, qf(:, k), vf(:, k), tf(k), tau, g, ncl, cols, grad, ma, mb)
+        dvals(i, k) = tau
+        call add_ends(-tau*grad, sys%dv(2, i), sys%dv(3, i), ma, mb, rend(:, :, k))
+      end do
+      do i = 1, sys%nc
+        call eval_row(sys, sys%con(1, i), sys%con(4, i), sys%con_dir(:, i), sys%con(2, i), sys%con(3, i), &
+                      qf(:, k), vf(:, k), g, gd, acc0, ncl, cols, grad, ma, mb)
+        call add_ends(lf(i, k)*grad, sys%con(2, i), sys%con(3, i), ma, mb, rend(:, :, k))
+      end do
+    end do
+
+  contains
+
+    !> Add generalized forces f (columns: marker a's, then b's) to the end positions of the segments
+    !> that own them.
+    subroutine add_ends(f, mka, mkb, ma, mb, re)
+      real(dp), intent(in) :: f(:)
+      integer, intent(in) :: mka, mkb
+      type(marker_state), intent(in) :: ma, mb
+      real(dp), intent(inout) :: re(:, :)
+      integer :: j
+      if (sys%mk_kind(mka) == MK_NODE) then
+        do j = 1, ma%n
+          if (ma%loc(j) <= 4) re(ma%loc(j), sys%mk_idx(mka)) = re(ma%loc(j), sys%mk_idx(mka)) + f(j)
+        end do
+      end if
+      if (sys%mk_kind(mkb) == MK_NODE) then
+        do j = 1, mb%n
+          if (mb%loc(j) <= 4) re(mb%loc(j), sys%mk_idx(mkb)) = re(mb%loc(j), sys%mk_idx(mkb)) + f(ma%n + j)
+        end do
+      end if
+    end subroutine add_ends
+
+  end subroutine coupled_post
 
 end module flexmech_coupled

@@ -17,13 +17,13 @@ CASES = [("fourbar_hac", ["links.0.elements=6", "links.1.elements=4", "links.2.e
 
 
 def _run(cases_dir, name, extra, model, mode):
-    assert kernels.api.cpl_set_solver(mode) == 0
+    assert kernels.cpl.cpl_set_solver(mode) == 0
     try:
         case = fm.load_case(cases_dir / f"{name}.toml",
                             overrides=["solver.t_end=0.003", "solver.dt=1e-5", "solver.output_every=10"] + extra)
         return fm.simulate(case, model=model)
     finally:
-        kernels.api.cpl_set_solver(AUTO)
+        kernels.cpl.cpl_set_solver(AUTO)
 
 
 @pytest.mark.parametrize("model", ["coupled", "nonlinear"])
@@ -51,5 +51,5 @@ def test_condensed_solve_equals_band_solve(cases_dir, name, extra, model):
 
 
 def test_set_solver_rejects_unknown_mode():
-    assert kernels.api.cpl_set_solver(7) == 4
-    assert kernels.api.cpl_set_solver(AUTO) == 0
+    assert kernels.cpl.cpl_set_solver(7) == 4
+    assert kernels.cpl.cpl_set_solver(AUTO) == 0

@@ -22,6 +22,7 @@ from flexmech_py.case import integrator_coefficients
 from flexmech_py.cli import main
 from flexmech_py.coupled import CoupledModel
 from flexmech_py.errors import CaseError, SolverError
+from flexmech_py import kernels
 from flexmech_py.kernels import api, check_status
 from flexmech_py.simulate import Prepared
 
@@ -83,14 +84,10 @@ KED_SDOF = (np.array([0, 0, 0, 1, 0, 0], np.int32), np.array([1], np.int32),
             np.array([1], np.int32), np.array([3], np.int32), np.zeros(1))
 KED_OMEGA = 1.0                                                                # sqrt(k / m)
 
-# coupled loop: one link, one element, fixed chord (ends held, th_1 prescribed to 0): only th_0 free,
-# m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L
-CPL_SDOF = (np.array([0, 0, 0, 0, 1, 0], np.int32), np.array([1], np.int32),
-            np.asfortranarray(np.arange(1, 7, dtype=np.int32).reshape(6, 1)),
-            np.asfortranarray([[1.0], [105.0], [1e3], [0.25]]),                # L, rho A, EA, EI
-            np.ones(1, np.int32), np.zeros((2, 1), order="F"), np.ones(1, np.int32), np.zeros(1, np.int32),
-            np.zeros(1), np.array([[1], [0]], np.int32, order="F"), np.zeros((2, 1), np.int32, order="F"),
-            np.zeros((1, 1), order="F"))
+# coupled loop: one segment, one element, fixed chord (ends and th_1 fixed): only th_0 free,
+# m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L (flat description: flexmech_coupled, coupled_build)
+CPL_SDOF = (np.array([1, 0, 6, 1] + [0] * 8 + [1] + list(range(1, 7)) + [0, 0, 0, 0, 1, 0], np.int32),
+            np.array([1.0, 105.0, 1e3, 0.25, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]))   # L, rho A, EA, EI; node fractions
 CPL_OMEGA = 1.0
 CPL_Q0 = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
 
@@ -113,10 +110,8 @@ def cpl_steps(h, coef, u, v, p, nsteps=1):
     q, vv, a, pp = CPL_Q0.copy(), np.zeros(6), np.zeros(6), np.zeros(6)
     q[4], vv[4], pp[4] = u, v, p
     zeros3 = np.zeros((3, 1, nsteps + 1), order="F")
-    qf, vf, af, lf, ef, status, _, _, nvalid = api.cpl_run(
-        nsteps + 1, 0, *CPL_SDOF, np.array([[1], [0]], np.int32, order="F"), np.zeros((2, 1), np.int32, order="F"),
-        zeros3, np.zeros(2), np.zeros(2), np.array([6], np.int32), zeros3, h, *coef, 1, 1e-14, 25, 0, 1e300,
-        np.array([1], np.int32), q, vv, a, pp)
+    qf, vf, af, lf, ef, status, _, _, nvalid = kernels.cpl.cpl_run(
+        nsteps + 1, *CPL_SDOF, zeros3, 0.0, h, *coef, 1, 1e-14, 25, 0, 1e300, np.array([1], np.int32), q, vv, a, pp)
     check_status(status, "cpl_run")
     assert nvalid == nsteps + 1
     return qf[4], vf[4], (q[4], vv[4], a[4], pp[4])
@@ -135,8 +130,7 @@ def measured_matrix(loop, om, coef):
 
 def test_sdof_oscillators_are_what_they_claim():
     """The coupled-loop oscillator: its mass and stiffness from the kernel are rho A L^3/105 and 4 EI/L."""
-    res, mm, cm, km, energy, status = api.cpl_dense(1, *CPL_SDOF, np.zeros(2), np.zeros(2), CPL_Q0, np.zeros(6),
-                                                    np.zeros(6))
+    res, mm, cm, km, energy, status = kernels.cpl.cpl_dense(1, *CPL_SDOF, CPL_Q0, np.zeros(6), np.zeros(6), 0.0)
     check_status(status, "cpl_dense")
     assert mm[0, 0] == pytest.approx(1.0, rel=1e-12) and km[0, 0] == pytest.approx(1.0, rel=1e-12)
     assert cm[0, 0] == 0.0
@@ -278,7 +272,7 @@ def test_superposition_run_continues_in_chunks(cases_dir, case_name, name, param
 def test_coupled_run_continues_in_chunks(cases_dir):
     case = fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=0.01", "solver.output_every=1"])
     p = Prepared(case)
-    cm = CoupledModel.from_case(case, p.fe)
+    cm = CoupledModel.from_case(case)
     coef = dict(zip(("alpha_m", "alpha_f", "beta", "gamma"),
                     integrator_coefficients("generalized-alpha", {"rho_inf": 0.5})))
     q0, v0 = cm.initial_state(p.rm.select(slice(0, 1)))

@@ -8,8 +8,8 @@ from scipy.integrate import solve_bvp
 from conftest import assert_free_pendulum_conserves_energy
 
 import flexmech_py as fm
-from flexmech_py.coupled import CoupledModel, node_state
-from flexmech_py.model import FEModel
+from flexmech_py.coupled import CoupledModel
+from flexmech_py.coupled_outputs import node_state
 from flexmech_py.simulate import simulate_models
 
 # Mattiasson (1981), tip-loaded cantilever: (PL^2/EI, vertical tip deflection / L, shortening / L);
@@ -44,7 +44,7 @@ def static_cantilever_tip(k, n):
                    "density": 1.0, "elements": n}],
         "drive": {"type": "torque", "torques": [{"joint": "base", "constant": 0.0}]},
         "solver": {"t_end": 1.0, "dt": 1.0}, "outputs": {"a": {"kind": "joint_angle", "joint": "base"}}})
-    cm = CoupledModel.from_case(case, FEModel.from_case(case), split=True)
+    cm = CoupledModel.from_case(case, split=True)
     q = cm.q_fixed.copy()
     for si, (_, k0, k1) in enumerate(cm.segments):
         d = cm.seg_slice(si)

@@ -1,0 +1,419 @@
+"""The layout of the coupled and nonlinear models (flexmech_py.coupled) built from a mechanism:
+segments and their DOFs, rigid bodies, markers, constraint rows per joint, force drives, lumped
+inertias, and the kernel's flat description (fortran/flexmech_coupled.f90: coupled_build).
+
+- Every flexible link is one beam *segment* (coupled model) or one segment per element (nonlinear
+  model): the absolute positions of the segment ends (shared by the segments that meet there) and
+  elastic DOFs in the segment's chord frame.
+- Every rigid link and rigid body is a rigid body with coordinates [x_C, y_C, phi].
+- Joints are constraint rows on *markers* (a segment node, a rigid-body point, a ground point) of the
+  kinds of ``fortran/flexmech_markers.f90``, with Lagrange multipliers (the constraint forces); a
+  revolute or weld joint between two segment-end nodes shares their position DOFs instead (no
+  multipliers), a ground joint there fixes them.
+- A kinematic drive is a row on its joint's coordinate, a force drive a generalized force on it.
+
+The rows of each joint kind are in :data:`JOINT_ROWS`: a new joint kind is one entry there (and one
+constraint kind in Fortran when its rows are new).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import CaseError
+from .model import link_mesh, rcm_free_numbering
+
+__all__ = ["Layout", "Row", "JointModel", "LinkMesh", "JOINT_ROWS", "HOLDING", "CON_POINT", "CON_ANGLE",
+           "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",
+           "start_value", "flat_description"]
+
+# constraint kinds (flexmech_markers) and marker kinds (flexmech_coupled)
+CON_POINT, CON_ANGLE, CON_PROJECTION = 1, 2, 3
+MK_GROUND, MK_NODE, MK_BODY = 0, 1, 2
+J_FLOOR = 1e-6     # a rigid body without rotary inertia: J_S = J_FLOOR m lref^2 in the iteration matrix
+
+#: the rows of each joint kind: "point" (2 rows, or shared position DOFs), "normal" (the prismatic
+#: guide's normal projection), "angle" (relative angle held at its initial value); the joint
+#: coordinate a drive acts on is an "angle" (revolute) or a "slide" projection (prismatic)
+JOINT_ROWS = {"revolute": (("point",), "angle"), "weld": (("point", "angle"), "angle"),
+              "prismatic": (("normal", "angle"), "slide")}
+#: elastic conditions that hold the joint coordinate at its initial value in these models (theory.md D9)
+HOLDING = {"revolute": ("locked", "clamp"), "prismatic": ("locked",), "weld": ()}
+
+
+@dataclass
+class Row:
+    """A constraint row (or a measure) between markers a and b: ``kind`` CON_*, ``aux`` (the component
+    of a point row; 1 for a row whose value moves), ``d`` the direction of a projection in a's frame,
+    ``value``: ("zero",), ("start", joint, what) its initial value, or ("drive", joint)."""
+
+    kind: int
+    a: int
+    b: int
+    aux: int = 0
+    d: tuple = (0.0, 0.0)
+    value: tuple = ("zero",)
+    joint: str | None = None
+    role: str = ""
+
+
+@dataclass
+class JointModel:
+    """How the model holds one joint: its markers, whether it shares DOFs, its rows by role
+    (x, y, normal, angle, hold, drive), its coordinate (a measure Row) and force drive."""
+
+    name: str
+    kind: str
+    markers: tuple
+    shared: object = None          # the position node the two sides share (None: point rows)
+    rows: dict = field(default_factory=dict)
+    coordinate: Row | None = None
+    force: int | None = None
+    axis: tuple = (1.0, 0.0)       # prismatic: the guide direction in a's frame
+
+
+@dataclass
+class LinkMesh:
+    """The flexible links' mesh nodes and elements as a result's ``fe`` (what the guards, the gap
+    study and the summary read): one node per (link, mesh node), no nodes for rigid links; ``ndof``
+    the size of the displacement layout, ``nfree`` and ``bandwidth`` the model's own."""
+
+    case: dict
+    link_names: list
+    n_el: list
+    node_frac: list
+    node_of: list
+    nnodes: int
+    trans_dof: np.ndarray
+    rot_dof: dict
+    ndof: int
+    el_link: np.ndarray
+    nfree: int = 0
+    bandwidth: int = 0
+
+    @property
+    def nel(self) -> int:
+        return int(self.el_link.size)
+
+    def link_elements(self, li: int) -> np.ndarray:
+        return np.flatnonzero(self.el_link == li + 1)
+
+    def node_ref(self, ref: str, where: str) -> tuple[int, int, float]:
+        """(link, node, zeta [m]) of a flexible link's point; CaseError when it is not a mesh node."""
+        link, pos = ref.split(".", 1)
+        li = self.link_names.index(link)
+        k = mesh_node(self.case, self.node_frac, li, pos, where)
+        return li, self.node_of[li][k], self.node_frac[li][k] * self.case["links"][li]["length"]
+
+
+def mesh_node(case, fracs, li: int, point: str, where: str) -> int:
+    link = case.mechanism.links[li]
+    frac = link.fraction(point, where)
+    f = fracs[li]
+    k = int(np.argmin(np.abs(f - frac)))
+    if abs(f[k] - frac) > 1e-9:
+        n = len(f) - 1
+        raise CaseError(where, f"'{link.name}.{point}' is not at a mesh node ({link.name} has {n} elements: "
+                               f"fractions k/{n}); choose a node, name the point in links.points, or change "
+                               "elements_per_link")
+    return k
+
+
+def node_segment(segments, li: int, k: int) -> tuple[int, int]:
+    """(segment, node within it) of mesh node k of link li: the first segment holding it."""
+    for si, (l2, k0, k1) in enumerate(segments):
+        if l2 == li and k0 <= k <= k1:
+            return si, k - k0
+    raise AssertionError((li, k))
+
+
+def marker_key(m, pr, where: str) -> tuple:
+    """(kind, segment or body, node, (x, y)) of a resolved point: a segment node of a flexible link, a
+    rigid-body point (from its centre of mass, body frame) or a ground point; m: a Layout or a
+    CoupledModel (case, fracs, segments, bodies)."""
+    if pr.body is None:
+        return (MK_GROUND, 0, 0, tuple(map(float, pr.position)))
+    mech = m.case.mechanism
+    bi = mech.body_index(pr.body)
+    if pr.body.kind == "link" and not pr.body.rigid:
+        li = mech.link_index(pr.body.name)
+        k = mesh_node(m.case, m.fracs, li, pr.point, where)
+        si, kk = node_segment(m.segments, li, k)
+        return (MK_NODE, si, kk, (0.0, 0.0))
+    body = next(i for i, b in enumerate(m.bodies) if b[0] == bi)
+    return (MK_BODY, body, 0, tuple(map(float, pr.body.marker(pr.point, where))))
+
+
+def start_value(mech, rm, joint: str, what: str) -> float:
+    """Initial value of a held quantity of a joint: its relative body angle ("angle") or its coordinate
+    ("coordinate") on the first sample of the rigid motion."""
+    if what == "coordinate":
+        return float(rm.joint(joint)[0, 0])
+    a, b = mech.joint_points(mech.joint(joint))
+    ang = [0.0 if p.body is None else float(rm.z[0, 3 * mech.body_index(p.body) + 2]) for p in (a, b)]
+    return ang[1] - ang[0]
+
+
+class Layout:
+    """The layout of a case's coupled (``split=False``) or nonlinear (``split=True``) model, built
+    step by step on construction: ``segments`` (link, k0, k1), ``fracs`` (node fractions per link,
+    None for rigid links), ``bodies`` (mechanism body index, 0-based DOFs (3,), m, J_C, J_S),
+    ``markers`` (kind, segment or body, node, (x, y)), ``rows`` the constraint rows, ``joints``
+    {name: JointModel}, ``forces`` [(coordinate Row, Drive)], ``pm`` (segment, element, xi, mass),
+    ``ri`` (segment, node, J), ``node_ends`` {position node: [(segment, 0 start / 1 end)]}; then
+    ``ld``, ``n_el``, ``free_of``, ``q_fixed`` and ``mesh``."""
+
+    def __init__(self, case, split: bool):
+        self.case, self.split, self.mech = case, split, case.mechanism
+        if not any(not ln.rigid for ln in self.mech.links):
+            raise CaseError("links", "the coupled and nonlinear models need at least one flexible link; make a link "
+                                     "flexible (rigid = false) or use the rigid-body solution")
+        self.fracs = [None if ln.rigid else link_mesh(ln, self.case["links"][li]["elements"])
+                      for li, ln in enumerate(self.mech.links)]
+        self.segments = []
+        for li, f in enumerate(self.fracs):
+            if f is not None:
+                n = f.size - 1
+                self.segments += [(li, k, k + 1) for k in range(n)] if split else [(li, 0, n)]
+        self.bodies, self.markers, self.rows, self.joints, self.forces = [], [], [], {}, []
+        self.dof, self.fixed, self.node_ends, self.parent = {}, {}, {}, {}
+        self._positions()
+        self._joints()
+        self._lumped()
+        self.n_el = np.array([k1 - k0 for _, k0, k1 in self.segments], np.int32)
+        self.ld = self._ld_array()
+        self.free_of = self._free_numbering()
+        self.q_fixed = self._q_fixed()
+        self.mesh = self._mesh()
+
+    # --------------------------------------------------------------- position nodes and DOFs
+    def _find(self, x):
+        while self.parent.get(x, x) != x:
+            x = self.parent[x]
+        return x
+
+    def _end_node(self, pr):
+        """The position node (link, mesh node) of a flexible link's point when it is a segment end, or None."""
+        if pr.body is None or pr.body.kind != "link" or pr.body.rigid:
+            return None
+        li = self.mech.link_index(pr.body.name)
+        k = mesh_node(self.case, self.fracs, li, pr.point, f"joints (point {pr.label})")
+        if any(l2 == li and k in (k0, k1) for l2, k0, k1 in self.segments):
+            return (li, k)
+        return None
+
+    def _positions(self) -> None:
+        """Shared position nodes (revolute and weld joints between segment ends), the DOFs of every
+        segment (in the order the seed cases always had) and of the rigid bodies."""
+        for j in self.mech.joints:
+            if j.kind in ("revolute", "weld"):
+                na, nb = (self._end_node(p) for p in self.mech.joint_points(j))
+                if na is not None and nb is not None:
+                    self.parent[self._find(na)] = self._find(nb)
+        for si, (li, k0, k1) in enumerate(self.segments):
+            for end, k in enumerate((k0, k1)):
+                root = self._find((li, k))
+                if ("r", root) not in self.dof:
+                    self._new(("r", root)), self._new(("r", root, 1))
+                self.node_ends.setdefault(root, []).append((si, end))
+            self._new(("t", si, 0))
+            for k in range(1, k1 - k0):
+                self._new(("e", si, k, "p")), self._new(("e", si, k, "v")), self._new(("e", si, k, "t"))
+            self._new(("t", si, 1))
+        lref = self.mech.characteristic_length()
+        for bi, body in enumerate(self.mech.bodies):
+            if body.kind == "link" and not body.rigid:
+                continue
+            m, _, jc = body.mass_properties()
+            dofs = np.array([self._new(("b", bi, c)) for c in range(3)])
+            self.bodies.append((bi, dofs, m, jc, jc if jc > 0 else J_FLOOR * m * lref ** 2))
+
+    def _new(self, key) -> int:
+        self.dof[key] = len(self.dof)
+        return self.dof[key]
+
+    def seg_cols(self) -> list:
+        """0-based all-DOF numbers of every segment's local vector."""
+        out = []
+        for si, (li, k0, k1) in enumerate(self.segments):
+            col = []
+            for k in (k0, k1):
+                root = self._find((li, k))
+                col += [self.dof[("r", root)], self.dof[("r", root, 1)]]
+            col.append(self.dof[("t", si, 0)])
+            for k in range(1, k1 - k0):
+                col += [self.dof[("e", si, k, c)] for c in ("p", "v", "t")]
+            col.append(self.dof[("t", si, 1)])
+            out.append(col)
+        return out
+
+    def _ld_array(self) -> np.ndarray:
+        ld = np.zeros((3 * int(self.n_el.max()) + 3, len(self.segments)), np.int32)
+        for si, col in enumerate(self.seg_cols()):
+            ld[:len(col), si] = np.array(col) + 1
+            ld[len(col):, si] = ld[0, si]   # padding (never read: the kernel uses 3n+3 entries)
+        return np.asfortranarray(ld)
+
+    def _free_numbering(self) -> np.ndarray:
+        mask = np.ones(len(self.dof), bool)
+        for node in self.fixed:
+            mask[[self.dof[("r", node)], self.dof[("r", node, 1)]]] = False
+        if not mask.any():
+            raise CaseError("joints", "the coupled model has no free DOF")
+        cliques = [np.array(c) for c in self.seg_cols()] + [b[1] for b in self.bodies]
+        return rcm_free_numbering(cliques, mask)
+
+    def _q_fixed(self) -> np.ndarray:
+        q = np.zeros(len(self.dof))
+        for node, pos in self.fixed.items():
+            q[self.dof[("r", node)]], q[self.dof[("r", node, 1)]] = pos
+        return q
+
+    # --------------------------------------------------------------- joints and drives
+    def marker(self, key) -> int:
+        """Index of a marker (added when new)."""
+        if key not in self.markers:
+            self.markers.append(key)
+        return self.markers.index(key)
+
+    def _joints(self) -> None:
+        """Markers and rows of every joint (JOINT_ROWS), its drive, and the welds between the
+        consecutive segments of a link (nonlinear model)."""
+        for j in self.mech.joints:
+            a, b = self.mech.joint_points(j)
+            where = f"joints.{j.name}.connects"
+            jm = JointModel(j.name, j.kind, (self.marker(marker_key(self, a, where)),
+                                             self.marker(marker_key(self, b, where))))
+            base, coord = JOINT_ROWS[j.kind]
+            if j.kind == "prismatic":    # the guide direction in the frame of body a
+                ang = 0.0 if a.body is None else a.body.angle
+                u = j.unit_axis()
+                jm.axis = (np.cos(ang) * u[0] + np.sin(ang) * u[1], -np.sin(ang) * u[0] + np.cos(ang) * u[1])
+            for role in base:
+                self._joint_rows(jm, role, a, b)
+            c = jm.coordinate = (Row(CON_ANGLE, *jm.markers, joint=j.name, role="coordinate") if coord == "angle" else
+                                 Row(CON_PROJECTION, *jm.markers, d=jm.axis, joint=j.name, role="coordinate"))
+            drive = self.mech.drive_of(j.name)
+            if drive is not None and drive.kinematic:
+                self._add_row(jm, "drive", Row(c.kind, *jm.markers, aux=1, d=c.d, value=("drive", j.name)))
+            elif drive is not None:
+                jm.force = len(self.forces)
+                self.forces.append((c, drive))
+            elif self.mech.condition(j) in HOLDING[j.kind]:
+                what = "angle" if coord == "angle" else "coordinate"
+                self._add_row(jm, "hold", Row(c.kind, *jm.markers, d=c.d, value=("start", j.name, what)))
+            self.joints[j.name] = jm
+        for si in range(1, len(self.segments)):
+            if self.segments[si][0] == self.segments[si - 1][0]:    # consecutive elements of one link
+                n = self.segments[si - 1][2] - self.segments[si - 1][1]
+                ma = self.marker((MK_NODE, si - 1, n, (0.0, 0.0)))
+                self.rows.append(Row(CON_ANGLE, ma, self.marker((MK_NODE, si, 0, (0.0, 0.0))), role="interior"))
+
+    def _add_row(self, jm: JointModel, role: str, row: Row) -> None:
+        row.joint, row.role = jm.name, role
+        jm.rows[role] = len(self.rows)
+        self.rows.append(row)
+
+    def _joint_rows(self, jm: JointModel, role: str, a, b) -> None:
+        ma, mb = jm.markers
+        if role == "point":
+            na, nb = self._end_node(a), self._end_node(b)
+            if (na is not None or a.body is None) and (nb is not None or b.body is None):
+                jm.shared = self._find(nb if nb is not None else na)
+                if a.body is None or b.body is None:     # a ground joint: the node is fixed
+                    self.fixed[jm.shared] = tuple(map(float, (a if a.body is None else b).position))
+                return
+            for comp, name in ((1, "x"), (2, "y")):
+                self._add_row(jm, name, Row(CON_POINT, ma, mb, aux=comp))
+        elif role == "normal":
+            self._add_row(jm, "normal", Row(CON_PROJECTION, ma, mb, d=(-jm.axis[1], jm.axis[0])))
+        else:   # the relative angle held at its initial value
+            self._add_row(jm, "angle", Row(CON_ANGLE, ma, mb, value=("start", jm.name, "angle")))
+
+    # --------------------------------------------------------------- masses, mesh view
+    def _lumped(self) -> None:
+        """Point masses and hubs of the flexible links, at the first segment holding their node."""
+        self.pm, self.ri = [], []
+        for li, link in enumerate(self.mech.links):
+            if link.rigid:      # a rigid link's lumped inertias are in its mass properties
+                continue
+            for frac, mass in link.lumped:
+                si, kk = node_segment(self.segments, li, mesh_node(self.case, self.fracs, li, repr(frac), "point_masses"))
+                n = self.segments[si][2] - self.segments[si][1]
+                self.pm.append((si, min(kk + 1, n), 1.0 if kk == n else 0.0, mass))
+            for frac, j in link.hubs:
+                si, kk = node_segment(self.segments, li, mesh_node(self.case, self.fracs, li, repr(frac), "rotary_inertias"))
+                self.ri.append((si, kk, j))
+
+    def _mesh(self) -> LinkMesh:
+        node_of, rot, el_link, nn = [], {}, [], 0
+        for li, f in enumerate(self.fracs):
+            ids = [] if f is None else list(range(nn, nn + f.size))
+            node_of.append(ids)
+            nn += len(ids)
+            el_link += [li + 1] * max(0, len(ids) - 1)
+        for li, ids in enumerate(node_of):
+            for node in ids:
+                rot[(node, li)] = 2 * nn + node
+        return LinkMesh(case=self.case, link_names=[ln.name for ln in self.mech.links],
+                        n_el=[0 if f is None else f.size - 1 for f in self.fracs],
+                        node_frac=[np.zeros(0) if f is None else f for f in self.fracs], node_of=node_of, nnodes=nn,
+                        trans_dof=np.arange(2 * nn).reshape(nn, 2), rot_dof=rot, ndof=3 * nn,
+                        el_link=np.array(el_link, np.int32), nfree=int(self.free_of.max()), bandwidth=self._bandwidth())
+
+    def _bandwidth(self) -> int:
+        kl = 0
+        for col in self.seg_cols():
+            f = self.free_of[np.array(col)]
+            f = f[f > 0]
+            if f.size:
+                kl = max(kl, int(f.max() - f.min()))
+        return kl
+
+
+# ----------------------------------------------------------------------------- the flat description
+def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """(ispec, rspec) of flexmech_coupled: coupled_build (layout documented there)."""
+    nseg, maxn = len(lay.segments), int(lay.n_el.max())
+    links = lay.case["links"]
+    laws = [d.packed(0.0) for _, d in lay.forces]
+    nh = max([max(len(k["sin"]), len(k["cos"])) for k in laws] + [0])
+    nth = max([len(k["time_harmonics"]) for k in laws] + [0])
+    tab_t, tab_c, dv = [], [], []
+    for (row, _), k in zip(lay.forces, laws):
+        first, knots = 0, 0
+        if k["table"] is not None:
+            first, knots = len(tab_t) + 1, len(k["table"][0])
+            tab_t += list(k["table"][0])
+            tab_c += list(k["table"][1].T)
+        dv += [row.kind, row.a + 1, row.b + 1, first, knots]
+    mk = lay.markers
+    ispec = [nseg, len(lay.bodies), len(lay.dof), maxn, len(lay.pm), len(lay.ri), len(mk), len(lay.rows),
+             len(lay.forces), nh, nth, len(tab_t)]
+    ispec += list(lay.n_el) + list(lay.ld.T.ravel()) + [d + 1 for body in lay.bodies for d in body[1]]
+    ispec += list(lay.free_of) + [p[0] + 1 for p in lay.pm] + [p[1] for p in lay.pm]
+    ispec += [r[0] + 1 for r in lay.ri] + [r[1] for r in lay.ri]
+    ispec += [m[0] for m in mk] + [0 if m[0] == MK_GROUND else m[1] + 1 for m in mk] + [m[2] for m in mk]
+    ispec += [i for r in lay.rows for i in (r.kind, r.a + 1, r.b + 1, r.aux)] + dv
+    wn = np.zeros((nseg, maxn + 1))
+    prop = []
+    for si, (li, k0, k1) in enumerate(lay.segments):
+        f = lay.fracs[li][k0:k1 + 1]
+        wn[si, :k1 - k0 + 1] = (f - f[0]) / (f[-1] - f[0])
+        wn[si, k1 - k0 + 1:] = 2.0 + np.arange(maxn - (k1 - k0))     # padding, increasing (never read)
+        ln = links[li]
+        prop += [ln["length"] * (f[-1] - f[0]), ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"],
+                 ln["youngs_modulus"] * ln["second_moment"]]
+    rspec = prop + list(wn.ravel()) + [x for _, _, m, jc, js in lay.bodies for x in (m, jc, js)]
+    rspec += [x for p in lay.pm for x in (p[2], p[3])] + [r[2] for r in lay.ri] + [x for m in mk for x in m[3]]
+    rspec += [x for r in lay.rows for x in r.d] + [x for r, _ in lay.forces for x in r.d]
+    rspec += [x for k in laws for x in k["par"]]
+    for k in laws:
+        rspec += list(k["sin"]) + [0.0] * (nh - len(k["sin"])) + list(k["cos"]) + [0.0] * (nh - len(k["cos"]))
+    for k in laws:
+        rspec += [x for h in list(k["time_harmonics"]) + [[0.0, 0.0, 0.0]] * (nth - len(k["time_harmonics"])) for x in h]
+    rspec += tab_t + [x for c in tab_c for x in c] + [float(gravity[0]), float(gravity[1]), float(rayleigh[0]),
+                                                      float(rayleigh[1])]
+    return np.array(ispec, np.int32), np.array(rspec, float)

@@ -1,0 +1,112 @@
+!> Flat API of the coupled and nonlinear models facing f2py: plain arrays and scalars only.  Python
+!> (flexmech_py/coupled.py) packs the model into ispec(ni), rspec(nr) (layout: flexmech_coupled,
+!> coupled_build) and calls these through flexmech_py.kernels; every routine returns a status code
+!> (flexmech_lapack: 4 bad input, 5 Newton failure, 6 divergence limit).
+!>   ndof all DOFs (q, v, a), nfree free DOFs, nc1 = max(1, constraint rows), nframes output frames.
+module flexmech_coupled_api
+  use flexmech_kinds, only: dp
+  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
+  use flexmech_coupled, only: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, &
+                              coupled_set_solver
+  implicit none
+  private
+  public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver
+
+contains
+
+  !> Build and check the sizes the caller expects (ndof DOFs; nc1 >= the constraint rows).
+  subroutine build_checked(ispec, rspec, ndof, nc1, sys, status)
+    integer, intent(in) :: ispec(:), ndof, nc1
+    real(dp), intent(in) :: rspec(:)
+    type(coupled_system), intent(out) :: sys
+    integer, intent(out) :: status
+    call coupled_build(ispec, rspec, sys, status)
+    if (status /= STATUS_OK) return
+    if (sys%ndof /= ndof .or. nc1 < max(1, sys%nc)) status = STATUS_BAD_INPUT
+  end subroutine build_checked
+
+  !> Run the model (generalized-alpha-Newton; Newmark for alpha_m = alpha_f = 0) over nsteps steps of
+  !> dt from time t0 [s].  cval (3, nc1, nsteps+1): [value, rate, acceleration] of every constraint row
+  !> at every step.  q, v, a, pa (ndof): on entry the initial state (fixed entries hold their values;
+  !> the free accelerations a are made consistent; pa is the pseudo-acceleration, set to a when
+  !> init_pseudo /= 0 (a fresh start), else used as given (continuing a run)), on exit the last state
+  !> reached.  div_limit [m] > 0: the run stops with status 6 when coupled_elastic_measure
+  !> (flexmech_coupled) exceeds it; seg_link(nseg) is the mechanism link of each segment (segments of a
+  !> link listed consecutively from its start).  Frames: qf, vf, af (ndof, nframes), lf (nc1, nframes)
+  !> the multipliers (constraint forces), ef (4, nframes) [kinetic, potential, work of the inputs, max
+  !> Newton iterations since the last frame]; nvalid: number of valid frames.
+  subroutine cpl_run(ni, nr, ndof, nc1, nsteps, nframes, nseg, ispec, rspec, cval, t0, dt, alpha_m, alpha_f, &
+                     beta, gamma, out_every, tol, maxit, init_pseudo, div_limit, seg_link, q, v, a, pa, &
+                     qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
+    integer, intent(in) :: ni, nr, ndof, nc1, nsteps, nframes, nseg
+    integer, intent(in) :: ispec(ni)
+    real(dp), intent(in) :: rspec(nr)
+    real(dp), intent(in) :: cval(3, nc1, nsteps + 1)
+    real(dp), intent(in) :: t0, dt, alpha_m, alpha_f, beta, gamma, tol, div_limit
+    integer, intent(in) :: out_every, maxit, init_pseudo
+    integer, intent(in) :: seg_link(nseg)
+    real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof), pa(ndof)
+    real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
+    real(dp), intent(out) :: lf(nc1, nframes)
+    integer, intent(out) :: status, fail_step, iters, nvalid
+    type(coupled_system) :: sys
+    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
+    call build_checked(ispec, rspec, ndof, nc1, sys, status)
+    if (status /= STATUS_OK) return
+    call coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, init_pseudo, &
+                     div_limit, seg_link, q, v, a, pa, qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
+  end subroutine cpl_run
+
+  !> Linear solver of every later cpl_run in this process: mode -1 (default) automatic, 1 condensed
+  !> onto the segment-end positions, 0 the whole band (docs/theory.md section 11).  status 4 for
+  !> another mode.
+  subroutine cpl_set_solver(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    call coupled_set_solver(mode, status)
+  end subroutine cpl_set_solver
+
+  !> Residual (all DOFs; inertia, elastic, gravity and force drives, no constraint forces), M, C_v, K_t
+  !> (dense, free DOFs) and [kinetic, potential] energy at one state and time t [s].
+  subroutine cpl_dense(ni, nr, ndof, nfree, ispec, rspec, q, v, a, t, res, mm, cm, km, energy, status)
+    integer, intent(in) :: ni, nr, ndof, nfree
+    integer, intent(in) :: ispec(ni)
+    real(dp), intent(in) :: rspec(nr), q(ndof), v(ndof), a(ndof), t
+    real(dp), intent(out) :: res(ndof), mm(nfree, nfree), cm(nfree, nfree), km(nfree, nfree), energy(2)
+    integer, intent(out) :: status
+    type(coupled_system) :: sys
+    res = 0.0_dp; mm = 0.0_dp; cm = 0.0_dp; km = 0.0_dp; energy = 0.0_dp
+    call build_checked(ispec, rspec, ndof, huge(1), sys, status)
+    if (status /= STATUS_OK) return
+    if (sys%nfree /= nfree) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    call coupled_dense(sys, q, v, a, t, res, mm, cm, km, energy)
+  end subroutine cpl_dense
+
+  !> Frames (qf, vf, af (ndof, nf), multipliers lf (nc1, nf), times tf (nf)) evaluated on the model
+  !> (flexmech_coupled: coupled_post): marker states mks (9, nmk, nf), measure rows meas (4, nm) with
+  !> directions meas_dir (2, nm) -> mv (3, nm, nf), force-drive values dvals (nd1, nf) (nd1 >= the
+  !> force drives), segment-end residuals rend (4, nseg, nf).
+  subroutine cpl_post(ni, nr, ndof, nc1, nf, nmk, nm, nd1, nseg, ispec, rspec, qf, vf, af, lf, tf, meas, &
+                      meas_dir, mks, mv, dvals, rend, status)
+    integer, intent(in) :: ni, nr, ndof, nc1, nf, nmk, nm, nd1, nseg
+    integer, intent(in) :: ispec(ni), meas(4, nm)
+    real(dp), intent(in) :: rspec(nr), qf(ndof, nf), vf(ndof, nf), af(ndof, nf), lf(nc1, nf), tf(nf)
+    real(dp), intent(in) :: meas_dir(2, nm)
+    real(dp), intent(out) :: mks(9, nmk, nf), mv(3, nm, nf), dvals(nd1, nf), rend(4, nseg, nf)
+    integer, intent(out) :: status
+    type(coupled_system) :: sys
+    mks = 0.0_dp; mv = 0.0_dp; dvals = 0.0_dp; rend = 0.0_dp
+    call build_checked(ispec, rspec, ndof, nc1, sys, status)
+    if (status /= STATUS_OK) return
+    if (sys%nmk /= nmk .or. sys%nseg /= nseg .or. nd1 < sys%nd .or. any(meas(2:3, :) < 1) .or. &
+        any(meas(2:3, :) > nmk) .or. any(meas(1, :) < 1) .or. any(meas(1, :) > 3)) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    call coupled_post(sys, qf, vf, af, lf, tf, meas, meas_dir, mks, mv, dvals, rend)
+  end subroutine cpl_post
+
+end module flexmech_coupled_api

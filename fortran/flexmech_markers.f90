@@ -1,0 +1,196 @@
+!> Markers and constraint kinds of the coupled and nonlinear models (docs/theory.md section 11.6).
+!>
+!> A marker is a point of a body with a frame angle: a node of a beam segment, a point of a rigid
+!> body, or a ground point.  marker_state holds, at one state (q, v), its position r [m], frame
+!> angle psi [rad], their rates, the velocity parts of their second derivatives (r'' = dr . q'' + ra0,
+!> psi'' = dpsi . q'' + psia0) and their gradients over the marker's DOFs:
+!>   segment node k (local fraction w, chord c = r_e - r_s, phi = atan2(c), g = Omega c / |c|^2,
+!>   omega = g . c', alpha0 = -2 (c . c') omega / |c|^2, elastic translation u = [p_k, v_k] in the
+!>   chord frame, zero at the segment ends):
+!>     r = (1 - w) r_s + w r_e + R(phi) u,   psi = phi + th_k
+!>     DOFs [xs, ys, xe, ye, (p_k, v_k,) th_k]
+!>   rigid-body point s (body frame, from the centre of mass):  r = r_C + R(phi) s,  psi = phi
+!>     DOFs [x_C, y_C, phi]
+!>   ground point: r fixed, psi = 0, no DOF.
+!> A constraint row (or a joint coordinate) is a scalar function of two markers a, b (one routine per
+!> kind), returned as its value g, rate g', the velocity part acc0 of g'' and its gradient over the
+!> columns of a (first ma%n entries) then of b (next mb%n entries; a column may repeat when the two
+!> markers share a DOF: gradients add):
+!>   CON_POINT       (r_a - r_b)_i, i = aux (1: x, 2: y)             revolute, weld (point rows)
+!>   CON_ANGLE       psi_b - psi_a                                    weld, prismatic, kinematic drive
+!>                                                                    and torque on a revolute
+!>   CON_PROJECTION  e . (r_b - r_a), e = R(psi_a) d, d fixed in a   prismatic normal row (d the guide
+!>                                                                    normal), slide coordinate (d the
+!>                                                                    guide direction)
+!> A new constraint kind is one routine here and one case in constraint_row.
+module flexmech_markers
+  use flexmech_kinds, only: dp
+  implicit none
+  private
+  public :: marker_state, segment_marker, body_marker, ground_marker, constraint_row
+  public :: row_point, row_angle, row_projection
+  public :: CON_POINT, CON_ANGLE, CON_PROJECTION, MAXCOL
+
+  integer, parameter :: CON_POINT = 1, CON_ANGLE = 2, CON_PROJECTION = 3
+  integer, parameter :: MAXCOL = 7        !< columns of one marker (an interior segment node)
+
+  type :: marker_state
+    real(dp) :: r(2) = 0.0_dp, psi = 0.0_dp      !< position [m], frame angle [rad]
+    real(dp) :: rd(2) = 0.0_dp, psid = 0.0_dp    !< their rates
+    real(dp) :: ra0(2) = 0.0_dp, psia0 = 0.0_dp  !< velocity parts of their second derivatives
+    integer :: n = 0                              !< number of columns
+    integer :: col(MAXCOL) = 0                    !< all-DOF numbers of the columns
+    integer :: loc(MAXCOL) = 0                    !< positions in the owner's local vector
+    real(dp) :: dr(2, MAXCOL) = 0.0_dp, dpsi(MAXCOL) = 0.0_dp   !< gradients
+  end type marker_state
+
+contains
+
+  !> Marker at node k (0..n) of a segment of n elements, at fraction w of its length; q, v the
+  !> all-DOF vectors, cols(3n+3) the all-DOF numbers of the segment's local vector
+  !> [xs ys xe ye th_0 (p_j v_j th_j)_{j=1..n-1} th_n].
+  pure subroutine segment_marker(q, v, cols, n, k, w, ms)
+    real(dp), intent(in) :: q(:), v(:), w
+    integer, intent(in) :: cols(:), n, k
+    type(marker_state), intent(out) :: ms
+    real(dp) :: c(2), cd(2), l2, cs, sn, g(2), om, al0, u(2), ud(2), ru(2), rou(2), roud(2), rs(2), re(2)
+    integer :: kt, j
+    rs = q(cols(1:2)); re = q(cols(3:4))
+    c = re - rs; cd = v(cols(3:4)) - v(cols(1:2))
+    l2 = c(1)**2 + c(2)**2
+    cs = c(1)/sqrt(l2); sn = c(2)/sqrt(l2)
+    g = [-c(2), c(1)]/l2
+    om = g(1)*cd(1) + g(2)*cd(2)
+    al0 = -2.0_dp*(c(1)*cd(1) + c(2)*cd(2))*om/l2
+    kt = merge(3*n + 3, 3*k + 5, k >= n)
+    u = 0.0_dp; ud = 0.0_dp
+    if (k > 0 .and. k < n) then
+      u = q(cols(3*k + 3:3*k + 4)); ud = v(cols(3*k + 3:3*k + 4))
+    end if
+    ru = [cs*u(1) - sn*u(2), sn*u(1) + cs*u(2)]          ! R u
+    rou = [-ru(2), ru(1)]                                  ! Omega R u
+    roud = [-(sn*ud(1) + cs*ud(2)), cs*ud(1) - sn*ud(2)]   ! Omega R u'
+    ms%r = (1.0_dp - w)*rs + w*re + ru
+    ms%rd = (1.0_dp - w)*v(cols(1:2)) + w*v(cols(3:4)) + om*rou + [cs*ud(1) - sn*ud(2), sn*ud(1) + cs*ud(2)]
+    ms%ra0 = al0*rou - om*om*ru + 2.0_dp*om*roud
+    ms%psi = atan2(c(2), c(1)) + q(cols(kt))
+    ms%psid = om + v(cols(kt))
+    ms%psia0 = al0
+    ms%n = 5
+    ms%loc(1:4) = [1, 2, 3, 4]
+    ms%dr = 0.0_dp; ms%dpsi = 0.0_dp
+    ms%dr(1, 1) = 1.0_dp - w; ms%dr(2, 2) = 1.0_dp - w; ms%dr(1, 3) = w; ms%dr(2, 4) = w
+    do j = 1, 2
+      ms%dr(:, j) = ms%dr(:, j) - rou*g(j)
+      ms%dr(:, 2 + j) = ms%dr(:, 2 + j) + rou*g(j)
+    end do
+    ms%dpsi(1:2) = -g; ms%dpsi(3:4) = g
+    if (k > 0 .and. k < n) then
+      ms%n = 7
+      ms%loc(5:6) = [3*k + 3, 3*k + 4]
+      ms%dr(:, 5) = [cs, sn]; ms%dr(:, 6) = [-sn, cs]
+    end if
+    ms%loc(ms%n) = kt
+    ms%dpsi(ms%n) = 1.0_dp
+    ms%col(1:ms%n) = cols(ms%loc(1:ms%n))
+  end subroutine segment_marker
+
+  !> Marker at s (body frame, from the centre of mass) of a rigid body with coordinates z = [x_C, y_C,
+  !> phi], rates zd and all-DOF numbers cols(3).
+  pure subroutine body_marker(z, zd, cols, s, ms)
+    real(dp), intent(in) :: z(3), zd(3), s(2)
+    integer, intent(in) :: cols(3)
+    type(marker_state), intent(out) :: ms
+    real(dp) :: rs(2), c, sn
+    c = cos(z(3)); sn = sin(z(3))
+    rs = [c*s(1) - sn*s(2), sn*s(1) + c*s(2)]
+    ms%r = z(1:2) + rs
+    ms%rd = zd(1:2) + zd(3)*[-rs(2), rs(1)]
+    ms%ra0 = -zd(3)**2*rs
+    ms%psi = z(3); ms%psid = zd(3); ms%psia0 = 0.0_dp
+    ms%n = 3
+    ms%loc(1:3) = [1, 2, 3]
+    ms%col(1:3) = cols
+    ms%dr = 0.0_dp; ms%dpsi = 0.0_dp
+    ms%dr(1, 1) = 1.0_dp; ms%dr(2, 2) = 1.0_dp; ms%dr(:, 3) = [-rs(2), rs(1)]
+    ms%dpsi(3) = 1.0_dp
+  end subroutine body_marker
+
+  !> A ground point at pos [m] (frame angle 0, no DOF).
+  pure subroutine ground_marker(pos, ms)
+    real(dp), intent(in) :: pos(2)
+    type(marker_state), intent(out) :: ms
+    ms%r = pos
+    ms%n = 0
+  end subroutine ground_marker
+
+  !> Row of kind CON_* between markers a and b (aux: the component of CON_POINT; d: the direction of
+  !> CON_PROJECTION in a's frame).  Columns: a's then b's (nc = ma%n + mb%n).
+  pure subroutine constraint_row(kind, aux, d, ma, mb, g, gd, acc0, nc, cols, grad)
+    integer, intent(in) :: kind, aux
+    real(dp), intent(in) :: d(2)
+    type(marker_state), intent(in) :: ma, mb
+    real(dp), intent(out) :: g, gd, acc0, grad(2*MAXCOL)
+    integer, intent(out) :: nc, cols(2*MAXCOL)
+    nc = ma%n + mb%n
+    cols(1:ma%n) = ma%col(1:ma%n)
+    cols(ma%n + 1:nc) = mb%col(1:mb%n)
+    select case (kind)
+    case (CON_POINT)
+      call row_point(aux, ma, mb, g, gd, acc0, grad)
+    case (CON_ANGLE)
+      call row_angle(ma, mb, g, gd, acc0, grad)
+    case default
+      call row_projection(d, ma, mb, g, gd, acc0, grad)
+    end select
+  end subroutine constraint_row
+
+  !> Point coincidence, component i: g = (r_a - r_b)_i.
+  pure subroutine row_point(i, ma, mb, g, gd, acc0, grad)
+    integer, intent(in) :: i
+    type(marker_state), intent(in) :: ma, mb
+    real(dp), intent(out) :: g, gd, acc0, grad(:)
+    g = ma%r(i) - mb%r(i)
+    gd = ma%rd(i) - mb%rd(i)
+    acc0 = ma%ra0(i) - mb%ra0(i)
+    grad(1:ma%n) = ma%dr(i, 1:ma%n)
+    grad(ma%n + 1:ma%n + mb%n) = -mb%dr(i, 1:mb%n)
+  end subroutine row_point
+
+  !> Relative frame angle g = psi_b - psi_a [rad] (not wrapped).
+  pure subroutine row_angle(ma, mb, g, gd, acc0, grad)
+    type(marker_state), intent(in) :: ma, mb
+    real(dp), intent(out) :: g, gd, acc0, grad(:)
+    g = mb%psi - ma%psi
+    gd = mb%psid - ma%psid
+    acc0 = mb%psia0 - ma%psia0
+    grad(1:ma%n) = -ma%dpsi(1:ma%n)
+    grad(ma%n + 1:ma%n + mb%n) = mb%dpsi(1:mb%n)
+  end subroutine row_angle
+
+  !> Projection g = e . (r_b - r_a) on the direction e = R(psi_a) d turning with marker a:
+  !>   g' = psi_a' (Omega e) . dr + e . dr',  dr = r_b - r_a
+  !>   g'' = e . dr'' + 2 psi_a' (Omega e) . dr' - psi_a'^2 e . dr + psi_a'' (Omega e) . dr
+  pure subroutine row_projection(d, ma, mb, g, gd, acc0, grad)
+    real(dp), intent(in) :: d(2)
+    type(marker_state), intent(in) :: ma, mb
+    real(dp), intent(out) :: g, gd, acc0, grad(:)
+    real(dp) :: e(2), oe(2), dr(2), drd(2), c, s, oed
+    integer :: j
+    c = cos(ma%psi); s = sin(ma%psi)
+    e = [c*d(1) - s*d(2), s*d(1) + c*d(2)]
+    oe = [-e(2), e(1)]
+    dr = mb%r - ma%r; drd = mb%rd - ma%rd
+    oed = dot_product(oe, dr)
+    g = dot_product(e, dr)
+    gd = ma%psid*oed + dot_product(e, drd)
+    acc0 = dot_product(e, mb%ra0 - ma%ra0) + 2.0_dp*ma%psid*dot_product(oe, drd) - ma%psid**2*g + ma%psia0*oed
+    do j = 1, ma%n
+      grad(j) = -dot_product(e, ma%dr(:, j)) + oed*ma%dpsi(j)
+    end do
+    do j = 1, mb%n
+      grad(ma%n + j) = dot_product(e, mb%dr(:, j))
+    end do
+  end subroutine row_projection
+
+end module flexmech_markers
