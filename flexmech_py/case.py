@@ -51,7 +51,7 @@ OUTPUT_KINDS = {
     "position": ({"at", "component"}, {}),
     "inertia_load": ({"component"}, {"at": None, "model": "run"}),
     "axial_force": ({"link"}, {"at": 0.5}),
-    "reaction": ({"joint", "component"}, {}),
+    "reaction": ({"joint", "component"}, {"source": "model"}),
     "drive_force": ({"joint"}, {}),
 }
 COMPONENTS = {
@@ -64,6 +64,7 @@ UNITS = {
     "joint_angle": "rad", "joint_displacement": "m", "link_angle": "rad", "strain": "1", "curvature": "1/m",
     "position": "m", "axial_force": "N",
 }
+REACTION_SOURCES = ("model", "rigid")   # the run's elastic model's joint forces, or the rigid-body solution's
 ERROR_ESTIMATES = ("time", "none")   # step doubling (one more run at 2 dt), or nothing (guards.py)
 TOP_KEYS = {"case", "mechanism", "links", "bodies", "mesh", "joints", "drive", "drives", "initial", "point_masses",
             "rotary_inertias", "loads", "solver", "outputs"}
@@ -309,6 +310,8 @@ def _outputs(raw, mech) -> dict:
             _output_point(spec, d, kind, w, mech)
         if kind == "inertia_load":
             d["model"] = v.text(spec, "model", w, default="run", choices=("run",) + SUPERPOSITION_MODELS)
+        if kind == "reaction":
+            d["source"] = v.text(spec, "source", w, default="model", choices=REACTION_SOURCES)
         out[name] = d
     return out
 

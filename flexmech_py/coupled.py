@@ -445,6 +445,8 @@ def validity(fe: FEModel, axial: np.ndarray, u_dev: np.ndarray) -> dict:
     pi^2 EI / L^2 of the link, and the largest displacement from the rigid motion over its length."""
     out = {}
     for li, ln in enumerate(fe.case["links"]):
+        if ln.get("rigid"):   # no deformation
+            continue
         ne = np.pi ** 2 * ln["youngs_modulus"] * ln["second_moment"] / ln["length"] ** 2
         n = axial[fe.link_elements(li)]
         disp = max(float(np.max(np.hypot(u_dev[fe.trans_dof[node, 0]], u_dev[fe.trans_dof[node, 1]])))

@@ -29,6 +29,8 @@ def deflection_over_length(res) -> np.ndarray:
     km = res.motion
     out = np.zeros((len(fe.case["links"]), res.t.size))
     for li, ln in enumerate(fe.case["links"]):
+        if ln.get("rigid"):
+            continue
         L = ln["length"]
         c, s = np.cos(km.phi[:, li]), np.sin(km.phi[:, li])
         pos = [np.array([km.ox[:, li] + f * L * c, km.oy[:, li] + f * L * s])
@@ -50,6 +52,8 @@ def validity_time(res) -> tuple[float, float]:
     comp = np.zeros(res.t.size, bool)
     if res.axial is not None:
         for li, ln in enumerate(fe.case["links"]):
+            if ln.get("rigid"):
+                continue
             ne = np.pi ** 2 * ln["youngs_modulus"] * ln["second_moment"] / ln["length"] ** 2
             comp |= (-res.axial[fe.link_elements(li)]).max(axis=0) > THRESHOLDS["compression_over_euler"] * ne
 

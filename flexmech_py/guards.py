@@ -59,12 +59,15 @@ def link_strains(res) -> np.ndarray:
     fe = res.fe
     out = np.zeros((len(res.case["links"]), res.t.size))
     for li, ln in enumerate(res.case["links"]):
+        if ln.get("rigid"):
+            continue
         els = fe.link_elements(li)
         n = len(els)
         ea = ln["youngs_modulus"] * ln["area"]
         ax = np.abs(res.axial[els]) / ea if res.axial is not None else np.zeros((n, res.t.size))
         for k in range(n + 1):
-            kap = np.abs(res.curvature(li, k / n)) if res.curvature is not None else 0.0
+            frac = k / n if fe.uniform[li] else fe.node_frac[li][k]
+            kap = np.abs(res.curvature(li, frac)) if res.curvature is not None else 0.0
             eps_ax = np.max(ax[max(k - 1, 0):min(k + 1, n)], axis=0)
             out[li] = np.maximum(out[li], ln["half_depth"] * kap + eps_ax)
     return out
@@ -86,6 +89,8 @@ def check_validity(res) -> dict:
                "valid_until_s": None}
     events = []   # (time, link, kind, peak)
     for li, ln in enumerate(links):
+        if ln.get("rigid"):
+            continue
         name = ln["name"]
         v = per_link[name]
         comp = np.maximum(0.0, -res.axial[fe.link_elements(li)].min(axis=0)) / v["euler_load_N"]
