@@ -1,5 +1,7 @@
-"""Every case file runs with every superposition model, to its full length, and gives sane physics;
-golden numbers (tests/golden_seed.json, provenance inside) guard against silent changes."""
+"""Every case file runs with every superposition model and gives sane physics (the template cases to their full
+length, the general-form cases to REDUCED_T_END: their full runs are in `flexmech bench`); the general-form
+cases also in the coupled and nonlinear models; golden numbers (tests/golden_seed.json, provenance inside)
+guard against silent changes."""
 
 import json
 from pathlib import Path
@@ -8,16 +10,26 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py.simulate import simulate_models
+from flexmech_py.simulate import Prepared, simulate_models
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE_FILES = sorted((ROOT / "cases").glob("**/*.toml"))
 GOLDEN = json.loads((Path(__file__).parent / "golden_seed.json").read_text())
+REDUCED_T_END = 0.02   # s, the general-form cases in this suite
+
+
+def _case(path, t_end=None):
+    case = fm.load_case(path)
+    if "template" not in case["mechanism"]:
+        t_end = REDUCED_T_END if t_end is None else t_end
+    if t_end is not None and t_end < case["solver"]["t_end"]:
+        case = fm.load_case(path, overrides=[f"solver.t_end={t_end}"])
+    return case
 
 
 @pytest.fixture(scope="module")
 def runs():
-    return {f.stem: simulate_models(fm.load_case(f)) for f in CASE_FILES}
+    return {f.stem: simulate_models(_case(f)) for f in CASE_FILES}
 
 
 @pytest.mark.parametrize("path", CASE_FILES, ids=lambda p: p.stem)
@@ -27,6 +39,25 @@ def test_case_runs_all_models(runs, path):
         for name, y in res.columns.items():
             assert np.all(np.isfinite(y)), (model, name)
         assert np.max(np.abs(res.u)) > 0
+
+
+GENERAL_FILES = [f for f in CASE_FILES if "template" not in fm.load_case(f)["mechanism"]]
+
+
+@pytest.mark.parametrize("model", ["coupled", "nonlinear"])
+@pytest.mark.parametrize("path", GENERAL_FILES, ids=lambda p: p.stem)
+def test_general_case_runs_coupled_models(path, model):
+    case = _case(path, t_end=0.005)
+    try:
+        res = Prepared(case).run(model)
+    except fm.CaseError as exc:
+        # the one place that admits what the coupled and nonlinear models do not handle yet (issue 10: the
+        # coupled helper generalizes them; remove this when they run every case file)
+        if exc.field == "model" and "does not yet handle" in str(exc):
+            pytest.skip(f"{model}: {exc} (pending: coupled/nonlinear models on general mechanisms, issue 10)")
+        raise
+    for name, y in res.columns.items():
+        assert np.all(np.isfinite(y)), (model, name)
 
 
 def test_seed_fourbar_turns_and_speeds_up(runs):
