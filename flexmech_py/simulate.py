@@ -296,7 +296,11 @@ class Prepared:
             if u0 is not None or v0 is not None:
                 raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
             _coupled_supports(case, model)
-            return self._run_coupled(t_start, model)
+            res = self._run_coupled(t_start, model)
+            if any(sp["kind"] == "reaction" and sp.get("source", "model") == "model" for sp in case["outputs"].values()):
+                res.extra.setdefault("reactions", {"source": "rigid", "note": f"the {model} model has no joint "
+                                                  "reactions of its own yet: reaction outputs are the rigid-body ones"})
+            return res
         if not self._checked:
             check_elastic_problem(fe, fe.rig_samples(self.rm_frames, self.gravity, slice(0, 1)), self.setup.dof)
             self._checked = True

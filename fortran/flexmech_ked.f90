@@ -155,6 +155,9 @@ contains
       sys%el_same(e) = el_link(e) == el_link(e - 1) .and. all(el_prop([1, 3, 4, 5], e) == el_prop([1, 3, 4, 5], e - 1))
     end do
     call init_slaves(sys, free_of, sl_of, sl_ptr, sl_col)
+    do e = 2, sys%nel   ! an element after one on the general path has no reusable matrices before it
+      if (sys%el_gen(e - 1) > 0) sys%el_same(e) = .false.
+    end do
     sys%kl = half_bandwidth(sys%el_free)
     do i = 1, size(sys%gen)
       sys%kl = max(sys%kl, maxval(sys%gen(i)%cols) - minval(sys%gen(i)%cols))
@@ -429,17 +432,16 @@ contains
     integer :: e, i, j, n
     integer :: idx(6)
     real(dp) :: cs, sn, om, al, ce(6, 6), ke(6, 6), se(6, 6), me(6, 6), ue(6), ve(6), re(6), a(2), mi, cm
-    real(dp) :: ul(6), vl(6), fr
-    real(dp), parameter :: eye2(2, 2) = reshape([1.0_dp, 0.0_dp, 0.0_dp, 1.0_dp], [2, 2])
+    real(dp) :: ul(6), vl(6)
     integer :: jprev
-    logical :: qs, fresh
+    logical :: qs, general
+    general = size(sys%gen) > 0   ! any item on the general path (hoisted: the direct loop stays as it was)
     qs = .false.
     if (present(static)) qs = static
     cm = merge(0.0_dp, 1.0_dp, qs)
     ab = 0.0_dp
     r = 0.0_dp
     jprev = 0
-    fresh = .false.
     cs = 1.0_dp; sn = 0.0_dp
     do e = 1, sys%nel
       j = sys%el_link(e)
@@ -447,16 +449,13 @@ contains
         cs = cos(rig(1, j)); sn = sin(rig(1, j)); jprev = j
       end if
       om = rig(2, j); al = rig(3, j)
-      if (sys%el_gen(e) > 0) then   ! touches a slaved DOF: the general path
-        call gen_element(sys, e, rig(:, j), cs, sn, cm, cc, ck, qs, u, v, ab, r)
-        fresh = .false.
-        cycle
+      if (general) then
+        if (sys%el_gen(e) > 0) cycle   ! touches a slaved DOF: assemble_slaved (its successor recomputes, el_same)
       end if
       idx = sys%el_free(:, e)
       ! the local matrices of a uniform link's elements are equal: ce, ke and the rotated effective
       ! matrix se of the previous element are reused (not with the per-element geometric stiffness)
-      if (.not. fresh .or. .not. sys%el_same(e) .or. sys%geo) then
-        fresh = .true.
+      if (e == 1 .or. .not. sys%el_same(e) .or. sys%geo) then
         ce = (2.0_dp*om)*sys%g(:, :, e)
         if (qs) then
           ke = sys%k(:, :, e)
@@ -494,10 +493,8 @@ contains
     do i = 1, sys%nlm
       mi = sys%lm_mass(i)
       a = point_accel(rig(:, sys%lm_link(i)), sys%lm_z(i))
-      if (sys%lm_gen(i) > 0) then
-        call gen_add(sys, sys%gen(sys%lm_gen(i)), mi*eye2, (sys%ray_m*mi)*eye2, 0.0_dp*eye2, mi*a, cm, cc, ck, &
-                     qs, u, v, ab, r)
-        cycle
+      if (general) then
+        if (sys%lm_gen(i) > 0) cycle
       end if
       do n = 1, 2
         j = sys%lm_free(n, i)
@@ -507,13 +504,8 @@ contains
       end do
     end do
     do i = 1, sys%nri
-      if (sys%ri_gen(i) > 0) then
-        mi = sys%ri_j(i)
-        fr = 0.0_dp
-        if (sys%load_model /= LOAD_CLASSIC_TRANSLATIONAL) fr = mi*rig(3, sys%ri_link(i))
-        call gen_add(sys, sys%gen(sys%ri_gen(i)), reshape([mi], [1, 1]), reshape([sys%ray_m*mi], [1, 1]), &
-                     reshape([0.0_dp], [1, 1]), [fr], cm, cc, ck, qs, u, v, ab, r)
-        cycle
+      if (general) then
+        if (sys%ri_gen(i) > 0) cycle
       end if
       j = sys%ri_free(i)
       if (j == 0) cycle
@@ -522,7 +514,38 @@ contains
       r(j) = r(j) - mi*sys%ray_m*v(j)
       if (sys%load_model /= LOAD_CLASSIC_TRANSLATIONAL) r(j) = r(j) - mi*rig(3, sys%ri_link(i))
     end do
+    if (general) call assemble_slaved(sys, rig, cm, cc, ck, qs, u, v, ab, r)
   end subroutine ked_assemble
+
+  !> The items touching a slaved DOF (skipped by ked_assemble's direct loops) through gen_add.
+  subroutine assemble_slaved(sys, rig, cm, cc, ck, qs, u, v, ab, r)
+    class(ked_system), intent(in) :: sys
+    real(dp), intent(in) :: rig(:, :), cm, cc, ck, u(:), v(:)
+    logical, intent(in) :: qs
+    real(dp), intent(inout) :: ab(:, :), r(:)
+    real(dp), parameter :: eye2(2, 2) = reshape([1.0_dp, 0.0_dp, 0.0_dp, 1.0_dp], [2, 2])
+    real(dp) :: mi, fr
+    integer :: e, i, j
+    do e = 1, sys%nel
+      if (sys%el_gen(e) == 0) cycle
+      j = sys%el_link(e)
+      call gen_element(sys, e, rig(:, j), cos(rig(1, j)), sin(rig(1, j)), cm, cc, ck, qs, u, v, ab, r)
+    end do
+    do i = 1, sys%nlm
+      if (sys%lm_gen(i) == 0) cycle
+      mi = sys%lm_mass(i)
+      call gen_add(sys, sys%gen(sys%lm_gen(i)), mi*eye2, (sys%ray_m*mi)*eye2, 0.0_dp*eye2, &
+                   mi*point_accel(rig(:, sys%lm_link(i)), sys%lm_z(i)), cm, cc, ck, qs, u, v, ab, r)
+    end do
+    do i = 1, sys%nri
+      if (sys%ri_gen(i) == 0) cycle
+      mi = sys%ri_j(i)
+      fr = 0.0_dp
+      if (sys%load_model /= LOAD_CLASSIC_TRANSLATIONAL) fr = mi*rig(3, sys%ri_link(i))
+      call gen_add(sys, sys%gen(sys%ri_gen(i)), reshape([mi], [1, 1]), reshape([sys%ray_m*mi], [1, 1]), &
+                   reshape([0.0_dp], [1, 1]), [fr], cm, cc, ck, qs, u, v, ab, r)
+    end do
+  end subroutine assemble_slaved
 
   !> Element e (touching a slaved DOF) added through gen_add: its global M, C, K and load at the
   !> rigid sample r of its link (c, s its cos, sin).

@@ -128,8 +128,8 @@ def test_slider_crank_rigid_limit(cases_dir):
             err = max(err, np.max(np.abs(res.reactions(j)[late] - rigid)) / np.max(np.abs(rigid[:, :2])))
         errs.append(err)
         assert res.reactions.residual < 1e-9
-    assert 80 < umax[0] / umax[1] < 120                         # 1/E: measured 101
-    assert errs[1] < 1e-4 and errs[1] < errs[0] / 10            # measured 1.6e-3 -> 3.0e-5
+    assert 80 < umax[0] / umax[1] < 130                         # 1/E: measured 105
+    assert errs[1] < 1e-4 and errs[1] < errs[0] / 100           # measured 4.0e-2 -> 2.4e-5
 
 
 # ----------------------------------------------------------------------------- time-varying slave relations
@@ -253,7 +253,7 @@ def test_stiff_coupler_tends_to_the_rigid_coupler(cases_dir):
     """The seed four-bar with a rigid coupler (a rigid link: slave relations at both pins) against the coupler
     as a flexible beam made stiffer.  At rest under gravity (sudden load; the stiff modes damped) the
     difference falls as 1/E, as do the differences of the natural frequencies.  Turning at 120 rad/s the
-    difference stops near 0.2 % (1.5e-3 measured): the linear models' spin softening of a rotation differs
+    difference stops near 0.2 % (1.7e-3 at E x 1e5): the linear models' spin softening of a rotation differs
     between a beam and a rigid body (docs/theory.md section 18.4)."""
     still = ("drive.speed=0.0", "loads.gravity=[0.0, -9.81]", "solver.t_end=0.02", "solver.output_every=10",
              "solver.rayleigh=[0.0, 1e-6]")
@@ -266,7 +266,7 @@ def test_stiff_coupler_tends_to_the_rigid_coupler(cases_dir):
         r = p.run("classic")
         diffs.append(max(np.max(np.abs(r[k] - rres[k])) / np.max(np.abs(rres[k])) for k in ("follower", "crank")))
         w = np.sqrt(p.fe.squared_frequencies(p.rig[:, :, 0], "classic")[:3])
-        assert np.max(np.abs(w - wr) / wr) < 1e-3 / fac ** 0.5          # 1/E: 7e-6, 9e-9
+        assert np.max(np.abs(w - wr) / wr) < 1e-3 / fac ** 0.5          # 1/E: 2.2e-5, 1.7e-7
     assert diffs[1] < 1e-3 and diffs[0] / diffs[1] > 50                 # 1/E: 3.0e-2, 2.6e-4
     moving = ("solver.t_end=0.03", "solver.rayleigh=[0.0, 1e-6]", "solver.output_every=10")
     rres = Prepared(_fourbar_coupler(cases_dir, True, 1.0, *moving)).run("classic")
