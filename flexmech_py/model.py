@@ -246,6 +246,30 @@ def _number_dofs(joints, node_of, fracs, nnodes: int, names):
     return rot, trans, 2 * nnodes + len(rot_groups), dof_names
 
 
+def _elements(mech, links, fracs, node_of, trans, rot) -> tuple[list, list, list]:
+    """(el_link, el_dof (0-based), el_prop) of the flexible links' beam elements, link by link."""
+    el_link, el_dof, el_prop = [], [], []
+    for li, ln in enumerate(links):
+        if mech.links[li].rigid:
+            continue
+        ra, ea, ei = ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"], ln["youngs_modulus"] * ln["second_moment"]
+        n = fracs[li].size - 1
+        uniform, le_u = _uniform(fracs[li]), ln["length"] / n
+        for k in range(n):
+            n1, n2 = node_of[li][k], node_of[li][k + 1]
+            el_link.append(li + 1)
+            el_dof.append([trans[n1, 0], trans[n1, 1], rot[(n1, li)], trans[n2, 0], trans[n2, 1], rot[(n2, li)]])
+            if uniform:    # equal elements: the same numbers as a uniform mesh always had
+                el_prop.append([le_u, k * le_u, ra, ea, ei])
+            else:
+                el_prop.append([(fracs[li][k + 1] - fracs[li][k]) * ln["length"], fracs[li][k] * ln["length"],
+                                ra, ea, ei])
+    if not el_dof:
+        raise CaseError("links", "no link is flexible: the superposition models need at least one flexible link "
+                                 "(rigid = false); the rigid-body motion alone is in every run's joint outputs")
+    return el_link, el_dof, el_prop
+
+
 @dataclass
 class FEModel:
     """The discretized mechanism; build it with :meth:`from_case`."""
@@ -308,25 +332,7 @@ class FEModel:
 
         parts, slides, slaving, ndof, fixed, new_names = build_slaving(mech, ndof, fixed, node_dofs)
         dof_names += new_names
-        el_link, el_dof, el_prop = [], [], []
-        for li, ln in enumerate(links):
-            if mech.links[li].rigid:
-                continue
-            ra, ea, ei = ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"], ln["youngs_modulus"] * ln["second_moment"]
-            uniform = _uniform(fracs[li])
-            le_u = ln["length"] / n_el[li]
-            for k in range(n_el[li]):
-                n1, n2 = node_of[li][k], node_of[li][k + 1]
-                el_link.append(li + 1)
-                el_dof.append([trans[n1, 0], trans[n1, 1], rot[(n1, li)], trans[n2, 0], trans[n2, 1], rot[(n2, li)]])
-                if uniform:    # equal elements: the same numbers as a uniform mesh always had
-                    el_prop.append([le_u, k * le_u, ra, ea, ei])
-                else:
-                    el_prop.append([(fracs[li][k + 1] - fracs[li][k]) * ln["length"], fracs[li][k] * ln["length"],
-                                    ra, ea, ei])
-        if not el_dof:
-            raise CaseError("links", "no link is flexible: the superposition models need at least one flexible link "
-                                     "(rigid = false); the rigid-body motion alone is in every run's joint outputs")
+        el_link, el_dof, el_prop = _elements(mech, links, fracs, node_of, trans, rot)
         el_dof = np.array(el_dof, dtype=np.int32).T  # (6, nel), 0-based for now
 
         model = cls(case=case, joints=joints, link_names=names, n_el=n_el, node_of=node_of, nnodes=nnodes,

@@ -116,7 +116,7 @@ def slave_transformation(fe, rig1):
         rows = sl._solve(rig1[:, :, None])
         cols = fe.free_of[sl.masters] - 1
         for k in range(3):
-            t[k][np.ix_(sl.slaves, cols)] = rows[k][0]
+            t[k][np.ix_(sl.slaves, cols)] = rows[k][:, 0, :]
     return t
 
 

@@ -285,14 +285,17 @@ class Slaving:
             reduced.append((pick, {k: x / row[pick] for k, x in row.items() if k != pick}))
             kept.append(i)
             slaves.append(pick)
-        self.rows_kept, self.slaves = kept, slaves
+        self.rows_kept, self.slaves, self._block_order = kept, slaves, None
+        if not slaves:                                      # every relation fixed its DOFs
+            self.masters, self.pattern = [], []
+            return
         sl = set(slaves)
         self.masters = sorted({k for i in kept for k in rows[i] if k not in sl})
         t = [self._solve(rig_drawn), self._solve(rig_probe)]
         nz = np.zeros((len(slaves), len(self.masters)), bool)
         for tt in t:
             for x in tt:
-                nz |= np.any(np.abs(x) > 1e-13, axis=0)
+                nz |= np.any(np.abs(x) > 1e-13, axis=1)
         self.pattern = [np.flatnonzero(nz[k]) for k in range(len(slaves))]
 
     def finalize(self, free_of: np.ndarray) -> None:
@@ -312,31 +315,78 @@ class Slaving:
         return out
 
     # ------------------------------------------------------------------ values
+    def _blocks(self, rows) -> list[list[int]]:
+        """The kept rows (row k pivots slave k) grouped into the strongly connected blocks of their slave
+        coupling, in an order in which each block needs only slaves of the blocks before it: C_s is
+        block triangular, and its diagonal blocks are small (1 x 1, a slider's 2 x 2 [n; t])."""
+        ns = len(self.slaves)
+        sidx = {d: k for k, d in enumerate(self.slaves)}
+        reach = np.eye(ns, dtype=bool)
+        for k, ri in enumerate(self.rows_kept):
+            for d in rows[ri]:
+                if d in sidx:
+                    reach[k, sidx[d]] = True
+        for m in range(ns):                                  # transitive closure (ns is small)
+            reach |= reach[:, m:m + 1] & reach[m:m + 1, :]
+        blocks, done = [], np.zeros(ns, bool)
+        while not done.all():
+            for k in np.flatnonzero(~done):
+                comp = np.flatnonzero(reach[k] & reach[:, k])
+                if np.all(done[np.flatnonzero(reach[k] & ~np.isin(np.arange(ns), comp))]):
+                    blocks.append([int(c) for c in comp])
+                    done[comp] = True
+                    break
+        return blocks
+
     def _solve(self, rig):
-        """(T, T', T'') as arrays (N, nslaves, nmasters) on a rig chunk."""
+        """(T, T', T'') as arrays (nslaves, N, nmasters) on a rig chunk: C_s T = -C_m,
+        C_s T' = -(C_s' T + C_m'), C_s T'' = -(C_s'' T + 2 C_s' T' + C_m''), by block substitution."""
         rows = self.rows(rig)
         ns, nm = len(self.slaves), len(self.masters)
         n = rig.shape[2] if rig.ndim == 3 else 1
-        col = {d: j for j, d in enumerate(self.slaves)}
-        col.update({d: ns + j for j, d in enumerate(self.masters)})
-        c = np.zeros((3, n, ns, ns + nm))
-        for i, ri in enumerate(self.rows_kept):
+        sidx = {d: k for k, d in enumerate(self.slaves)}
+        midx = {d: j for j, d in enumerate(self.masters)}
+        cs = [{} for _ in range(ns)]                         # row k: {slave: (value, d, dd) arrays (N, 1)}
+        cm = np.zeros((3, ns, n, nm))
+        for k, ri in enumerate(self.rows_kept):
             for d, jet in rows[ri].items():
-                for k, x in enumerate((jet.v, jet.d, jet.dd)):
-                    c[k, :, i, col[d]] = x
-        cs, cm = c[..., :ns], c[..., ns:]
-        try:
-            inv = np.linalg.inv(cs[0])
-        except np.linalg.LinAlgError:
-            inv = None
-        if inv is None or not np.all(np.isfinite(inv)):
-            names = sorted({self.labels[i][0] for i in self.rows_kept})
-            raise SolverError(f"the elastic relations of the joints {', '.join(names)} became singular (a loop of rigid "
-                              "bodies whose slave choice degenerates): make one of its bodies a flexible link")
-        t0 = -inv @ cm[0]
-        t1 = -inv @ (cs[1] @ t0 + cm[1])
-        t2 = -inv @ (cs[2] @ t0 + 2.0 * (cs[1] @ t1) + cm[2])
-        return t0, t1, t2
+                x = [np.broadcast_to(np.asarray(y, float), (n,)) for y in (jet.v, jet.d, jet.dd)]
+                if d in sidx:
+                    cs[k][sidx[d]] = [y[:, None] for y in x]
+                else:
+                    cm[:, k, :, midx[d]] = x
+        if self.__dict__.get("_block_order") is None:
+            self._block_order = self._blocks(rows)
+        t = np.zeros((3, ns, n, nm))
+        for order in range(3):
+            rhs = -cm[order].copy()
+            for k in range(ns):                              # the known terms of lower orders
+                for j, c in cs[k].items():
+                    if order >= 1:
+                        rhs[k] -= c[order] * t[0, j] if order == 1 else c[2] * t[0, j] + 2.0 * c[1] * t[1, j]
+            self._substitute(cs, rhs, t[order])
+        return t[0], t[1], t[2]
+
+    def _substitute(self, cs, rhs, out) -> None:
+        """Solve C_s Y = rhs (ns, N, nm) into ``out`` block by block (C_s values only)."""
+        for block in self._block_order:
+            inside = set(block)
+            r = [rhs[k] - sum((c[0] * out[j] for j, c in cs[k].items() if j not in inside), 0.0) for k in block]
+            a = [[cs[k].get(j, (0.0,))[0] for j in block] for k in block]
+            if len(block) == 1:
+                out[block[0]] = r[0] / a[0][0]
+            elif len(block) == 2:
+                det = a[0][0] * a[1][1] - a[0][1] * a[1][0]
+                out[block[0]] = (a[1][1] * r[0] - a[0][1] * r[1]) / det
+                out[block[1]] = (a[0][0] * r[1] - a[1][0] * r[0]) / det
+            else:                                            # a loop of rigid bodies: a general solve
+                mat = np.stack([np.stack([np.broadcast_to(x, out.shape[1:2] + (1,))[:, 0] for x in row], -1) for row in a], -2)
+                sol = np.linalg.solve(mat, np.stack(r, 1))  # (N, nb, nm)
+                out[block] = sol.transpose(1, 0, 2)
+            if not np.all(np.isfinite(out[block])):
+                names = sorted({self.labels[self.rows_kept[k]][0] for k in block})
+                raise SolverError(f"the elastic relations of the joints {', '.join(names)} became singular (a loop of "
+                                  "rigid bodies whose slave choice degenerates): make one of its bodies a flexible link")
 
     def values(self, rig) -> np.ndarray:
         """(3, nnz, N) [T, T', T''] of the CSR rows on a rig chunk (5, ncols, N), Fortran order."""
@@ -344,33 +394,34 @@ class Slaving:
         t = self._solve(rig)
         k = np.repeat(np.arange(self.nsl), [p.size for p in self.pattern])
         j = np.concatenate(self.pattern) if self.pattern else np.zeros(0, int)
-        out = np.stack([x[:, k, j] for x in t])            # (3, N, nnz)
-        if out.shape[2] == 0:
-            out = np.zeros((3, out.shape[1], 1))
-        return np.asfortranarray(out.transpose(0, 2, 1))
+        out = np.stack([x[k, :, j] for x in t])            # (3, nnz, N)
+        if out.shape[1] == 0:
+            out = np.zeros((3, 1, out.shape[2]))
+        return np.asfortranarray(out)
 
     def reconstruct(self, x_all: np.ndarray, rig, derivs=None) -> None:
         """Fill the slaved entries of all-DOF frames x_all (ndof, N) in place: u_s = T u_m, or with
         ``derivs = (v_all, a_all)`` also v_s = T' u + T v and a_s = T'' u + 2 T' v + T a."""
         if not self.nsl:
             return
-        t0, t1, t2 = self._solve(rig)
-        m = x_all[self.masters].T[:, :, None]               # (N, nm, 1)
-        x_all[self.slaves] = (t0 @ m)[:, :, 0].T
+        t0, t1, t2 = self._solve(rig)                     # (ns, N, nm)
+        m = x_all[self.masters]                             # (nm, N)
+        x_all[self.slaves] = np.einsum("snj,jn->sn", t0, m)
         if derivs is not None:
             v_all, a_all = derivs
-            vm, am = v_all[self.masters].T[:, :, None], a_all[self.masters].T[:, :, None]
-            v_all[self.slaves] = (t1 @ m + t0 @ vm)[:, :, 0].T
-            a_all[self.slaves] = (t2 @ m + 2.0 * (t1 @ vm) + t0 @ am)[:, :, 0].T
+            vm, am = v_all[self.masters], a_all[self.masters]
+            v_all[self.slaves] = np.einsum("snj,jn->sn", t1, m) + np.einsum("snj,jn->sn", t0, vm)
+            a_all[self.slaves] = (np.einsum("snj,jn->sn", t2, m) + 2.0 * np.einsum("snj,jn->sn", t1, vm)
+                                  + np.einsum("snj,jn->sn", t0, am))
 
     def project(self, q_all: np.ndarray, rig) -> np.ndarray:
         """Generalized forces over all DOFs (ndof, N) on the masters: q + T^T q_slaves (in place at the
         masters; the slaved entries are left as they were)."""
         if not self.nsl:
             return q_all
-        t0 = self._solve(rig)[0]                            # (N, ns, nm)
+        t0 = self._solve(rig)[0]                            # (ns, N, nm)
         q = q_all.copy()
-        q[self.masters] += np.einsum("nsm,sn->mn", t0, q_all[self.slaves])
+        q[self.masters] += np.einsum("snm,sn->mn", t0, q_all[self.slaves])
         return q
 
 

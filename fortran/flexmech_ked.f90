@@ -294,33 +294,36 @@ contains
 
   !> Add an item with slaved DOFs, given its matrices mg, cg, kg (n x n) and load fg (n) in the
   !> all-DOF components: S += T^T (cm M T + cc Cb + ck Kb), r += T^T (-F - Cb v - Kb u) with
-  !> Cb = 2 M T' + C T and Kb = M T'' + C T' + K T (static: Cb = 0, Kb = K T).
+  !> Cb = 2 M T' + C T and Kb = M T'' + C T' + K T (static: Cb = 0, Kb = K T), grouped as
+  !> S += T^T [M (cm T + 2 cc T' + ck T'') + C (cc T + ck T') + ck K T] and
+  !> r += T^T [-F - M (2 T' v + T'' u) - C (T v + T' u) - K T u].
   subroutine gen_add(sys, it, mg, cg, kg, fg, cm, cc, ck, qs, u, v, ab, r)
     class(ked_system), intent(in) :: sys
     type(gen_item), intent(in) :: it
     real(dp), intent(in) :: mg(:, :), cg(:, :), kg(:, :), fg(:), cm, cc, ck, u(:), v(:)
     logical, intent(in) :: qs
     real(dp), intent(inout) :: ab(:, :), r(:)
-    real(dp) :: t(it%n, it%nm), td(it%n, it%nm), tdd(it%n, it%nm), cb(it%n, it%nm), kb(it%n, it%nm)
-    real(dp) :: s(it%nm, it%nm), rl(it%n), rm(it%nm)
+    real(dp) :: t(it%n, it%nm), td(it%n, it%nm), tdd(it%n, it%nm), a(it%n, it%nm), s(it%nm, it%nm)
+    real(dp) :: um(it%nm), vm(it%nm), wm(it%n), wc(it%n), wk(it%n), rl(it%n)
     integer :: c
     call gen_transform(sys, it, t, td, tdd)
+    um = u(it%cols)
+    vm = v(it%cols)
+    wk = matmul(t, um)
     if (qs) then
-      cb = 0.0_dp
-      kb = matmul(kg, t)
+      a = ck*matmul(kg, t)
+      rl = -fg - matmul(kg, wk)
     else
-      cb = 2.0_dp*matmul(mg, td) + matmul(cg, t)
-      kb = matmul(mg, tdd) + matmul(cg, td) + matmul(kg, t)
+      a = matmul(mg, cm*t + (2.0_dp*cc)*td + ck*tdd) + matmul(cg, cc*t + ck*td) + ck*matmul(kg, t)
+      wm = 2.0_dp*matmul(td, vm) + matmul(tdd, um)
+      wc = matmul(t, vm) + matmul(td, um)
+      rl = -fg - matmul(mg, wm) - matmul(cg, wc) - matmul(kg, wk)
     end if
-    s = matmul(transpose(t), cm*matmul(mg, t) + cc*cb + ck*kb)
+    s = matmul(transpose(t), a)
     call band_add_general(ab, size(ab, 1), sys%kl, sys%ku, it%nm, it%cols, s)
-    rl = -fg
+    um = matmul(rl, t)                     ! T^T rl
     do c = 1, it%nm
-      rl = rl - cb(:, c)*v(it%cols(c)) - kb(:, c)*u(it%cols(c))
-    end do
-    rm = matmul(rl, t)        ! T^T rl
-    do c = 1, it%nm
-      r(it%cols(c)) = r(it%cols(c)) + rm(c)
+      r(it%cols(c)) = r(it%cols(c)) + um(c)
     end do
   end subroutine gen_add
 
