@@ -408,3 +408,23 @@ def test_unsupported_models_and_rigid_only_mechanisms(cases_dir):
     with pytest.raises(fm.CaseError) as exc:
         Prepared(fm.validate_case(raw))
     assert exc.value.field == "links"
+
+
+def test_periodic_steady_state_with_turning_relations(cases_dir):
+    """The quick-return at constant crank speed (slave rows turning with its rigid rocker and its moving
+    contact point): the periodic steady state from the monodromy matrix equals the end of a damped
+    transient from rest run over six periods on the same grid."""
+    from flexmech_py.floquet import PeriodicCase, floquet, steady_state
+
+    damped = ["solver.rayleigh=[60.0, 1e-6]", "mesh.elements_per_link=2", "solver.output_every=1"]
+    pc = PeriodicCase(_load(cases_dir, "quick_return", *damped), "classic", dt=2e-4)
+    fr = floquet(pc)
+    assert fr.stable
+    steady = steady_state(pc, fr)
+    assert steady.extra["floquet"]["periodicity_residual"] < 1e-8
+    tr = Prepared(_load(cases_dir, "quick_return", *damped, f"solver.t_end={6 * pc.period!r}"),
+                  dt=pc.dt * (1 + 1e-12)).run("classic")
+    assert tr.nsteps == 6 * pc.nsteps
+    nf = steady.t.size
+    for name in ("strain_crank_start", "crank_tip_transverse", "guide_force"):
+        assert np.max(np.abs(tr[name][-nf:] - steady[name])) < 1e-6 * np.max(np.abs(steady[name])), name
