@@ -103,7 +103,7 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray, dof: int | None = None)
     try:
         ev = fe.squared_frequencies(rig0[:, :, 0] * np.array([1, 0, 0, 0, 0])[:, None])
     except np.linalg.LinAlgError:
-        turning = [p.name for p in fe.parts.values() if p.inertia == 0.0 and not fe.fixed[p.dofs[2]]]
+        turning = [p.name for p in fe.parts.values() if p.inertia == 0.0 and fe.free_of[p.dofs[2]] > 0]
         if turning:
             raise CaseError(f"bodies.{turning[0]}.inertia", "is 0 but the body can turn in the elastic problem of "
                                                            "the superposition models (its joints leave its rotation "
