@@ -286,7 +286,7 @@ class Study:
 
 
 def _uniform_mesh(case: dict):
-    ns = {ln["elements"] for ln in case["links"]}
+    ns = {ln["elements"] for ln in case["links"] if not ln.get("rigid")}
     return ns.pop() if len(ns) == 1 else None
 
 
@@ -326,7 +326,7 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
     if r < 0 or 2 ** r != ref_dt_factor:
         raise CaseError("--ref-dt-factor", f"must be a power of 2 (1, 2, 4, ...), got {ref_dt_factor}")
     case_mesh = _uniform_mesh(case)
-    n_ref = int(ref_elements) if ref_elements else 2 * max(elements + [max(ln["elements"] for ln in case["links"])])
+    n_ref = int(ref_elements) if ref_elements else 2 * max(elements + [max(ln["elements"] for ln in case["links"] if not ln.get("rigid"))])
     n_ref = 8 * math.ceil(n_ref / 8) if not ref_elements else n_ref
     if n_ref % 8:
         raise CaseError("--ref-elements", f"must be a multiple of 8 (the reference mesh family is n, n/2, n/4, n/8), "

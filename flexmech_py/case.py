@@ -340,8 +340,8 @@ def _output_point(spec: dict, d: dict, kind: str, w: str, mech) -> None:
     ref = mech.point(v.text(spec, "at", w), f"{w}.at")
     if ref.body is None:
         raise CaseError(f"{w}.at", "names a ground point, which does not move; name a point of a body")
-    if kind == "inertia_load" and ref.body.kind != "link":
-        raise CaseError(f"{w}.at", "inertia loads are given at the points of links")
+    if kind == "inertia_load" and (ref.body.kind != "link" or ref.body.rigid):
+        raise CaseError(f"{w}.at", "inertia loads are given at the points of flexible links (the mesh nodes)")
     if kind == "displacement" and d["component"] in ("rotation", "axial", "transverse") and ref.body.kind != "link":
         raise CaseError(f"{w}.component", f"{d['component']!r} is defined for link points; use x or y")
     d["at"] = spec["at"]

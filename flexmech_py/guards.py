@@ -90,7 +90,8 @@ def link_strains(res) -> np.ndarray:
         ea = ln["youngs_modulus"] * ln["area"]
         ax = np.abs(res.axial[els]) / ea if res.axial is not None else np.zeros((n, res.t.size))
         for k in range(n + 1):
-            kap = np.abs(res.curvature(li, k / n)) if res.curvature is not None else 0.0
+            frac = k / n if fe.uniform[li] else fe.node_frac[li][k]
+            kap = np.abs(res.curvature(li, frac)) if res.curvature is not None else 0.0
             eps_ax = np.max(ax[max(k - 1, 0):min(k + 1, n)], axis=0)
             out[li] = np.maximum(out[li], ln["half_depth"] * kap + eps_ax)
     return out

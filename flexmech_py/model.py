@@ -13,6 +13,10 @@ Conventions (docs/theory.md):
   of the attached link.  Constrained DOFs are kept in the numbering ("all DOFs") and dropped from the
   solved system ("free DOFs").
 - Free DOFs are numbered by reverse Cuthill-McKee to keep the band narrow.
+- Rigid links and rigid bodies are rigid bodies of the elastic problem (three DOFs at their centre of
+  mass), prismatic joints have an along DOF, and every joint that touches them is a relation between
+  DOFs with time-varying coefficients whose slave DOFs are not solved for (flexmech_py/slaving.py);
+  the rigid samples then carry a column per rigid body and prismatic joint (:meth:`FEModel.rig_samples`).
 """
 
 from __future__ import annotations
@@ -64,17 +68,15 @@ def _end_name(frac: float) -> str:
 
 
 def mechanism_joints(case: dict) -> list[Joint]:
-    """The mechanism's joints between links (and the ground), with their elastic conditions."""
+    """The mechanism's revolute and weld joints between flexible links (and the ground), with their
+    elastic conditions: those the FE model expresses by shared or fixed DOFs.  Joints that touch a rigid
+    link or body, and prismatic joints, are relations (flexmech_py/slaving.py)."""
     mech = case.mechanism
     out = []
     for j in mech.joints:
         a, b = mech.joint_points(j)
-        for ref in (a, b):
-            if ref.body is not None and ref.body.kind != "link":
-                raise CaseError(f"joints.{j.name}", f"joins rigid body {ref.body.name!r}: rigid bodies are not yet "
-                                                    "part of the finite-element models")
-        if j.kind == "prismatic":
-            raise CaseError(f"joints.{j.name}", "prismatic joints are not yet part of the finite-element models")
+        if j.kind == "prismatic" or any(ref.body is not None and ref.body.rigid for ref in (a, b)):
+            continue
         sign = 1.0
         if b.body is None:      # the ground on the b side: swap, and flip the sign of the joint coordinate
             a, b, sign = b, a, -1.0
@@ -82,15 +84,23 @@ def mechanism_joints(case: dict) -> list[Joint]:
         af = None if a.body is None else a.body.fraction(a.point)
         out.append(Joint(j.name, ai, af, mech.link_index(b.body.name), b.body.fraction(b.point), mech.condition(j),
                          j.kind, sign))
-    for ln in mech.links:
-        if ln.rigid:
-            raise CaseError(f"links.{ln.name}.rigid", "rigid links are not yet part of the finite-element models")
     return out
 
 
-def link_mesh(link, n: int) -> np.ndarray:
-    """Node fractions (0 .. 1) of a link meshed with about n elements and a node at every named point."""
-    cuts = sorted({0.0, 1.0} | {float(f) for f in link.points.values()})
+def joint_fractions(mech, link) -> set:
+    """Fractions of ``link`` where joints attach (each must be a mesh node)."""
+    out = set()
+    for j in mech.joints:
+        for ref in mech.joint_points(j):
+            if ref.body is link:
+                out.add(float(link.fraction(ref.point)))
+    return out
+
+
+def link_mesh(link, n: int, extra=()) -> np.ndarray:
+    """Node fractions (0 .. 1) of a link meshed with about n elements and a node at every named point
+    (and at the fractions ``extra``, e.g. its joint points)."""
+    cuts = sorted({0.0, 1.0} | {float(f) for f in link.points.values()} | {float(f) for f in extra})
     if len(cuts) == 2:
         return np.linspace(0.0, 1.0, n + 1)
     fr = [0.0]
@@ -193,6 +203,10 @@ def _node_index(fracs: np.ndarray, frac: float) -> int:
     return k
 
 
+def _uniform(fracs: np.ndarray) -> bool:
+    return np.allclose(fracs, np.linspace(0.0, 1.0, fracs.size), rtol=0.0, atol=1e-14) and fracs.size > 1
+
+
 def _merge_nodes(joints, fracs) -> tuple[list, int]:
     """Global nodes: one per (link, mesh node), merged where a revolute or weld joins two links."""
     nodes = _UnionFind()
@@ -232,6 +246,30 @@ def _number_dofs(joints, node_of, fracs, nnodes: int, names):
     return rot, trans, 2 * nnodes + len(rot_groups), dof_names
 
 
+def _elements(mech, links, fracs, node_of, trans, rot) -> tuple[list, list, list]:
+    """(el_link, el_dof (0-based), el_prop) of the flexible links' beam elements, link by link."""
+    el_link, el_dof, el_prop = [], [], []
+    for li, ln in enumerate(links):
+        if mech.links[li].rigid:
+            continue
+        ra, ea, ei = ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"], ln["youngs_modulus"] * ln["second_moment"]
+        n = fracs[li].size - 1
+        uniform, le_u = _uniform(fracs[li]), ln["length"] / n
+        for k in range(n):
+            n1, n2 = node_of[li][k], node_of[li][k + 1]
+            el_link.append(li + 1)
+            el_dof.append([trans[n1, 0], trans[n1, 1], rot[(n1, li)], trans[n2, 0], trans[n2, 1], rot[(n2, li)]])
+            if uniform:    # equal elements: the same numbers as a uniform mesh always had
+                el_prop.append([le_u, k * le_u, ra, ea, ei])
+            else:
+                el_prop.append([(fracs[li][k + 1] - fracs[li][k]) * ln["length"], fracs[li][k] * ln["length"],
+                                ra, ea, ei])
+    if not el_dof:
+        raise CaseError("links", "no link is flexible: the superposition models need at least one flexible link "
+                                 "(rigid = false); the rigid-body motion alone is in every run's joint outputs")
+    return el_link, el_dof, el_prop
+
+
 @dataclass
 class FEModel:
     """The discretized mechanism; build it with :meth:`from_case`."""
@@ -260,16 +298,23 @@ class FEModel:
     dof_names: list = field(default_factory=list)
     node_frac: list = field(default_factory=list)   # node_frac[link][k]: fraction of the link's length of node k
     last_run: dict | None = field(default=None, repr=False)   # the last run's frames and final state (run())
+    parts: dict = field(default_factory=dict)       # rigid link / body name -> slaving.RigidPart
+    slides: list = field(default_factory=list)      # slaving.Slide per prismatic joint
+    slaving: object = None                          # slaving.Slaving, None without relations
+    uniform: list = field(default_factory=list)     # per link: equal elements
 
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_case(cls, case: dict) -> "FEModel":
+        from .slaving import build_slaving
+
         mech = case.mechanism
         links = case["links"]
         names = [ln["name"] for ln in links]
         joints = mechanism_joints(case)
-        fracs = [link_mesh(link, ln["elements"]) for link, ln in zip(mech.links, links)]
-        n_el = [f.size - 1 for f in fracs]
+        fracs = [np.zeros(0) if link.rigid else link_mesh(link, ln["elements"], joint_fractions(mech, link))
+                 for link, ln in zip(mech.links, links)]
+        n_el = [max(f.size - 1, 0) for f in fracs]
         node_of, nnodes = _merge_nodes(joints, fracs)
         rot, trans, ndof, dof_names = _number_dofs(joints, node_of, fracs, nnodes, names)
         fixed = np.zeros(ndof, bool)
@@ -279,20 +324,15 @@ class FEModel:
                 fixed[trans[node]] = True
                 if j.shares_rotation:
                     fixed[rot[(node, j.outboard)]] = True
-        el_link, el_dof, el_prop = [], [], []
-        for li, ln in enumerate(links):
-            ra, ea, ei = ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"], ln["youngs_modulus"] * ln["second_moment"]
-            uniform = len(mech.links[li].points) == 0
-            le_u = ln["length"] / n_el[li]
-            for k in range(n_el[li]):
-                n1, n2 = node_of[li][k], node_of[li][k + 1]
-                el_link.append(li + 1)
-                el_dof.append([trans[n1, 0], trans[n1, 1], rot[(n1, li)], trans[n2, 0], trans[n2, 1], rot[(n2, li)]])
-                if uniform:    # equal elements: the same numbers as a uniform mesh always had
-                    el_prop.append([le_u, k * le_u, ra, ea, ei])
-                else:
-                    el_prop.append([(fracs[li][k + 1] - fracs[li][k]) * ln["length"], fracs[li][k] * ln["length"],
-                                    ra, ea, ei])
+
+        def node_dofs(ref):   # a flexible link's point: ((x, y) DOFs of its node, its rotation DOF there)
+            li = mech.link_index(ref.body.name)
+            node = node_of[li][_node_index(fracs[li], ref.body.fraction(ref.point))]
+            return tuple(trans[node]), rot[(node, li)]
+
+        parts, slides, slaving, ndof, fixed, new_names = build_slaving(mech, ndof, fixed, node_dofs)
+        dof_names += new_names
+        el_link, el_dof, el_prop = _elements(mech, links, fracs, node_of, trans, rot)
         el_dof = np.array(el_dof, dtype=np.int32).T  # (6, nel), 0-based for now
 
         model = cls(case=case, joints=joints, link_names=names, n_el=n_el, node_of=node_of, nnodes=nnodes,
@@ -301,21 +341,42 @@ class FEModel:
                     el_prop=np.asfortranarray(np.array(el_prop, float).T),
                     lm_link=np.zeros(0, np.int32), lm_dof=np.zeros((2, 0), np.int32), lm_prop=np.zeros((2, 0)),
                     ri_link=np.zeros(0, np.int32), ri_dof=np.zeros(0, np.int32), ri_prop=np.zeros(0),
-                    dof_names=dof_names, node_frac=fracs)
-        model._number_free_dofs(el_dof)
+                    dof_names=dof_names, node_frac=fracs, parts=parts, slides=slides, slaving=slaving,
+                    uniform=[_uniform(f) for f in fracs])
         model._lumped(case)
+        model._number_free_dofs(el_dof)
         return model
 
     def _number_free_dofs(self, el_dof0: np.ndarray) -> None:
-        if not np.any(~self.fixed):
-            raise CaseError("joints", "every elastic DOF is constrained: nothing to solve")
-        self.free_of = rcm_free_numbering([el_dof0[:, e] for e in range(el_dof0.shape[1])], ~self.fixed)
+        sl = self.slaving
+        solve = ~self.fixed
+        if sl is not None:
+            solve[sl.slaves] = False
+        if not np.any(solve):
+            raise CaseError("joints", "every elastic DOF is constrained: nothing to solve (a superposition model "
+                                      "needs a flexible link that the joints leave free to deform)")
+        cliques = [el_dof0[:, e] for e in range(el_dof0.shape[1])]
+        if sl is not None:   # an item with a slaved DOF couples every DOF its slaves depend on
+            masters = {s: [sl.masters[j] for j in p] for s, p in zip(sl.slaves, sl.pattern)}
+            items = cliques + [self.lm_dof[:, i] - 1 for i in range(self.lm_dof.shape[1])] + [[d - 1] for d in self.ri_dof]
+            cliques = [np.array(sorted({m for d in dofs for m in masters.get(int(d), [int(d)])}), int) for dofs in items]
+        self.free_of = rcm_free_numbering(cliques, solve)
         self.bandwidth = int(kernels.api.ked_bandwidth(self.free_of, self.el_dof))
+        if sl is not None:
+            sl.finalize(self.free_of)
+            for c in cliques:
+                f = self.free_of[c]
+                f = f[f > 0]
+                if f.size:
+                    self.bandwidth = max(self.bandwidth, int(f.max() - f.min()))
 
     def node_ref(self, ref: str, where: str) -> tuple[int, int, float]:
         """Resolve a link point ('<link>.<start|mid|end|name|fraction>') to (link index, global node,
         zeta along the link [m]); a CaseError when it is not a mesh node."""
         link, pos = ref.split(".", 1)
+        if link in self.parts:
+            raise CaseError(where, f"{ref!r} is a point of the rigid {'link' if link in self.link_names else 'body'} "
+                                   f"{link!r}, which has no mesh; name a point of a flexible link")
         li = self.link_names.index(link)
         frac = self.case.mechanism.links[li].fraction(pos, where)
         f = self.node_frac[li]
@@ -326,23 +387,42 @@ class FEModel:
                                    f"fractions k/{n}); choose a node, name the point in links.points, "
                                    "or change elements_per_link")
         return li, self.node_of[li][k], k * self.case["links"][li]["length"] / self.n_el[li] \
-            if len(self.case.mechanism.links[li].points) == 0 else f[k] * self.case["links"][li]["length"]
+            if self.uniform[li] else f[k] * self.case["links"][li]["length"]
+
+    def point_ref(self, ref: str, where: str):
+        """A body point for outputs: ('node', (link index, node, zeta)) on a flexible link (a mesh node),
+        or ('rigid', (RigidPart, PointRef)) on a rigid link or body."""
+        link = ref.split(".", 1)[0]
+        if link in self.parts:
+            return "rigid", (self.parts[link], self.case.mechanism.point(ref, where))
+        return "node", self.node_ref(ref, where)
 
     def _lumped(self, case: dict) -> None:
-        lm = [self.node_ref(pm["at"], f"point_masses[{i}].at") + (pm["mass"],)
-              for i, pm in enumerate(case["point_masses"])]
-        if lm:
-            self.lm_link = np.array([li + 1 for li, _, _, _ in lm], np.int32)
-            self.lm_dof = np.asfortranarray(np.array([self.trans_dof[node] + 1 for _, node, _, _ in lm], np.int32).T)
-            self.lm_prop = np.asfortranarray(np.array([[m, z] for _, _, z, m in lm], float).T)
-        ri = []
+        """Point masses and rotary inertias of the flexible links (those of rigid links are in their mass
+        properties), then every rigid body's mass at its centre and its rotary inertia."""
+        rigid_links = {n for n in self.parts if n in self.link_names}
+        lm, ri = [], []
+        for i, pm in enumerate(case["point_masses"]):
+            if pm["at"].split(".")[0] not in rigid_links:
+                li, node, z = self.node_ref(pm["at"], f"point_masses[{i}].at")
+                lm.append((li + 1, self.trans_dof[node] + 1, pm["mass"], z))
         for i, r in enumerate(case["rotary_inertias"]):
+            if r["turns_with"] in rigid_links:
+                continue
             _, node, _ = self.node_ref(r["at"], f"rotary_inertias[{i}].at")
             lw = self.link_names.index(r["turns_with"])
             if (node, lw) not in self.rot_dof:
                 raise CaseError(f"rotary_inertias[{i}].turns_with", f"link {r['turns_with']!r} does not pass through "
                                 f"{r['at']!r}; name a link that meets at that node")
             ri.append((lw + 1, self.rot_dof[(node, lw)] + 1, r["inertia"]))
+        for p in self.parts.values():   # classic-translational drops J alpha, as for every rotary inertia
+            lm.append((p.col + 1, np.array(p.dofs[:2]) + 1, p.mass, p.zeta))
+            if p.inertia > 0.0:
+                ri.append((p.col + 1, p.dofs[2] + 1, p.inertia))
+        if lm:
+            self.lm_link = np.array([c for c, _, _, _ in lm], np.int32)
+            self.lm_dof = np.asfortranarray(np.array([d for _, d, _, _ in lm], np.int32).T)
+            self.lm_prop = np.asfortranarray(np.array([[m, z] for _, _, m, z in lm], float).T)
         if ri:
             self.ri_link = np.array([a for a, _, _ in ri], np.int32)
             self.ri_dof = np.array([b for _, b, _ in ri], np.int32)
@@ -360,6 +440,16 @@ class FEModel:
     def joint(self, name: str) -> Joint:
         """The joint called ``name``."""
         return next(j for j in self.joints if j.name == name)
+
+    def rotation_dof(self, ref) -> int | None:
+        """All-DOF number of the elastic rotation of a point's body there (a PointRef; None: the ground)."""
+        if ref.body is None:
+            return None
+        if ref.body.name in self.parts:
+            return self.parts[ref.body.name].dofs[2]
+        li = self.link_names.index(ref.body.name)
+        node = self.node_of[li][self.node_index(li, ref.body.fraction(ref.point))]
+        return self.rot_dof[(node, li)]
 
     def node_index(self, li: int, frac: float) -> int:
         """Index along link ``li`` of its mesh node at fraction ``frac`` of its length."""
@@ -384,14 +474,55 @@ class FEModel:
             np.ones(1, np.int32), np.ones((2, 1), np.int32, order="F"), np.zeros((2, 1), order="F"))
         ri = (self.ri_link, self.ri_dof, self.ri_prop) if self.ri_link.size else (
             np.ones(1, np.int32), np.ones(1, np.int32), np.zeros(1))
-        return (self.free_of, self.el_link, self.el_dof, self.el_prop) + lm + ri
+        sl = self.slaving
+        slv = (sl.slave_of(self.ndof), sl.ptr, sl.col) if sl is not None and sl.nsl else (
+            np.zeros(self.ndof, np.int32), np.ones(1, np.int32), np.ones(1, np.int32))
+        return (self.free_of, self.el_link, self.el_dof, self.el_prop) + lm + ri + slv
 
-    def expand(self, x_free: np.ndarray) -> np.ndarray:
-        """Free-DOF vectors (nfree, ...) -> all-DOF vectors (ndof, ...), zeros at constrained DOFs."""
+    def slave_values(self, rig: np.ndarray) -> np.ndarray:
+        """(3, nnz, N) coefficients [T, T', T''] of the slave rows at rig samples (5, ncols, N) (or one
+        sample (5, ncols)); one dummy entry of zeros without slaves."""
+        rig = np.asarray(rig, float)
+        n = rig.shape[2] if rig.ndim == 3 else 1
+        if self.slaving is None or not self.slaving.nsl:
+            return np.zeros((3, 1, n), order="F")
+        return self.slaving.values(rig)
+
+    def rig_samples(self, rm, gravity, idx=slice(None)) -> np.ndarray:
+        """(5, ncols, N) kernel samples of a RigidMotion: the links' columns [phi, omega, alpha, a_O - g]
+        (RigidMotion.kernel_samples), then one per rigid body [phi, omega, alpha, a_C - g] (its frame at
+        the centre of mass) and one per prismatic joint [d, d', d'', 0, 0] (flexmech_py/slaving.py)."""
+        base = rm.kernel_samples(gravity, idx)
+        mech = self.case.mechanism
+        if not mech.rigid_bodies and not self.slides:
+            return base
+        cols = []
+        for b in mech.rigid_bodies:
+            i = 3 * mech.body_index(b)
+            z, zd, zdd = rm.z[idx, i:i + 3], rm.zd[idx, i:i + 3], rm.zdd[idx, i:i + 3]
+            cols.append([z[:, 2], zd[:, 2], zdd[:, 2], zdd[:, 0] - gravity[0], zdd[:, 1] - gravity[1]])
+        for sl in self.slides:
+            jq = rm.joint(sl.joint.name)[idx]
+            cols.append([jq[:, 0], jq[:, 1], jq[:, 2], 0.0 * jq[:, 0], 0.0 * jq[:, 0]])
+        extra = np.array(cols, float).transpose(1, 0, 2)
+        return np.asfortranarray(np.concatenate([base, extra], axis=1))
+
+    def expand(self, x_free: np.ndarray, rig: np.ndarray | None = None) -> np.ndarray:
+        """Free-DOF vectors (nfree, ...) -> all-DOF vectors (ndof, ...), zeros at constrained DOFs; the
+        slaved DOFs from their masters when the frames' rig samples (5, ncols, N) are given (else 0)."""
         out = np.zeros((self.ndof,) + x_free.shape[1:])
         mask = self.free_of > 0
         out[mask] = x_free[self.free_of[mask] - 1]
+        if rig is not None and self.slaving is not None and out.ndim == 2:
+            self.slaving.reconstruct(out, rig)
         return out
+
+    def expand_state(self, uf, vf, af, rig):
+        """All-DOF (u, v, a) frames from free-DOF ones, slaved DOFs with the derivatives of their rows."""
+        u, v, a = self.expand(uf), self.expand(vf), self.expand(af)
+        if self.slaving is not None:
+            self.slaving.reconstruct(u, rig, (v, a))
+        return u, v, a
 
     def restrict(self, x_all: np.ndarray) -> np.ndarray:
         """All-DOF vectors (ndof, ...) -> free-DOF vectors (nfree, ...)."""
@@ -405,7 +536,8 @@ class FEModel:
         """Dense (M, C, K) over the free DOFs and the rigid-inertia load over all DOFs at one rigid sample."""
         rig = np.asfortranarray(rig, float)
         mm, cm, km, f, status = kernels.api.ked_matrices(
-            self.nfree, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig)
+            self.nfree, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
+            np.asfortranarray(self.slave_values(rig)[:, :, 0]))
         kernels.check_status(status, "ked_matrices")
         return mm, cm, km, f
 
@@ -422,6 +554,7 @@ class FEModel:
         """Dense geometric stiffness over the free DOFs at one rigid sample for element axial forces
         ``nax`` (nel,) [N], tension > 0 (the term ``solver.geometric_stiffness`` adds to K)."""
         kgm, status = kernels.api.ked_geometric_matrix(self.nfree, *self._system_args(), np.asfortranarray(rig, float),
+                                                       np.asfortranarray(self.slave_values(rig)[:, :, 0]),
                                                        np.asarray(nax, float))
         kernels.check_status(status, "ked_geometric_matrix")
         return kgm
@@ -470,6 +603,7 @@ class FEModel:
             q_val = np.zeros((1, nsteps + 1), order="F")
         uf, vf, af, nf, status, fail, geo_iters, nvalid = kernels.api.ked_run(
             nframes, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
+            self.slave_values(rig),
             np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, alpha_m, alpha_f, beta, gamma,
             out_every, int(a0 is None), GEOMETRIC_CODE[geometric], geo_tol, geo_maxit, float(div_limit), u, v, a, p)
         self.last_run = {"uf": uf, "vf": vf, "af": af, "nf": nf, "frames_valid": int(nvalid), "u": u, "v": v,

@@ -53,18 +53,7 @@ def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float)
     u_all (ndof, nf) elastic DOFs; phi (nf,) rigid link angle.
     """
     els = fe.link_elements(li)
-    n = len(els)
-    s = frac * n
-    k = int(round(s))
-    if abs(s - k) < 1e-9:   # at a node: average the elements that meet there
-        parts = []
-        if k > 0:
-            parts.append((els[k - 1], 1.0))
-        if k < n:
-            parts.append((els[k], 0.0))
-    else:
-        e = min(int(np.floor(s)), n - 1)
-        parts = [(els[e], s - e)]
+    parts = [(els[e], xi) for e, xi in _element_at(fe, li, frac)]
     kap = 0.0
     for e, xi in parts:
         dglob = u_all[fe.el_dof[:, e] - 1]
@@ -72,9 +61,30 @@ def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float)
     return kap / len(parts)
 
 
+def _element_at(fe, li: int, frac: float) -> list[tuple[int, float]]:
+    """[(element index along link li, xi)] at fraction ``frac``: both elements at an interior node (xi 1 and
+    0), else the element containing it."""
+    f = fe.node_frac[li]
+    n = f.size - 1
+    if fe.uniform[li]:
+        s = frac * n
+        k = int(round(s))
+        at_node = abs(s - k) < 1e-9
+    else:
+        k = int(np.argmin(np.abs(f - frac)))
+        at_node = abs(f[k] - frac) < 1e-9
+    if at_node:   # at a node: the elements that meet there
+        return [(e, xi) for e, xi in ((k - 1, 1.0), (k, 0.0)) if 0 <= e < n]
+    if fe.uniform[li]:
+        e = min(int(np.floor(s)), n - 1)
+        return [(e, s - e)]
+    e = int(np.clip(np.searchsorted(f, frac) - 1, 0, n - 1))
+    return [(e, (frac - f[e]) / (f[e + 1] - f[e]))]
+
+
 def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run_model: str, rm=None,
                      load_cache: dict | None = None, joint_motion=None, curvature=None,
-                     axial=None) -> dict[str, np.ndarray]:
+                     axial=None, rates=None, reactions=None) -> dict[str, np.ndarray]:
     """Evaluate every named output over the frames.
 
     u_all (ndof, nf) elastic DOFs (displacements from the rigid motion ``motion``, a LinkMotion);
@@ -82,7 +92,10 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run
     frames (joint coordinates, reactions, drive forces of the rigid-body solution).
     joint_motion: LinkMotion the joint and link angles come from instead (the coupled models pass
     their own chord motion); curvature: callable(link, fraction) -> kappa (default: from u_all);
-    axial: (nel, nf) element axial forces [N] for ``axial_force`` outputs.
+    axial: (nel, nf) element axial forces [N] for ``axial_force`` outputs; rates: (v_all, a_all) the
+    elastic velocities and accelerations (a prismatic joint's elastic slide adds to its rigid one);
+    reactions: callable(joint) -> (nf, 3) the model's joint reactions (``source = "model"``; without
+    it the rigid-body reactions).
     """
     out = {}
     loads = {} if load_cache is None else load_cache
@@ -92,7 +105,7 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run
         if kind in ("joint_angle", "joint_displacement", "joint_speed", "joint_acceleration"):
             k = {"joint_angle": 0, "joint_displacement": 0, "joint_speed": 1, "joint_acceleration": 2}[kind]
             out[name] = (_joint_from_links(fe, joint_motion, sp["joint"], k) if joint_motion is not None
-                         else rm.joint(sp["joint"])[:, k].copy())
+                         else rm.joint(sp["joint"])[:, k] + _elastic_slide(fe, sp["joint"], k, u_all, rates))
         elif kind == "link_angle":
             lm = motion if joint_motion is None else joint_motion
             out[name] = np.unwrap(lm.phi[:, fe.link_names.index(sp["link"])])
@@ -104,14 +117,15 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run
         elif kind == "axial_force":
             out[name] = _axial_output(fe, axial, sp, name)
         elif kind in ("displacement", "position"):
-            out[name] = _point_output(fe, u_all, motion, sp, name)
+            out[name] = _point_output(fe, u_all, motion, sp, name, rm)
         elif kind == "inertia_load":
             model = run_model if sp["model"] == "run" else sp["model"]
             if model not in loads:
                 loads[model] = fe.loads(rig_frames, model)
             out[name] = _load_output(fe, loads[model], sp, name)
         elif kind == "reaction":
-            r = rm.reaction(sp["joint"])
+            model_source = sp.get("source", "model") == "model" and reactions is not None
+            r = reactions(sp["joint"]) if model_source else rm.reaction(sp["joint"])
             out[name] = {"x": r[:, 0], "y": r[:, 1], "moment": r[:, 2],
                          "magnitude": np.hypot(r[:, 0], r[:, 1])}[sp["component"]].copy()
         elif kind == "drive_force":
@@ -126,16 +140,44 @@ def _axial_output(fe, axial, sp: dict, name: str) -> np.ndarray:
         raise CaseError(f"outputs.{name}", "axial forces are not available for this model")
     li = fe.link_names.index(sp["link"])
     els = fe.link_elements(li)
-    n = len(els)
-    s = sp["at"] * n
-    k = int(round(s))
-    if abs(s - k) < 1e-9 and 0 < k < n:
-        return 0.5 * (axial[els[k - 1]] + axial[els[k]])
-    return axial[els[min(int(np.floor(s)), n - 1)]]
+    at = _element_at(fe, li, sp["at"])
+    return sum(axial[els[e]] for e, _ in at) / len(at)
 
 
-def _point_output(fe, u_all, motion, sp: dict, name: str) -> np.ndarray:
-    li, node, zeta = fe.node_ref(sp["at"], f"outputs.{name}.at")
+def _elastic_slide(fe, joint: str, k: int, u_all, rates) -> np.ndarray | float:
+    """A prismatic joint's elastic slide (k = 0), its rate (1) or acceleration (2): the along DOF; 0 for
+    other joints."""
+    dof = next((sl.dof for sl in getattr(fe, "slides", ()) if sl.joint.name == joint), None)
+    if dof is None:
+        return 0.0
+    x = u_all if k == 0 else (None if rates is None else rates[k - 1])
+    return 0.0 if x is None else x[dof]
+
+
+def _rigid_point_output(fe, u_all, rm, part, ref, sp: dict) -> np.ndarray:
+    """Position or displacement of a point of a rigid link or body: rigid + d + dtheta z x s (linearized)."""
+    mech = fe.case.mechanism
+    i = 3 * mech.body_index(part.body)
+    phi = rm.z[:, i + 2]
+    c, s = np.cos(phi), np.sin(phi)
+    m = part.body.marker(ref.point)
+    sx, sy = c * m[0] - s * m[1], s * m[0] + c * m[1]
+    dx, dy, dth = (u_all[d] for d in part.dofs)
+    ux, uy = dx - sy * dth, dy + sx * dth
+    comp = sp["component"]
+    if sp["kind"] == "position":
+        return (rm.z[:, i] + sx + ux) if comp == "x" else (rm.z[:, i + 1] + sy + uy)
+    if comp == "rotation":
+        return dth.copy()
+    ca, sa = (c, s) if part.body.kind == "link" else (np.ones_like(c), np.zeros_like(s))
+    return {"x": ux, "y": uy, "axial": ca * ux + sa * uy, "transverse": -sa * ux + ca * uy}[comp]
+
+
+def _point_output(fe, u_all, motion, sp: dict, name: str, rm=None) -> np.ndarray:
+    kind, where = fe.point_ref(sp["at"], f"outputs.{name}.at")
+    if kind == "rigid":
+        return _rigid_point_output(fe, u_all, rm, *where, sp)
+    li, node, zeta = where
     comp = sp["component"]
     ux, uy = u_all[fe.trans_dof[node, 0]], u_all[fe.trans_dof[node, 1]]
     phi = motion.phi[:, li]

@@ -105,22 +105,37 @@ def system(fe, rig, model, rayleigh=(0.0, 0.0)):
     return M, C, K, F
 
 
-def newmark(fe, rig, model, dt, beta=0.25, gamma=0.5, rayleigh=(0.0, 0.0), q_all=None):
-    """Newmark run over rig (5, nlinks, nsteps+1); returns u (nfree, nsteps+1).
-
-    q_all (ndof, nsteps+1): applied generalized forces over all DOFs (optional).
-    """
+def slave_transformation(fe, rig1):
+    """(T, T', T'') (ndof, nfree): all DOFs u = T w in terms of the free DOFs w at one rigid sample,
+    identity rows for the free DOFs, the slave rows of fe.slaving (zero rows for fixed DOFs)."""
+    t = np.zeros((3, fe.ndof, fe.nfree))
     free = np.flatnonzero(fe.free_of > 0)
-    free = free[np.argsort(fe.free_of[free])]  # in free-DOF order
+    t[0, free, fe.free_of[free] - 1] = 1.0
+    sl = fe.slaving
+    if sl is not None and sl.nsl:
+        rows = sl._solve(rig1[:, :, None])
+        cols = fe.free_of[sl.masters] - 1
+        for k in range(3):
+            t[k][np.ix_(sl.slaves, cols)] = rows[k][:, 0, :]
+    return t
+
+
+def newmark(fe, rig, model, dt, beta=0.25, gamma=0.5, rayleigh=(0.0, 0.0), q_all=None):
+    """Newmark run over rig (5, ncols, nsteps+1); returns u (nfree, nsteps+1).
+
+    q_all (ndof, nsteps+1): applied generalized forces over all DOFs (optional).  With slave
+    relations the dense all-DOF system is reduced with u = T w: T^T M T, T^T (2 M T' + C T),
+    T^T (M T'' + C T' + K T), T^T (Q - F).
+    """
     ns = rig.shape[2]
 
     def mats(i):
         M, C, K, F = system(fe, rig[:, :, i], model, rayleigh)
         rhs = -F if q_all is None else q_all[:, i] - F
-        ix = np.ix_(free, free)
-        return M[ix], C[ix], K[ix], rhs[free]
+        t, td, tdd = slave_transformation(fe, rig[:, :, i])
+        return t.T @ M @ t, t.T @ (2 * M @ td + C @ t), t.T @ (M @ tdd + C @ td + K @ t), t.T @ rhs
 
-    nf = free.size
+    nf = fe.nfree
     u = np.zeros((nf, ns)); v = np.zeros(nf)
     M, C, K, r = mats(0)
     a = np.linalg.solve(M, r)

@@ -17,6 +17,7 @@ from .mechanism import MotionSource, prepare_motion
 from .mechanism.motion import LinkMotion, RigidMotion
 from .model import FEModel
 from .outputs import evaluate_outputs, link_curvature, output_unit
+from .reactions import ModelReactions
 from .results import Result
 
 __all__ = ["simulate", "simulate_models", "Prepared", "motion_source", "rigid_motion", "time_grid", "RigidMotion"]
@@ -46,12 +47,14 @@ def time_grid(case: dict, dt: float | None = None, out_every: int | None = None)
     return nsteps, sol["t_end"] / nsteps, out_every
 
 
-def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion):
-    """The force drives' torques as generalized forces on the free elastic DOFs: (q_free, q_val) or
-    (None, None).
+def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion, rig: np.ndarray | None = None):
+    """The force drives' torques and forces as generalized forces on the free elastic DOFs: (q_free,
+    q_val) or (None, None); ``rig`` the samples of rm (fe.rig_samples) when the model has slave relations.
 
-    A torque on a revolute joint acts on the rotation of its b link at the joint node, its reaction
-    on the a link's.  Assembled over all DOFs (constrained ones included) and restricted to the free
+    A torque on a revolute joint acts on the elastic rotation of its body b at the joint, its reaction
+    on body a's; a force on a prismatic joint acts on the joint's along DOF (the elastic slide: the
+    force on b and its reaction on a at the contact point do the work F ds).  Assembled over all DOFs
+    (constrained ones included), projected onto the masters of slaved DOFs and restricted to the free
     DOFs; rows that vanish identically (torques on clamped DOFs, or action and reaction on one locked
     rotation) are dropped, so they cost nothing.
     """
@@ -59,19 +62,34 @@ def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion):
     forced = [d.joint for d in mech.drives if not d.kinematic]
     if not forced:
         return None, None
-    q_all = np.zeros((fe.ndof, rm.t.size))
-    for name in forced:
-        j = fe.joint(name)
-        tau = j.sign * rm.drive_force(name)
-        node = fe.node_of[j.outboard][fe.node_index(j.outboard, j.outboard_frac)]
-        q_all[fe.rot_dof[(node, j.outboard)]] += tau
-        if j.inboard is not None:
-            q_all[fe.rot_dof[(node, j.inboard)]] -= tau
+    q_all = drive_loads(fe, rm, forced)
+    if fe.slaving is not None:
+        q_all = fe.slaving.project(q_all, fe.rig_samples(rm, case["loads"]["gravity"]) if rig is None else rig)
     qf = fe.restrict(q_all)
     rows = np.flatnonzero(np.any(qf != 0.0, axis=1))
     if rows.size == 0:
         return None, None
     return (rows + 1).astype(np.int32), np.asfortranarray(qf[rows])
+
+
+def drive_loads(fe: FEModel, rm: RigidMotion, joints) -> np.ndarray:
+    """(ndof, N) the generalized forces of the drives of ``joints`` over all DOFs: a torque on the
+    elastic rotations of its joint's bodies (+ on b, - on a), a force on its joint's along DOF."""
+    mech = fe.case.mechanism
+    slides = {sl.joint.name: sl for sl in fe.slides}
+    q_all = np.zeros((fe.ndof, rm.t.size))
+    for name in joints:
+        f = rm.drive_force(name)
+        if name in slides:
+            q_all[slides[name].dof] += f
+            continue
+        a, b = mech.joint_points(mech.joint(name))
+        db, da = fe.rotation_dof(b), fe.rotation_dof(a)
+        if db is not None:
+            q_all[db] += f
+        if da is not None:
+            q_all[da] -= f
+    return q_all
 
 
 def check_elastic_problem(fe: FEModel, rig0: np.ndarray, dof: int | None = None) -> None:
@@ -86,12 +104,18 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray, dof: int | None = None)
     try:
         ev = fe.squared_frequencies(rig0[:, :, 0] * np.array([1, 0, 0, 0, 0])[:, None])
     except np.linalg.LinAlgError:
+        turning = [p.name for p in fe.parts.values() if p.inertia == 0.0 and fe.free_of[p.dofs[2]] > 0]
+        if turning:
+            raise CaseError(f"bodies.{turning[0]}.inertia", "is 0 but the body can turn in the elastic problem of "
+                                                           "the superposition models (its joints leave its rotation "
+                                                           "free): give its rotary inertia about its centre of mass") from None
         raise CaseError("links", "the mass matrix is not positive definite: every link needs density > 0 and area > 0") from None
     scale = np.max(np.abs(ev))
     nzero = int(np.sum(np.abs(ev) < 1e-13 * scale))
-    # a joint left free with 'torque' turns the mechanism's own degree of freedom into a zero-stiffness
-    # mode of the elastic problem, on purpose (theory.md section 14)
-    released = sum(1 for j in fe.joints if j.elastic == "torque")
+    # a joint left free with 'torque' (a prismatic one with 'force') turns the mechanism's own degree of
+    # freedom into a zero-stiffness mode of the elastic problem, on purpose (theory.md section 14)
+    mech = fe.case.mechanism
+    released = sum(1 for j in mech.joints if mech.condition(j) in ("torque", "force"))
     allowed = min(released, released if dof is None else dof)
     if nzero > allowed:
         raise CaseError("joints", f"the elastic problem has {nzero - allowed} unintended zero-stiffness mode(s): the joints leave the "
@@ -175,14 +199,15 @@ class Prepared:
             fe = FEModel.from_case(self.case)
             for name, sp in self.case["outputs"].items():  # node references must fall on the mesh
                 if isinstance(sp.get("at"), str):
-                    fe.node_ref(sp["at"], f"outputs.{name}.at")
+                    fe.point_ref(sp["at"], f"outputs.{name}.at")
             self._fe = fe
         return self._fe
 
     def _full_grid(self):
         if self._full is None:
             rm = self.rm
-            self._full = (rm, rm.kernel_samples(self.gravity)) + elastic_torque_loads(self.case, self.fe, rm)
+            rig = self.fe.rig_samples(rm, self.gravity)
+            self._full = (rm, rig) + elastic_torque_loads(self.case, self.fe, rm, rig)
         return self._full
 
     @property
@@ -222,7 +247,8 @@ class Prepared:
                 qv = np.asfortranarray(qv[:, i0:i1 + 1])
             return np.asfortranarray(rig[:, :, i0:i1 + 1]), qf, qv
         rm = self.source(self.times(i0, i1))
-        return (rm.kernel_samples(self.gravity),) + elastic_torque_loads(self.case, self.fe, rm)
+        rig = self.fe.rig_samples(rm, self.gravity)
+        return (rig,) + elastic_torque_loads(self.case, self.fe, rm, rig)
 
     def coarsened(self):
         """This case on every second step of its grid (the same rigid solution), for the step-doubling
@@ -300,7 +326,7 @@ class Prepared:
             return self._run_coupled(t_start, model)
         case, fe = self.case, self.fe
         if not self._checked:
-            check_elastic_problem(fe, self.rm_frames.kernel_samples(self.gravity)[:, :, :1], self.setup.dof)
+            check_elastic_problem(fe, fe.rig_samples(self.rm_frames, self.gravity, slice(0, 1)), self.setup.dof)
             self._checked = True
         sol = dict(case["solver"])
         if geometric is not None:
@@ -347,11 +373,14 @@ class Prepared:
         sel = slice(0, nvalid)
         rmf = self.rm_frames
         motion_f = rmf.motion.select(sel)
-        rig_f = rmf.kernel_samples(self.gravity, sel)
-        u_all = fe.expand(uf)
+        rig_f = fe.rig_samples(rmf, self.gravity, sel)
+        u_all, v_all, a_all = fe.expand_state(uf, vf, af, rig_f)
         if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
             nf = np.array([[fe.el_prop[3, e] / fe.el_prop[0, e]] for e in range(fe.nel)]) * _axial_stretch(fe, u_all, motion_f)
-        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rmf.select(sel), axial=nf)
+        rm_f = rmf.select(sel)
+        reactions = ModelReactions(fe, model, rm_f, rig_f, (u_all, v_all, a_all), sol, nf)
+        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rm_f, axial=nf,
+                                   rates=(v_all, a_all), reactions=reactions)
         units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
         self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": t_samples}
         timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
@@ -360,10 +389,13 @@ class Prepared:
         if sol["geometric_stiffness"] != "none":
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": int(geo_iters),
                                             "mean_per_step": geo_iters / self.nsteps}
+        if reactions.checked:
+            extra["reactions"] = reactions.summary()
         res = Result(case=case, model=model, t=rmf.t[sel], columns=columns, units=units, fe=fe,
-                     q=rmf.q[sel], qd=rmf.qd[sel], qdd=rmf.qdd[sel], u=u_all, v=fe.expand(vf),
-                     a=fe.expand(af), rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
+                     q=rmf.q[sel], qd=rmf.qd[sel], qdd=rmf.qdd[sel], u=u_all, v=v_all,
+                     a=a_all, rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
                      axial=nf, motion=motion_f)
+        res.reactions = reactions
         res.curvature = lambda li, frac: link_curvature(fe, u_all, motion_f.phi[:, li], li, frac)
         return guards.partial_or(res, failure, sol["geometric_stiffness"])
 

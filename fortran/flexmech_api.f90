@@ -9,9 +9,14 @@
 !>   el_prop(5,nel)    [L m, zeta0 m (start along its link), rho*A kg/m, E*A N, E*I N m^2]
 !>   lm_link(nlm), lm_dof(2,nlm), lm_prop(2,nlm)   point masses: link, [u w] DOFs, [mass kg, zeta m]
 !>   ri_link(nri), ri_dof(nri), ri_prop(nri)       rotary inertias: link turned with, DOF, J kg m^2
+!>   sl_of(ndof), sl_ptr(nsl+1), sl_col(nnz)       slave relations: slave number of each DOF (0: none),
+!>                     first entry of each slave's row, free-DOF numbers of the rows (nsl = 0: sl_ptr = [1],
+!>                     one dummy sl_col entry); their coefficients are sl_val(3,nnz,...) or tv(3,nnz)
+!>                     [T, dT/dt, d2T/dt2] per sample (flexmech_ked, docs/theory.md section 18)
 !>   load_model        1 hac (case I), 2 classic (case II), 3 classic-translational
 !>   rayleigh(2)       Rayleigh damping [a_M 1/s, a_K s]
-!> Rigid samples rig(5,nlinks,...) : [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] per link.
+!> Rigid samples rig(5,nlinks,...) : [phi, omega, alpha, a_Ox - g_x, a_Oy - g_y] per link (nlinks counts
+!> every column: links, then any further bodies' frames; flexmech_py.model.FEModel.rig_samples).
 !> Every routine returns `status` (codes in flexmech_lapack; 5 = Newton failure, 6 = divergence limit).
 module flexmech_api
   use flexmech_kinds, only: dp
@@ -59,13 +64,22 @@ contains
 
   !> Validate index arrays and build the system. status = STATUS_BAD_INPUT on bad indices.
   subroutine build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
-                   ri_link, ri_dof, ri_prop, load_model, rayleigh, status)
+                   ri_link, ri_dof, ri_prop, sl_of, sl_ptr, sl_col, load_model, rayleigh, status)
     type(ked_system), intent(out) :: sys
     integer, intent(in) :: nlinks, ndof, free_of(:), el_link(:), el_dof(:, :), lm_link(:), lm_dof(:, :)
-    integer, intent(in) :: ri_link(:), ri_dof(:), load_model
+    integer, intent(in) :: ri_link(:), ri_dof(:), load_model, sl_of(:), sl_ptr(:), sl_col(:)
     real(dp), intent(in) :: el_prop(:, :), lm_prop(:, :), ri_prop(:), rayleigh(2)
     integer, intent(out) :: status
+    integer :: nsl
     status = STATUS_BAD_INPUT
+    nsl = size(sl_ptr) - 1
+    if (size(sl_of) /= ndof .or. nsl < 0 .or. size(sl_col) < 1) return
+    if (sl_ptr(1) /= 1 .or. sl_ptr(nsl + 1) - 1 > size(sl_col)) return
+    if (nsl > 0) then
+      if (any(sl_ptr(2:) < sl_ptr(:nsl))) return
+      if (any(sl_col(:sl_ptr(nsl + 1) - 1) < 1) .or. any(sl_col(:sl_ptr(nsl + 1) - 1) > maxval(free_of))) return
+    end if
+    if (any(sl_of < 0) .or. any(sl_of > nsl) .or. any(sl_of > 0 .and. free_of > 0)) return
     if (size(free_of) /= ndof .or. ndof < 1 .or. nlinks < 1) return
     if (any(el_link < 1) .or. any(el_link > nlinks)) return
     if (any(lm_link < 1) .or. any(lm_link > nlinks)) return
@@ -77,7 +91,7 @@ contains
     if (load_model < 1 .or. load_model > 3) return
     if (maxval([0, free_of]) < 1) return
     call sys%init(nlinks, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
-                  ri_link, ri_dof, ri_prop, load_model, rayleigh)
+                  ri_link, ri_dof, ri_prop, sl_of, sl_ptr, sl_col, load_model, rayleigh)
     status = STATUS_OK
   end subroutine build
 
@@ -111,12 +125,15 @@ contains
   !> (geo_tol, geo_maxit); 2 axial forces lagged one step; 3 quasi-static axial forces from
   !> K u = -F_rigid at each step.  nf (nel, nframes) returns the axial forces used [N].
   !> div_limit [m] > 0: the run stops with status 6 when a free translational DOF exceeds it.
-  subroutine ked_run(nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes, &
+  subroutine ked_run(nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes, nsl1, nnz, &
                      free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, ri_prop, &
-                     load_model, rayleigh, rig, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, &
+                     sl_of, sl_ptr, sl_col, &
+                     load_model, rayleigh, rig, sl_val, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, &
                      init_accel, geo_mode, geo_tol, geo_maxit, div_limit, u0, v0, a0, p0, uf, vf, af, nf, &
                      status, fail_step, geo_iters, nvalid)
-    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes
+    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes, nsl1, nnz
+    integer, intent(in) :: sl_of(ndof), sl_ptr(nsl1), sl_col(nnz)
+    real(dp), intent(in) :: sl_val(3, nnz, nsteps + 1)
     integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
     real(dp), intent(in) :: el_prop(5, nel)
     integer, intent(in) :: lm_link(nlm), lm_dof(2, nlm)
@@ -140,7 +157,7 @@ contains
     uf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; nf = 0.0_dp; geo_iters = 0
     fail_step = 0; nvalid = 0
     call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
-               ri_link, ri_dof, ri_prop, load_model, rayleigh, status)
+               ri_link, ri_dof, ri_prop, sl_of, sl_ptr, sl_col, load_model, rayleigh, status)
     if (status /= STATUS_OK) return
     if (sys%nfree /= nfree .or. any(q_free < 1) .or. any(q_free > nfree)) then
       status = STATUS_BAD_INPUT
@@ -150,13 +167,19 @@ contains
       status = STATUS_BAD_INPUT
       return
     end if
-    trans = .false.    ! the translational DOFs [u1 w1 . u2 w2 .] of the elements watched by the guard
+    trans = .false.    ! the translational DOFs [u1 w1 . u2 w2 .] of the elements and point masses watched by the guard
     do e = 1, nel
       do i = 1, 6
         if (i == 3 .or. i == 6) cycle
         if (free_of(el_dof(i, e)) > 0) trans(free_of(el_dof(i, e))) = .true.
       end do
     end do
+    do e = 1, nlm
+      do i = 1, 2
+        if (free_of(lm_dof(i, e)) > 0) trans(free_of(lm_dof(i, e))) = .true.
+      end do
+    end do
+    if (sys%nsl > 0) sys%tv = sl_val(:, :, 1)
     if (init_accel /= 0) then   ! with the geometric stiffness of the first sample (starts away from rest)
       call initial_axial_forces(sys, geo_mode, rig(:, :, 1), q_free, q_val, u0, status)
       if (status /= STATUS_OK) return
@@ -164,17 +187,19 @@ contains
       if (status /= STATUS_OK) return
       p0 = a0
     end if
-    call newmark_run(sys, rig, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, u0, v0, a0, p0, &
+    call newmark_run(sys, rig, sl_val, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, u0, v0, a0, p0, &
                      uf, vf, af, status, fail_step, nvalid, geo_mode, geo_tol, geo_maxit, nf, geo_iters, &
                      trans, div_limit)
   end subroutine ked_run
 
   !> Dense system matrices over the free DOFs at one rigid sample:
   !> mm = M, cm = Cg + Rayleigh, km = K + Kc; f = rigid-inertia load over ALL DOFs.
-  subroutine ked_matrices(nlinks, ndof, nel, nlm, nri, nfree, &
+  subroutine ked_matrices(nlinks, ndof, nel, nlm, nri, nfree, nsl1, nnz, &
                           free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, ri_prop, &
-                          load_model, rayleigh, rig, mm, cm, km, f, status)
-    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nfree
+                          sl_of, sl_ptr, sl_col, load_model, rayleigh, rig, tv, mm, cm, km, f, status)
+    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nfree, nsl1, nnz
+    integer, intent(in) :: sl_of(ndof), sl_ptr(nsl1), sl_col(nnz)
+    real(dp), intent(in) :: tv(3, nnz)   !< slave-row coefficients at the sample
     integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
     real(dp), intent(in) :: el_prop(5, nel)
     integer, intent(in) :: lm_link(nlm), lm_dof(2, nlm)
@@ -190,12 +215,13 @@ contains
     real(dp), allocatable :: ab(:, :), r(:), z(:)
     mm = 0.0_dp; cm = 0.0_dp; km = 0.0_dp; f = 0.0_dp
     call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
-               ri_link, ri_dof, ri_prop, load_model, rayleigh, status)
+               ri_link, ri_dof, ri_prop, sl_of, sl_ptr, sl_col, load_model, rayleigh, status)
     if (status /= STATUS_OK) return
     if (sys%nfree /= nfree) then
       status = STATUS_BAD_INPUT
       return
     end if
+    sys%tv = tv
     allocate (ab(band_rows(sys%kl, sys%ku), nfree), r(nfree), z(nfree))
     z = 0.0_dp
     call sys%assemble(rig, 0.0_dp, 0.0_dp, z, z, ab, r)
@@ -208,10 +234,11 @@ contains
   end subroutine ked_matrices
 
   !> Rigid-inertia loads over ALL DOFs at ns rigid samples (for output and comparison).
-  subroutine ked_loads(nlinks, ndof, nel, nlm, nri, ns, &
+  subroutine ked_loads(nlinks, ndof, nel, nlm, nri, ns, nsl1, nnz, &
                        free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, ri_prop, &
-                       load_model, rig, f, status)
-    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, ns
+                       sl_of, sl_ptr, sl_col, load_model, rig, f, status)
+    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, ns, nsl1, nnz
+    integer, intent(in) :: sl_of(ndof), sl_ptr(nsl1), sl_col(nnz)
     integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
     real(dp), intent(in) :: el_prop(5, nel)
     integer, intent(in) :: lm_link(nlm), lm_dof(2, nlm)
@@ -226,7 +253,7 @@ contains
     integer :: i
     f = 0.0_dp
     call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
-               ri_link, ri_dof, ri_prop, load_model, [0.0_dp, 0.0_dp], status)
+               ri_link, ri_dof, ri_prop, sl_of, sl_ptr, sl_col, load_model, [0.0_dp, 0.0_dp], status)
     if (status /= STATUS_OK) return
     do i = 1, ns
       call sys%rigid_load(rig(:, :, i), f(:, i))
@@ -235,10 +262,12 @@ contains
 
   !> Dense geometric stiffness over the free DOFs at one rigid sample for given element axial
   !> forces nax [N] (tension > 0): kgm = sum_e nax(e) Kg_e rotated to the link angle.
-  subroutine ked_geometric_matrix(nlinks, ndof, nel, nlm, nri, nfree, &
+  subroutine ked_geometric_matrix(nlinks, ndof, nel, nlm, nri, nfree, nsl1, nnz, &
                                   free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, ri_link, ri_dof, &
-                                  ri_prop, rig, nax, kgm, status)
-    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nfree
+                                  ri_prop, sl_of, sl_ptr, sl_col, rig, tv, nax, kgm, status)
+    integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nfree, nsl1, nnz
+    integer, intent(in) :: sl_of(ndof), sl_ptr(nsl1), sl_col(nnz)
+    real(dp), intent(in) :: tv(3, nnz)
     integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)
     real(dp), intent(in) :: el_prop(5, nel)
     integer, intent(in) :: lm_link(nlm), lm_dof(2, nlm)
@@ -252,12 +281,13 @@ contains
     real(dp), allocatable :: ab(:, :), r(:), z(:)
     kgm = 0.0_dp
     call build(sys, nlinks, ndof, free_of, el_link, el_dof, el_prop, lm_link, lm_dof, lm_prop, &
-               ri_link, ri_dof, ri_prop, 1, [0.0_dp, 0.0_dp], status)
+               ri_link, ri_dof, ri_prop, sl_of, sl_ptr, sl_col, 1, [0.0_dp, 0.0_dp], status)
     if (status /= STATUS_OK) return
     if (sys%nfree /= nfree) then
       status = STATUS_BAD_INPUT
       return
     end if
+    sys%tv = tv
     allocate (ab(band_rows(sys%kl, sys%ku), nfree), r(nfree), z(nfree))
     z = 0.0_dp
     sys%nax = nax

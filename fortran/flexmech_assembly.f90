@@ -9,7 +9,7 @@ module flexmech_assembly
   use flexmech_kinds, only: dp
   implicit none
   private
-  public :: band_rows, band_add_element6, band_add_diagonal, half_bandwidth, band_to_dense
+  public :: band_rows, band_add_element6, band_add_general, band_add_diagonal, half_bandwidth, band_to_dense
 
 contains
 
@@ -51,6 +51,22 @@ contains
       end do
     end do
   end subroutine band_add_element6
+
+  !> ab += the n x n matrix ke scattered to the free DOFs idx(n) (all > 0): the assembly of an item
+  !> whose local DOFs are expressed on n free DOFs through slave relations (flexmech_ked).
+  pure subroutine band_add_general(ab, ldab, kl, ku, n, idx, ke)
+    integer, intent(in) :: ldab, kl, ku, n
+    real(dp), intent(inout) :: ab(ldab, *)  !< band storage (2kl+ku+1, nfree)
+    integer, intent(in) :: idx(n)           !< free-DOF numbers (1-based, none 0)
+    real(dp), intent(in) :: ke(n, n)
+    integer :: a, b, d
+    d = kl + ku + 1
+    do b = 1, n
+      do a = 1, n
+        ab(d + idx(a) - idx(b), idx(b)) = ab(d + idx(a) - idx(b), idx(b)) + ke(a, b)
+      end do
+    end do
+  end subroutine band_add_general
 
   !> ab(i,i) += val for a free DOF i (no-op for i = 0).
   pure subroutine band_add_diagonal(ab, kl, ku, i, val)

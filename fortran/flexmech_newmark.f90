@@ -72,7 +72,7 @@ contains
   !> step (1-based) that failed, frames after the last valid one untouched.
   !> Divergence guard: after every step, max |u| over the DOFs marked in trans (the translations,
   !> metres) above div_limit [m] stops the run with STATUS_DIVERGED.
-  subroutine newmark_run(sys, rig, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, u, v, a, p, &
+  subroutine newmark_run(sys, rig, sl_val, q_free, q_val, dt, alpha_m, alpha_f, beta, gamma, out_every, u, v, a, p, &
                          uf, vf, af, status, fail_step, nvalid, geo_mode, geo_tol, geo_maxit, nf, geo_iters, &
                          trans, div_limit)
     type(ked_system), intent(inout) :: sys
@@ -82,6 +82,7 @@ contains
     real(dp), intent(inout) :: nf(:, :)            !< (nel, nframes) axial forces at the frames [N]
     integer, intent(out) :: geo_iters              !< total axial-force iterations
     real(dp), intent(in) :: rig(:, :, :)   !< (5, nlinks, nsteps+1) rigid samples on the time grid
+    real(dp), intent(in) :: sl_val(:, :, :) !< (3, nnz, nsteps+1) slave-row coefficients [T, T', T''] (flexmech_ked)
     integer, intent(in) :: q_free(:)       !< (nq) free DOFs loaded by applied generalized forces
     real(dp), intent(in) :: q_val(:, :)    !< (nq, nsteps+1) their values
     real(dp), intent(in) :: dt             !< step [s]
@@ -116,6 +117,7 @@ contains
     z = 0.0_dp
     locked = any(q_val /= 0.0_dp, dim=2)   ! DOFs an applied torque ever acts on (locked in the quasi-static solve)
     geo_iters = 0
+    if (sys%nsl > 0) sys%tv = sl_val(:, :, 1)
     call initial_axial_forces(sys, geo_mode, rig(:, :, 1), q_free, q_val, u, status)
     if (status /= STATUS_OK) then
       fail_step = 1
@@ -128,6 +130,7 @@ contains
       w = alpha_f*a - alpha_m*p            ! zero for Newmark
       up = u + dt*v + (dt*dt*(0.5_dp - beta))*p + (dt*dt*beta*c1)*w
       vp = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
+      if (sys%nsl > 0) sys%tv = sl_val(:, :, n + 1)
       if (geo_mode == GEO_QUASI_STATIC) then   ! N from K u = -F_rigid at this configuration
         call quasi_static_axial(sys, rig(:, :, n + 1), q_free, q_val(:, n + 1), locked, ab, ipiv, us, z, status)
         if (status /= STATUS_OK) then

@@ -12,11 +12,6 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"
-# Case files whose superposition runs (rigid bodies, rigid links, prismatic joints in the FE models)
-# arrive with branch 'superposition' (issue 10): the one place their superposition runs are skipped
-# (tests/test_cases.py, tests/test_bench.py); the merge empties it.
-SUPERPOSITION_PENDING = {"slider_crank", "slider_crank_torque", "quick_return", "sixbar_plate"}
-PENDING_REASON = "rigid bodies and prismatic joints in the superposition models: branch 'superposition'"
 
 
 @pytest.fixture

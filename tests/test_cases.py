@@ -1,6 +1,7 @@
-"""Every case file runs with every superposition model, to its full length, and with the coupled and
-nonlinear models at reduced size, and gives sane physics; golden numbers (tests/golden_seed.json,
-provenance inside) guard against silent changes."""
+"""Every case file runs with every superposition model and gives sane physics (the template cases to their full
+length, the general-form cases to REDUCED_T_END: their full runs are in `flexmech bench`), and with the coupled
+and nonlinear models at reduced size; golden numbers (tests/golden_seed.json, provenance inside) guard against
+silent changes."""
 
 import json
 from pathlib import Path
@@ -11,22 +12,28 @@ import pytest
 import flexmech_py as fm
 from flexmech_py.simulate import Prepared, simulate_models
 
-from conftest import PENDING_REASON, SUPERPOSITION_PENDING
-
 ROOT = Path(__file__).resolve().parents[1]
 CASE_FILES = sorted((ROOT / "cases").glob("**/*.toml"))
 GOLDEN = json.loads((Path(__file__).parent / "golden_seed.json").read_text())
+REDUCED_T_END = 0.02   # s, the general-form cases in this suite
+
+
+def _case(path, t_end=None):
+    case = fm.load_case(path)
+    if "template" not in case["mechanism"]:
+        t_end = REDUCED_T_END if t_end is None else t_end
+    if t_end is not None and t_end < case["solver"]["t_end"]:
+        case = fm.load_case(path, overrides=[f"solver.t_end={t_end}"])
+    return case
 
 
 @pytest.fixture(scope="module")
 def runs():
-    return {f.stem: simulate_models(fm.load_case(f)) for f in CASE_FILES if f.stem not in SUPERPOSITION_PENDING}
+    return {f.stem: simulate_models(_case(f)) for f in CASE_FILES}
 
 
 @pytest.mark.parametrize("path", CASE_FILES, ids=lambda p: p.stem)
 def test_case_runs_all_models(runs, path):
-    if path.stem in SUPERPOSITION_PENDING:
-        pytest.skip(PENDING_REASON)
     for model, res in runs[path.stem].items():
         assert res.t[-1] == pytest.approx(res.case["solver"]["t_end"])
         for name, y in res.columns.items():

@@ -81,7 +81,8 @@ KED_SDOF = (np.array([0, 0, 0, 1, 0, 0], np.int32), np.array([1], np.int32),
             np.asfortranarray(np.arange(1, 7, dtype=np.int32).reshape(6, 1)),
             np.asfortranarray([[1.0], [0.0], [3.0], [1.0], [1.0]]),            # L = 1, rho A = 3, EA = 1
             np.array([1], np.int32), np.asfortranarray([[1], [2]], np.int32), np.zeros((2, 1), order="F"),
-            np.array([1], np.int32), np.array([3], np.int32), np.zeros(1))
+            np.array([1], np.int32), np.array([3], np.int32), np.zeros(1),
+            np.zeros(6, np.int32), np.ones(1, np.int32), np.ones(1, np.int32))   # no slave relations
 KED_OMEGA = 1.0                                                                # sqrt(k / m)
 
 # coupled loop: one segment, one element, fixed chord (ends and th_1 fixed): only th_0 free,
@@ -98,7 +99,8 @@ def ked_steps(h, coef, u, v, p, nsteps=1):
     u0, v0, p0 = np.array([u], float), np.array([v], float), np.array([p], float)
     a0 = -KED_OMEGA**2 * u0
     uf, vf, af, _, status, _, _, nvalid = api.ked_run(
-        nsteps + 1, *KED_SDOF, 1, np.zeros(2), rig, np.ones(1, np.int32), np.zeros((1, nsteps + 1), order="F"),
+        nsteps + 1, *KED_SDOF, 1, np.zeros(2), rig, np.zeros((3, 1, nsteps + 1), order="F"), np.ones(1, np.int32),
+        np.zeros((1, nsteps + 1), order="F"),
         h, *coef, 1, 0, 0, 1e-8, 50, 1e300, u0, v0, a0, p0)
     check_status(status, "ked_run")
     assert nvalid == nsteps + 1
