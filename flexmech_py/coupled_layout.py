@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import CaseError
-from .model import link_mesh, rcm_free_numbering
+from .model import link_mesh, rcm_free_numbering, uniform_mesh
 
 __all__ = ["Layout", "Row", "JointModel", "LinkMesh", "JOINT_ROWS", "HOLDING", "CON_POINT", "CON_ANGLE",
            "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",
@@ -92,6 +92,7 @@ class LinkMesh:
     el_link: np.ndarray
     nfree: int = 0
     bandwidth: int = 0
+    uniform: list = field(default_factory=list)     # per link: equal elements
 
     @property
     def nel(self) -> int:
@@ -168,8 +169,8 @@ class Layout:
     def __init__(self, case, split: bool):
         self.case, self.split, self.mech = case, split, case.mechanism
         if not any(not ln.rigid for ln in self.mech.links):
-            raise CaseError("links", "the coupled and nonlinear models need at least one flexible link; make a link "
-                                     "flexible (rigid = false) or use the rigid-body solution")
+            raise CaseError("links", "no link is flexible: flexmech's models need at least one flexible link; make one flexible "
+                                     "(rigid = false); the rigid-body motion alone is Prepared(case).rm (docs/api.md)")
         self.fracs = [None if ln.rigid else link_mesh(ln, self.case["links"][li]["elements"])
                       for li, ln in enumerate(self.mech.links)]
         self.segments = []
@@ -361,7 +362,8 @@ class Layout:
                         n_el=[0 if f is None else f.size - 1 for f in self.fracs],
                         node_frac=[np.zeros(0) if f is None else f for f in self.fracs], node_of=node_of, nnodes=nn,
                         trans_dof=np.arange(2 * nn).reshape(nn, 2), rot_dof=rot, ndof=3 * nn,
-                        el_link=np.array(el_link, np.int32), nfree=int(self.free_of.max()), bandwidth=self._bandwidth())
+                        el_link=np.array(el_link, np.int32), nfree=int(self.free_of.max()), bandwidth=self._bandwidth(),
+                        uniform=[f is not None and uniform_mesh(f) for f in self.fracs])
 
     def _bandwidth(self) -> int:
         kl = 0

@@ -203,7 +203,8 @@ def _node_index(fracs: np.ndarray, frac: float) -> int:
     return k
 
 
-def _uniform(fracs: np.ndarray) -> bool:
+def uniform_mesh(fracs: np.ndarray) -> bool:
+    """True when a link's mesh fractions are equal elements."""
     return np.allclose(fracs, np.linspace(0.0, 1.0, fracs.size), rtol=0.0, atol=1e-14) and fracs.size > 1
 
 
@@ -254,7 +255,7 @@ def _elements(mech, links, fracs, node_of, trans, rot) -> tuple[list, list, list
             continue
         ra, ea, ei = ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"], ln["youngs_modulus"] * ln["second_moment"]
         n = fracs[li].size - 1
-        uniform, le_u = _uniform(fracs[li]), ln["length"] / n
+        uniform, le_u = uniform_mesh(fracs[li]), ln["length"] / n
         for k in range(n):
             n1, n2 = node_of[li][k], node_of[li][k + 1]
             el_link.append(li + 1)
@@ -265,8 +266,8 @@ def _elements(mech, links, fracs, node_of, trans, rot) -> tuple[list, list, list
                 el_prop.append([(fracs[li][k + 1] - fracs[li][k]) * ln["length"], fracs[li][k] * ln["length"],
                                 ra, ea, ei])
     if not el_dof:
-        raise CaseError("links", "no link is flexible: the superposition models need at least one flexible link "
-                                 "(rigid = false); the rigid-body motion alone is in every run's joint outputs")
+        raise CaseError("links", "no link is flexible: flexmech's models need at least one flexible link; make one flexible "
+                                 "(rigid = false); the rigid-body motion alone is Prepared(case).rm (docs/api.md)")
     return el_link, el_dof, el_prop
 
 
@@ -342,7 +343,7 @@ class FEModel:
                     lm_link=np.zeros(0, np.int32), lm_dof=np.zeros((2, 0), np.int32), lm_prop=np.zeros((2, 0)),
                     ri_link=np.zeros(0, np.int32), ri_dof=np.zeros(0, np.int32), ri_prop=np.zeros(0),
                     dof_names=dof_names, node_frac=fracs, parts=parts, slides=slides, slaving=slaving,
-                    uniform=[_uniform(f) for f in fracs])
+                    uniform=[uniform_mesh(f) for f in fracs])
         model._lumped(case)
         model._number_free_dofs(el_dof)
         return model
