@@ -165,7 +165,9 @@ def _layout(panels, title, shared):
     hspace = (0.3 if any(p.get("title") for p in panels) else 0.16) if shared else 0.45
     width = 8.0
     left, right = 0.95 / width, 0.97
-    top, bottom = 1.0 - (0.55 if title else 0.25) / height, 0.5 / height
+    head = (0.55 if title else 0.25) + (0.25 if panels[0].get("title") else 0.0)   # room for the first panel's title
+    height += head - (0.55 if title else 0.25)
+    top, bottom = 1.0 - head / height, 0.5 / height
     ax_h = height * (top - bottom) / (n + hspace * (n - 1))
     return width, height, left, right, top, bottom, hspace, width * (right - left), ax_h
 
