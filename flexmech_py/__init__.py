@@ -3,20 +3,48 @@
 Python API::
 
     import flexmech_py as fm
-    case = fm.load_case("cases/fourbar_hac.toml")
-    res = fm.simulate(case, model="hac")        # or "classic", "classic-translational", "coupled"
+    case = fm.load_case("cases/fourbar_hac.toml")   # a file here, else the bundled case of that name
+    res = fm.simulate(case, model="hac")        # or "classic", "classic-translational", "coupled", "nonlinear"
     res.t, res["strain_coupler_mid"]            # numpy arrays
     res.write("out/")                           # timeseries.csv, summary.json
 
-The compiled kernels are in :mod:`flexmech_py.kernels`.
+The bundled cases: ``fm.case_names()``, ``fm.case_path("fourbar_hac")``.  The compiled kernels are
+in :mod:`flexmech_py.kernels`.
 """
 
+import sys as _sys
+from importlib import machinery as _machinery
+from pathlib import Path as _Path
+
+
+def _installed_instead():
+    """When Python imports this package from the source tree (``python`` started in the repository
+    root puts the folder on sys.path first), the compiled kernels are not here: load the installed
+    package instead, which replaces this module in sys.modules.  Returns it, or None (this is it)."""
+    here = _Path(__file__).resolve().parent
+    if any(p.name.endswith(tuple(_machinery.EXTENSION_SUFFIXES)) for p in here.glob("_flexmech*")):   # kernels here
+        return None
+    elsewhere = [p for p in _sys.path if (_Path(p or ".") / __name__).resolve() != here]
+    spec = _machinery.PathFinder.find_spec(__name__, elsewhere)
+    if spec is None or spec.origin is None or _Path(spec.origin).resolve().parent == here:
+        return None   # nothing installed: kernels.py says how to build
+    import importlib.util
+
+    module = importlib.util.module_from_spec(spec)
+    _sys.modules[__name__] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+_installed_instead()   # after a handover the imports below find the installed modules, already loaded
 __version__ = "0.1.0"
 
+from .bundled import case_names, case_path  # noqa: E402
 from .case import MODELS, SUPERPOSITION_MODELS, Case, apply_overrides, load_case, validate_case  # noqa: E402
 from .errors import CaseError, FlexmechError, MechanismError, SolverError  # noqa: E402
 from .mechanism import Mechanism  # noqa: E402
 from .simulate import simulate  # noqa: E402
 
 __all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "Case", "Mechanism", "MODELS",
-           "SUPERPOSITION_MODELS", "FlexmechError", "CaseError", "MechanismError", "SolverError", "__version__"]
+           "SUPERPOSITION_MODELS", "FlexmechError", "CaseError", "MechanismError", "SolverError", "case_path",
+           "case_names", "__version__"]

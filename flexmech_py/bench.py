@@ -370,6 +370,12 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
 
 
+def plot_title(ladder: list[dict]) -> str:
+    """bench.png's title: the mesh sizes the ladder ran."""
+    epl = sorted({x["elements_per_link"] for x in ladder})
+    return f"flexmech bench: seed four-bar, {epl[0]}..{epl[-1]} elements per link" if epl else "flexmech bench"
+
+
 def _plot(path: Path, ladder: list[dict], solves: list[dict]) -> Path | None:
     try:
         import matplotlib
@@ -391,13 +397,28 @@ def _plot(path: Path, ladder: list[dict], solves: list[dict]) -> Path | None:
     ax.loglog(d, 0.5 * d * solves[0]["banded_us"] / d[0], color="0.7", lw=0.8, label="slope 1")
     ax.set_xlabel("free DOFs")
     ax.set_ylabel("time per step or per solve [us]")
-    ax.set_title("flexmech bench: seed four-bar, 1..256 elements per link")
+    ax.set_title(plot_title(ladder))
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _exponent_rows(metric: str, pts: list, lo: float, hi: float, what: str) -> list[dict]:
+    """The fitted exponent p of y ~ x^p over the points (x, y) with lo <= x <= hi (the asymptotic
+    range); with fewer than 3 there (the quick ladder) over all the points, and the note says so; no
+    row with fewer than 2 points."""
+    big = [(x, y) for x, y in pts if lo <= x <= hi]
+    use = big if len(big) >= 3 else pts
+    if len(use) < 2:
+        return []
+    xs, ys = zip(*use)
+    span = f"{lo:g}..{hi:g}" if math.isfinite(hi) else f">= {lo:g}"
+    note = (f"{what} {min(xs):g}..{max(xs):g}"
+            + ("" if use is big else f" (below the asymptotic range {span}: fixed costs weigh more)"))
+    return [{"metric": metric, "value": fit_exponent(xs, ys), "unit": "1", "note": note}]
 
 
 def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=print) -> dict:
@@ -444,19 +465,17 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
     for k, v in ref.items():
         summary.append({"metric": f"reference.{k}", "value": v, "unit": "", "note": "seed four-bar, hac, NumPy reference"})
     for model in MODELS:
-        r = [x for x in ladder if x["model"] == model and 16 <= x["elements"] <= 1024 and np.isfinite(x["us_per_step"])]
-        summary.append({"metric": f"exponent.{model}", "value": fit_exponent([x["elements"] for x in r],
-                                                                             [x["us_per_step"] for x in r]),
-                        "unit": "1", "note": "time per step ~ elements^p, 16..1024 elements in total"})
+        summary += _exponent_rows(f"exponent.{model}", [(x["elements"], x["us_per_step"]) for x in ladder
+                                                        if x["model"] == model and np.isfinite(x["us_per_step"])],
+                                  16, 1024, "time per step ~ elements^p, elements in total:")
         big = [x["peak_fraction"] for x in ladder if x["model"] == model and x["elements"] >= 64
                and np.isfinite(x["peak_fraction"])]
         if big:
             summary.append({"metric": f"peak_fraction_min_ge64.{model}", "value": min(big), "unit": "1",
                             "note": "smallest fraction of the scalar peak at >= 64 elements"})
     for key in ("banded_us", "dense_us"):
-        r = [x for x in solves if np.isfinite(x[key]) and x["dofs"] >= 50]
-        summary.append({"metric": f"exponent.solve_{key[:-3]}", "value": fit_exponent([x["dofs"] for x in r], [x[key] for x in r]),
-                        "unit": "1", "note": "LU + solve time ~ DOFs^p (>= 50 DOFs)"})
+        summary += _exponent_rows(f"exponent.solve_{key[:-3]}", [(x["dofs"], x[key]) for x in solves if np.isfinite(x[key])],
+                                  50, math.inf, "LU + solve time ~ DOFs^p, DOFs:")
     for m in memory:
         for k in ("tracemalloc_peak_MB", "maxrss_MB", "wall_s"):
             summary.append({"metric": f"memory.{m['steps']}_steps.{k}", "value": m[k], "unit": k.rsplit("_", 1)[-1],
@@ -477,8 +496,8 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
 
 def table(rows: list[dict], keys) -> str:
     """A fixed-width text table of the given columns."""
-    def fmt(v):
-        return f"{v:.4g}" if isinstance(v, float) else str(v)
+    def fmt(v):   # not applicable (nan): "-"
+        return ("-" if math.isnan(v) else f"{v:.4g}") if isinstance(v, float) else str(v)
     cols = [[k] + [fmt(r[k]) for r in rows] for k in keys]
     w = [max(len(c) for c in col) for col in cols]
     lines = ["  ".join(c[i].rjust(wi) for c, wi in zip(cols, w)) for i in range(len(rows) + 1)]

@@ -16,6 +16,7 @@ import json
 from pathlib import Path
 
 from . import validate as v
+from .bundled import resolve_case_path
 from .errors import CaseError
 from .mechanism import mechanism_from_spec
 from .mechanism.schema import mechanism_spec
@@ -349,9 +350,10 @@ def _output_point(spec: dict, d: dict, kind: str, w: str, mech) -> None:
 
 def read_case_file(path) -> dict:
     """The raw (unvalidated) table of a TOML case file; CaseError when it is missing or not TOML."""
-    path = Path(path)
+    path = resolve_case_path(path)
     if not path.is_file():
-        raise CaseError("case file", f"{str(path)!r} does not exist; give the path of a .toml case file")
+        raise CaseError("case file", f"{str(path)!r} does not exist; give the path of a .toml case file or the "
+                                     "name of a bundled one (flexmech_py.case_names())")
     try:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
@@ -359,8 +361,9 @@ def read_case_file(path) -> dict:
 
 
 def load_case(path, overrides: list[str] | None = None) -> dict:
-    """Read, override (``KEY.PATH=VALUE`` strings) and validate a TOML case file."""
-    path = Path(path)
+    """Read, override (``KEY.PATH=VALUE`` strings) and validate a TOML case file (a path, or the name of
+    a bundled case when no such file exists here: :func:`flexmech_py.bundled.resolve_case_path`)."""
+    path = resolve_case_path(path)
     raw = read_case_file(path)
     if overrides:
         raw = apply_overrides(raw, overrides)

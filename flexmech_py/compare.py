@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CaseError, FlexmechError, MechanismError, SolverError
-from .plots import line_figure
+from .plots import display_unit, line_figure
 from .results import _atomic_write
 
 __all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models", "model_run", "ModelRun"]
@@ -166,16 +166,30 @@ def compare_columns(res_cols: dict, ref_cols: dict, x: str = "t", columns=None, 
     return out
 
 
-def _write(metrics: dict, out_dir: Path, x: str, title: str, labels=("result", "reference"), extra=None) -> list[Path]:
+def _axis_label(name: str, unit: str | None) -> str:
+    return f"{name} [{display_unit(unit)}]" if unit is not None else name
+
+
+def _write(metrics: dict, out_dir: Path, x: str, title: str, labels=("result", "reference"), extra=None,
+           units=None) -> list[Path]:
+    """compare.json, compare.csv and one PNG per column (the two curves, then their difference).
+    ``units``: {column: unit} of the result; the abscissa is ``t`` [s] or the crank angle [rad]."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    units = units or {}
+    xlabel = "t [s]" if x == "t" else f"{x.replace('_', ' ')} [{units.get(x, 'rad')}]"
     paths = []
     for c, m in metrics.items():
+        u, k = units.get(c), 1.0
+        if u == "m" and max(np.max(np.abs(m["_ref"])), np.max(np.abs(m["_res"]))) < 0.1:
+            u, k = "mm", 1e3   # small lengths in mm, as the reports quote them
         p = line_figure(out_dir / f"compare_{c}.png",
-                        [{"x": m["_x"], "ylabel": c, "series": [(labels[1], m["_ref"], {"color": "k", "lw": 1.4}),
-                                                                (labels[0], m["_res"], {"color": "C3", "lw": 1.0})]},
-                         {"x": m["_x"], "ylabel": f"{labels[0]} - {labels[1]}",
-                          "series": [("", m["_res"] - m["_ref"], {"color": "C3", "lw": 0.8})]}],
-                        title=f"{title}: {c} (max error {100 * m['max_error']:.3g} % of the reference peak)", xlabel=x)
+                        [{"x": m["_x"], "ylabel": _axis_label(c, u),
+                          "series": [(labels[1], k * m["_ref"], {"color": "k", "lw": 1.4}),
+                                     (labels[0], k * m["_res"], {"color": "C3", "lw": 1.0})]},
+                         {"x": m["_x"], "ylabel": _axis_label(f"{labels[0]} - {labels[1]}", u),
+                          "series": [("", k * (m["_res"] - m["_ref"]), {"color": "C3", "lw": 0.8})]}],
+                        title=f"{title}: {c} (max error {100 * m['max_error']:.3g} % of the reference peak)",
+                        xlabel=xlabel)
         if p:
             paths.append(p)
     clean = {c: {k: v for k, v in m.items() if not k.startswith("_")} for c, m in metrics.items()}
@@ -209,8 +223,15 @@ def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None)
     ref_cols, ref_units, source = read_reference(reference)
     metrics = compare_columns(res_cols, ref_cols, x=x, columns=columns, ref_units=ref_units, res_units=res_units)
     paths = _write(metrics, Path(out_dir) if out_dir else result_dir / "compare", x, "comparison",
-                   extra={"reference": str(reference), "source": source, "result": str(result_dir)})
+                   extra={"reference": str(reference), "source": source, "result": str(result_dir)}, units=res_units)
     return metrics, paths
+
+
+def _case_units(case: dict) -> dict:
+    """{output: unit} of a case's outputs (outputs.output_unit)."""
+    from .outputs import output_unit
+
+    return {name: output_unit(spec, case) for name, spec in case["outputs"].items()}
 
 
 @dataclass
@@ -258,5 +279,6 @@ def compare_models(case: dict, models, reference_model="nonlinear", x="t", colum
         out[m] = compare_columns(cols, ref_cols, x=x, columns=use)
         paths += _write(out[m], Path(out_dir) / m, x, f"{m} against {reference_model}", labels=(m, reference_model),
                         extra={"model": m, "reference_model": reference_model,
-                               "kernel_s": runs[m].timing["kernel_s"], "reference_kernel_s": ref.timing["kernel_s"]})
+                               "kernel_s": runs[m].timing["kernel_s"], "reference_kernel_s": ref.timing["kernel_s"]},
+                        units=_case_units(case))
     return out, runs, paths
