@@ -63,7 +63,8 @@ else
     || { tail -30 "$LOG" >&2; die "the build failed (full log: $LOG)"; }
   printf '%s' "$sources" > "$BUILD_STAMP"
 fi
-say "ready: $(.venv/bin/flexmech --version)"
+version=$(.venv/bin/flexmech --version) || die "the installed package does not import (see the lines above; build log: $LOG)"
+say "ready: $version"
 
 case "${1:-}" in
   reproduce) shift; exec .venv/bin/flexmech reproduce --out reproduce "$@" ;;

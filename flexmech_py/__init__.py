@@ -41,10 +41,10 @@ __version__ = "0.1.0"
 
 from .bundled import case_names, case_path  # noqa: E402
 from .case import MODELS, SUPERPOSITION_MODELS, Case, apply_overrides, load_case, validate_case  # noqa: E402
-from .errors import CaseError, FlexmechError, MechanismError, SolverError  # noqa: E402
+from .errors import CaseError, FlexmechError, Interrupted, MechanismError, SolverError  # noqa: E402
 from .mechanism import Mechanism  # noqa: E402
 from .simulate import simulate  # noqa: E402
 
 __all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "Case", "Mechanism", "MODELS",
-           "SUPERPOSITION_MODELS", "FlexmechError", "CaseError", "MechanismError", "SolverError", "case_path",
+           "SUPERPOSITION_MODELS", "FlexmechError", "CaseError", "MechanismError", "SolverError", "Interrupted", "case_path",
            "case_names", "__version__"]

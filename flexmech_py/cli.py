@@ -1,7 +1,8 @@
 """The ``flexmech`` command line.
 
     flexmech run CASE.toml [--model M] [--dt S] [--elements-per-link N] [--integrator I] [--rho-inf X]
-                 [--hht-alpha A] [--set KEY.PATH=VALUE ...] [--out DIR]
+                 [--hht-alpha A] [--set KEY.PATH=VALUE ...] [--out DIR] [--overwrite] [--force]
+                 [--quiet | --progress] [--no-plots]
     flexmech reproduce [--out DIR]
     flexmech compare RESULT_DIR --reference FILE.csv [--x t|crank_angle] [--columns C ...] [--out DIR]
     flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
@@ -17,7 +18,8 @@ pool (--jobs N) or, with --scheduler tcp://HOST:PORT | local:N (or FLEXMECH_SCHE
 
 Errors a user can cause print one line ``flexmech: error: ...`` and exit with code 2; a run whose
 solver stopped writes its partial results, prints the diagnosis that way and exits with code 3, as
-does a sweep or stability chart in which any run failed (the others are kept).
+does a sweep or stability chart in which any run failed (the others are kept).  Ctrl-C stops a run
+keeping the frames so far (marked ``interrupted``) and exits with code 130.
 Validity warnings go to stderr as ``flexmech: warning: ...`` lines.
 """
 
@@ -86,6 +88,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a case value, e.g. --set solver.t_end=0.1 --set links.coupler.area=5e-5")
     r.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>)")
     r.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+    r.add_argument("--quiet", action="store_true", help="no cost estimate and no progress bar on stderr")
+    r.add_argument("--progress", action="store_true",
+                   help="draw the progress bar even when stderr is not a terminal (default: only on a terminal)")
+    r.add_argument("--force", action="store_true",
+                   help="run even when timeseries.csv would not fit on the disk of --out")
+    r.add_argument("--overwrite", action="store_true",
+                   help="replace the results of another run found in --out (files flexmech writes only)")
 
     rp = sub.add_parser("reproduce", help="regenerate the seed paper's Figs. 3-12 and a Markdown report")
     rp.add_argument("--out", default="reproduce", help="output folder (default: ./reproduce)")
@@ -465,34 +474,64 @@ def integrator_overrides(args) -> list[str]:
 
 def _cmd_run(args) -> int:
     from .case import load_case
-    from .simulate import simulate
+    from .errors import Interrupted
+    from .outdir import claim
+    from .progress import RunProgress
+    from .runner import FileSink, execute
+    from .simulate import Prepared
 
     case = load_case(args.case, overrides=args.set + integrator_overrides(args))
+    prep = Prepared(case, dt=args.dt, elements_per_link=args.elements_per_link)
+    model = args.model or prep.case["solver"]["model"]
+    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{model}"
+    sink = FileSink(out, frames_total=prep.frames, replace=claim(out, prep.case, args.overwrite), force=args.force)
+    progress = RunProgress(lambda: _run_cost(prep, model, sink), bar=True if args.progress else None,
+                           quiet=args.quiet)
     try:
-        res = simulate(case, model=args.model, dt=args.dt, elements_per_link=args.elements_per_link)
-    except (SolverError, MechanismError) as exc:   # the run stopped: keep and mark the frames before it
+        res = execute(prep, model, sink, progress=progress)
+    except Interrupted as exc:
+        progress.close()
+        return _report_stopped(exc, sink, 130)
+    except (SolverError, MechanismError) as exc:   # the run stopped: its frames so far are written, marked
+        progress.close()
         if exc.partial is None:
             raise
-        res = exc.partial
-        out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{res.model}"
-        paths = res.write(out)
-        print(res.table())
-        print(f"wrote partial results (up to t = {res.t[-1]:.6g} s): " + ", ".join(str(p) for p in paths))
-        for w in res.extra.get("warnings", []):
-            print(f"flexmech: warning: {w}", file=sys.stderr)
-        print(f"flexmech: error: {exc}", file=sys.stderr)
-        return 3
-    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{res.model}"
-    paths = res.write(out)
+        return _report_stopped(exc, sink, 3)
+    progress.close(finished=True)
+    paths = list(sink.paths)
     if not args.no_plots:
         from .plots import plot_result
 
-        paths += plot_result(res, out)
+        paths += plot_result(res.plot_view(), out)
+        res.extra["files"] = [p.name for p in paths]
+        res.write_summary(out)
     print(res.table())
     print("wrote " + ", ".join(str(p) for p in paths))
     for w in res.extra.get("warnings", []):
         print(f"flexmech: warning: {w}", file=sys.stderr)
     return 0
+
+
+def _run_cost(prep, model: str, sink) -> str:
+    """The words of a run's cost line: steps, DOFs, the size of timeseries.csv."""
+    from .runner import format_bytes
+
+    dofs = prep.coupled[model].ndof if model in prep.coupled else prep.fe.nfree
+    return (f"{prep.nsteps:,} steps of {dofs} DOFs, {prep.frames:,} frames, about "
+            f"{format_bytes(sink.projected_bytes)} of timeseries.csv")
+
+
+def _report_stopped(exc, sink, code: int) -> int:
+    """Table, written files, warnings and the reason of a run that stopped (failed or interrupted)."""
+    res = exc.partial
+    if res is not None:
+        print(res.table())
+        print(f"wrote partial results (up to t = {res.all_stats().t_last:.6g} s): "
+              + ", ".join(str(p) for p in sink.paths))
+        for w in res.extra.get("warnings", []):
+            print(f"flexmech: warning: {w}", file=sys.stderr)
+    print(f"flexmech: {'error' if code == 3 else 'stopped'}: {exc}", file=sys.stderr)
+    return code
 
 
 def _cmd_reproduce(args) -> int:

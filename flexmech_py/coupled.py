@@ -99,16 +99,19 @@ class CoupledModel:
             q[dofs], v[dofs] = rm0.z[0, 3 * bi:3 * bi + 3], rm0.zd[0, 3 * bi:3 * bi + 3]
         return q, v
 
-    def constraint_values(self, rm) -> np.ndarray:
+    def constraint_values(self, rm, start=None) -> np.ndarray:
         """(3, max(1, nc), nt) [value, rate, acceleration] of the rows on the rigid motion's grid: the
         drive law (the rigid joint coordinate) for a kinematic drive, the initial value for a held
-        coordinate (a weld, a locked joint, a prismatic joint's relative angle), zero otherwise."""
+        coordinate (a weld, a locked joint, a prismatic joint's relative angle), zero otherwise.
+        ``start``: the rigid motion whose first sample holds the initial values (default ``rm``; a
+        later chunk of a run passes its first chunk, so held values stay those of t = 0)."""
+        start = rm if start is None else start
         out = np.zeros((3, max(1, len(self.rows)), rm.t.size))
         for i, r in enumerate(self.rows):
             if r.value[0] == "drive":
                 out[:, i] = rm.joint(r.value[1]).T
             elif r.value[0] == "start":
-                out[0, i] = start_value(self.case.mechanism, rm, r.value[1], r.value[2])
+                out[0, i] = start_value(self.case.mechanism, start, r.value[1], r.value[2])
         return np.asfortranarray(out)
 
     # ------------------------------------------------------------------ kernel calls
@@ -122,14 +125,16 @@ class CoupledModel:
         return ispec, rspec
 
     def run(self, q0, v0, t, cval, dt, *, beta=0.25, gamma=0.5, alpha_m=0.0, alpha_f=0.0, out_every=1, tol=1e-8,
-            maxit=25, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), p0=None, div_limit=None, t0=None):
+            maxit=25, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), p0=None, div_limit=None, t0=None, state=None):
         """Generalized-alpha-Newton run over the grid t (Newmark (beta, gamma) for ``alpha_m = alpha_f
         = 0``; see :func:`flexmech_py.case.integrator_coefficients`); returns (qf, vf, af, lf, ef,
-        iterations).  cval: constraint_values() on t.  ``p0`` (ndof): the pseudo-acceleration of a run
-        being continued (None: a fresh start, p0 = the consistent initial acceleration).
-        ``div_limit`` [m]: the divergence guard (default DIVERGENCE_FACTOR x the longest flexible link).
-        After the call ``self.last_run`` holds the frames, ``frames_valid``, the final state
-        ``q, v, a, p``, ``status`` and ``fail_step`` (also when the run failed)."""
+        iterations).  cval: constraint_values() on t.  ``p0`` (ndof): the pseudo-acceleration to start
+        from (None: p0 = the consistent initial acceleration).  ``state``: the ``last_run`` of the run
+        this one continues (its ``q, v, a, p, carry``; q0, v0 and p0 are then not used): the steps are
+        those of one uninterrupted run.  ``div_limit`` [m]: the divergence guard (default
+        DIVERGENCE_FACTOR x the longest flexible link).  After the call ``self.last_run`` holds the
+        frames, ``frames_valid``, the final state ``q, v, a, p, carry``, ``status`` and ``fail_step``
+        (also when the run failed)."""
         from .case import DIVERGENCE_FACTOR
 
         t = np.asarray(t, float)
@@ -137,18 +142,24 @@ class CoupledModel:
         nsteps = t.size - 1
         nframes = nsteps // out_every + 1
         nc = len(self.rows)
-        q, v, a = np.array(q0, float), np.array(v0, float), np.zeros(self.ndof)
-        p = np.zeros(self.ndof) if p0 is None else np.array(p0, float)
+        carry = np.zeros(max(1, nc) + 2)
+        if state is not None:
+            start = 2
+            q, v, a, p, carry = (np.array(state[k], float) for k in ("q", "v", "a", "p", "carry"))
+        else:
+            start = 1 if p0 is None else 0
+            q, v, a = np.array(q0, float), np.array(v0, float), np.zeros(self.ndof)
+            p = np.zeros(self.ndof) if p0 is None else np.array(p0, float)
         if div_limit is None:
             div_limit = DIVERGENCE_FACTOR * max(self.case["links"][li]["length"] for li, _, _ in self.segments)
         seg_link = np.array([li + 1 for li, _, _ in self.segments], np.int32)
         ispec, rspec = self._spec(gravity, rayleigh)
         qf, vf, af, lf, ef, status, fail, iters, nvalid = kernels.cpl.cpl_run(
             nframes, ispec, rspec, np.asfortranarray(cval, float), t0, dt, alpha_m, alpha_f, beta, gamma,
-            out_every, tol, maxit, int(p0 is None), float(div_limit), seg_link, q, v, a, p)
+            out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry)
         lf = lf[:nc]
         self.last_run = {"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "frames_valid": int(nvalid),
-                         "q": q, "v": v, "a": a, "p": p, "status": int(status), "fail_step": int(fail)}
+                         "q": q, "v": v, "a": a, "p": p, "carry": carry, "status": int(status), "fail_step": int(fail)}
         kernels.check_status(status, "coupled time integration", time=t0 + fail * dt if fail else t0,
                              step=int(fail), data={"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "iters": iters,
                                                    "q": q, "v": v, "a": a, "p": p})

@@ -15,7 +15,7 @@ from .mechanism.motion import LinkMotion
 from .outputs import _axial_output, _load_output
 
 __all__ = ["ModelFrames", "model_frames", "chord_motion", "body_angles", "node_state", "deviation", "curvature",
-           "axial_forces", "joint_angles", "evaluate", "reaction", "drive_force", "diagnostics"]
+           "axial_forces", "joint_angles", "evaluate", "reaction", "drive_force", "Diagnostics"]
 
 
 @dataclass
@@ -359,40 +359,94 @@ def _point_output(cm: CoupledModel, fr: ModelFrames, rm, ref: LinkMotion, sp: di
 
 
 # ----------------------------------------------------------------------------- diagnostics
-def diagnostics(cm: CoupledModel, fr: ModelFrames, ef, rm, iters: int, nsteps: int, cval) -> dict:
+class _Continuous:
+    """Angle series that continue from block to block: each new piece is unwrapped from the end of
+    the previous one (a piece may start with the previous piece's last sample again)."""
+
+    def __init__(self):
+        self._last = {}      # key -> (last sample as given, last continuous value)
+
+    def __call__(self, key, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, float)
+        if key in self._last:
+            raw, cont = self._last[key]
+            y = np.unwrap(np.r_[raw, x])
+            y = y[1:] - y[0] + cont
+        else:
+            y = np.unwrap(x)
+        self._last[key] = (float(x[-1]), float(y[-1]))
+        return y
+
+
+class Diagnostics:
     """Energy balance, Newton statistics, link-length drift, constraint satisfaction and the drift of
-    the joint coordinates from the rigid-body solution."""
-    e = ef[0] + ef[1] - ef[2]
-    scale = max(np.max(np.abs(ef[0])), np.max(np.abs(ef[2])), 1e-300)
-    stretch = []
-    for si, (li, k0, k1) in enumerate(cm.segments):
-        d = cm.seg_slice(si)
-        ls = cm.case["links"][li]["length"] * (cm.fracs[li][k1] - cm.fracs[li][k0])
-        stretch.append(float(np.max(np.abs(np.hypot(*(fr.qf[d[2:4]] - fr.qf[d[0:2]])) / ls - 1.0))))
-    viol = constraint_violation(cm, fr, cval)
-    tangents = joint_angles(cm, fr.qf)
-    drift = {}
-    for name, jm in cm.joints.items():
-        mod = joint_coordinate(cm, fr, name)[0]
-        rig = rm.joint(name)[:, 0]
-        if jm.kind == "prismatic":
-            drift[name] = {"max_abs_m": float(np.max(np.abs(mod - rig))), "final_m": float(mod[-1] - rig[-1])}
-            continue
-        dth = np.unwrap(mod) - np.unwrap(rig)
-        dth -= 2 * np.pi * np.round(dth[0] / (2 * np.pi))
-        dhub = tangents[name] - np.unwrap(rig)
-        dhub -= 2 * np.pi * np.round(dhub[0] / (2 * np.pi))
-        drift[name] = {"max_abs_rad": float(np.max(np.abs(dth))), "final_rad": float(dth[-1]),
-                       "at_joint_tangents_max_abs_rad": float(np.max(np.abs(dhub)))}
-    return {"energy_balance": {"max_abs_drift_J": float(np.max(np.abs(e - e[0]))),
-                               "relative_drift": float(np.max(np.abs(e - e[0])) / scale),
-                               "final_kinetic_J": float(ef[0, -1]), "final_work_J": float(ef[2, -1])},
-            "newton": {"iterations": int(iters), "mean_per_step": iters / max(nsteps, 1),
-                       "max_per_step": int(np.max(ef[3]))},
-            "link_length_drift": {"max_relative": max(stretch), "bound": 1e-3, "within_bound": max(stretch) < 1e-3},
-            "joint_closure_error_m": max(viol["point_m"], viol["guide_normal_m"]),
-            "constraint_violation": viol,
-            "rigid_drift_from_rigid_body_solution": drift}
+    the joint coordinates from the rigid-body solution, accumulated over a run's blocks of frames
+    (:meth:`add` per block, in order; :meth:`summary` for summary.json's ``coupled`` entry)."""
+
+    def __init__(self, cm: CoupledModel):
+        self.cm = cm
+        self.e0 = None
+        self.energy_drift, self.scale = 0.0, 1e-300
+        self.final_kinetic = self.final_work = 0.0
+        self.iterations, self.max_iterations = 0, 0
+        self.stretch = 0.0
+        self.violation = {"point_m": 0.0, "guide_normal_m": 0.0, "angle_rad": 0.0, "slide_m": 0.0}
+        self.drift: dict[str, dict] = {}
+        self._turns = {}                  # joint -> whole turns removed from its drift (set at the first frame)
+        self._cont = _Continuous()
+
+    def add(self, fr: ModelFrames, ef, rm, iters: int, cval) -> None:
+        """One block: its frames fr, energies ef (4, nf), rigid motion rm and constraint values cval
+        (3, nc, nf) at those frames, and the Newton iterations of its steps."""
+        cm = self.cm
+        e = ef[0] + ef[1] - ef[2]
+        if self.e0 is None:
+            self.e0 = float(e[0])
+        self.energy_drift = max(self.energy_drift, float(np.max(np.abs(e - self.e0))))
+        self.scale = max(self.scale, float(np.max(np.abs(ef[0]))), float(np.max(np.abs(ef[2]))))
+        self.final_kinetic, self.final_work = float(ef[0, -1]), float(ef[2, -1])
+        self.iterations += int(iters)
+        self.max_iterations = max(self.max_iterations, int(np.max(ef[3])))
+        for si, (li, k0, k1) in enumerate(cm.segments):
+            d = cm.seg_slice(si)
+            ls = cm.case["links"][li]["length"] * (cm.fracs[li][k1] - cm.fracs[li][k0])
+            self.stretch = max(self.stretch, float(np.max(np.abs(np.hypot(*(fr.qf[d[2:4]] - fr.qf[d[0:2]])) / ls - 1.0))))
+        for k, v in constraint_violation(cm, fr, cval).items():
+            self.violation[k] = max(self.violation[k], v)
+        self._add_drift(fr, rm)
+
+    def _add_drift(self, fr: ModelFrames, rm) -> None:
+        cm = self.cm
+        tangents = joint_angles(cm, fr.qf)
+        for name, jm in cm.joints.items():
+            mod = joint_coordinate(cm, fr, name)[0]
+            rig = rm.joint(name)[:, 0]
+            d = self.drift.setdefault(name, {})
+            if jm.kind == "prismatic":
+                d["max_abs_m"] = max(d.get("max_abs_m", 0.0), float(np.max(np.abs(mod - rig))))
+                d["final_m"] = float(mod[-1] - rig[-1])
+                continue
+            rig_c = self._cont(("rigid", name), rig)
+            dth = self._cont(("model", name), mod) - rig_c
+            dhub = self._cont(("tangent", name), tangents[name]) - rig_c
+            if name not in self._turns:
+                self._turns[name] = (2 * np.pi * np.round(dth[0] / (2 * np.pi)), 2 * np.pi * np.round(dhub[0] / (2 * np.pi)))
+            dth, dhub = dth - self._turns[name][0], dhub - self._turns[name][1]
+            d["max_abs_rad"] = max(d.get("max_abs_rad", 0.0), float(np.max(np.abs(dth))))
+            d["final_rad"] = float(dth[-1])
+            d["at_joint_tangents_max_abs_rad"] = max(d.get("at_joint_tangents_max_abs_rad", 0.0),
+                                                     float(np.max(np.abs(dhub))))
+
+    def summary(self, nsteps: int) -> dict:
+        viol = dict(self.violation)
+        return {"energy_balance": {"max_abs_drift_J": self.energy_drift, "relative_drift": self.energy_drift / self.scale,
+                                   "final_kinetic_J": self.final_kinetic, "final_work_J": self.final_work},
+                "newton": {"iterations": self.iterations, "mean_per_step": self.iterations / max(nsteps, 1),
+                           "max_per_step": self.max_iterations},
+                "link_length_drift": {"max_relative": self.stretch, "bound": 1e-3, "within_bound": self.stretch < 1e-3},
+                "joint_closure_error_m": max(viol["point_m"], viol["guide_normal_m"]),
+                "constraint_violation": viol,
+                "rigid_drift_from_rigid_body_solution": {k: dict(v) for k, v in self.drift.items()}}
 
 
 def constraint_violation(cm: CoupledModel, fr: ModelFrames, cval) -> dict:

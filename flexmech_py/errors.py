@@ -11,6 +11,7 @@ __all__ = [
     "CaseError",
     "MechanismError",
     "SolverError",
+    "Interrupted",
 ]
 
 
@@ -57,4 +58,14 @@ class SolverError(FlexmechError, RuntimeError):
         self.data = data
         self.partial = partial
         self.failure = failure
+        super().__init__(message)
+
+
+class Interrupted(KeyboardInterrupt):
+    """The user stopped a run (Ctrl-C); ``partial``: the Result of the frames computed before it
+    (written and marked ``status = "interrupted"`` by a run that writes files).  A KeyboardInterrupt,
+    not a FlexmechError: whatever stops on Ctrl-C (a batch of runs, the CLI's exit 130) still does."""
+
+    def __init__(self, message: str, partial=None):
+        self.partial = partial
         super().__init__(message)

@@ -1,16 +1,18 @@
 """Guards in every run: validity of the small-deformation models, failure diagnosis, error estimate.
 
-- :func:`check_validity` (every run, cheap): per link the largest bending deflection from the
-  chord over the link length, the largest extreme-fibre strain, the largest compressive axial force
-  over the Euler load, and when each first passes its threshold (``THRESHOLDS``: deflection
-  2 % of L, compression 1 x the Euler load; a link's ``yield_strain`` when the case gives one).
-  Writes ``validity`` (per link), ``validity_overall`` and ``warnings`` into ``Result.extra``.
+- :class:`ValidityTracker` (every run, cheap, block by block; :func:`check_validity` for a run held
+  in memory): per link the largest bending deflection from the chord over the link length, the
+  largest extreme-fibre strain, the largest compressive axial force over the Euler load, and when
+  each first passes its threshold (``THRESHOLDS``: deflection 2 % of L, compression 1 x the Euler
+  load; a link's ``yield_strain`` when the case gives one).  Writes ``validity`` (per link),
+  ``validity_overall`` and ``warnings`` into ``Result.extra``.
 - :func:`failed` (a run that stopped): names the time, the quantity and the likely cause (step
   too large / physical instability / model outside its validity) from the run's own evidence —
   the shortest period of the elastic model, a short check at dt/2, the validity measures before
   the failure — and returns the SolverError that carries the partial result.
-- :func:`error_estimate` (``solver.error_estimate = "time"``): step doubling; the same model at
-  2 dt on the same rigid motion, error of the dt run ~ |y_dt - y_2dt| / (2^p - 1), p = 2.
+- :class:`StepDoubling` (``solver.error_estimate = "time"``): step doubling; the same model at
+  2 dt on the same rigid motion, run block by block beside the run, error of the dt run
+  ~ |y_dt - y_2dt| / (2^p - 1), p = 2.
 
 docs/stability.md ("Guards", "Validity warnings") documents the thresholds and messages.
 """
@@ -27,7 +29,7 @@ from . import coupled, kernels
 from .errors import MechanismError, SolverError
 from .model import squared_frequencies
 
-__all__ = ["check_validity", "failed", "error_estimate", "frames_before", "partial_or", "ORDER", "ERROR_WARN"]
+__all__ = ["check_validity", "ValidityTracker", "StepDoubling", "error_estimate", "failed", "frames_before", "ORDER", "ERROR_WARN"]
 
 ORDER = 2          # order of accuracy in time of every integrator flexmech ships (Newmark family, HHT, gen.-alpha)
 #: estimated time-step error, relative to the column's peak, above which a run warns (docs/stability.md)
@@ -91,59 +93,108 @@ def link_strains(res) -> np.ndarray:
         ax = np.abs(res.axial[els]) / ea if res.axial is not None else np.zeros((n, res.t.size))
         for k in range(n + 1):
             frac = k / n if fe.uniform[li] else fe.node_frac[li][k]
-            kap = np.abs(res.curvature(li, frac)) if res.curvature is not None else 0.0
+            kap = np.abs(res.curvature(li, frac)) if res.curvature_of is not None else 0.0
             eps_ax = np.max(ax[max(k - 1, 0):min(k + 1, n)], axis=0)
             out[li] = np.maximum(out[li], ln["half_depth"] * kap + eps_ax)
     return out
 
 
+_FIRST_TIMES = {"deflection": "deflection_exceeds_at_s", "compression": "compression_exceeds_at_s",
+                "strain": "strain_exceeds_yield_at_s"}
+
+
+class ValidityTracker:
+    """Validity measures of a run accumulated over its blocks of frames (:meth:`add` per block, in
+    order; :meth:`finish` writes them into the run's Result): per flexible link the largest
+    deflection over length, strain and compression over the Euler load and when each first passes its
+    threshold, and the largest elastic displacement of all frames and of the last one (evidence of
+    growth when a run stops)."""
+
+    def __init__(self):
+        self.links: dict[str, dict] = {}
+        self.max_displacement = self.last_displacement = 0.0
+        self.frames = 0
+        self.speeds: dict[float, float] = {}     # time a limit is first passed -> first rigid coordinate's speed
+
+    def add(self, block) -> None:
+        if block.t.size == 0:
+            return
+        fe, t = block.fe, block.t
+        per_link = coupled.validity(fe, block.axial, block.u)
+        defl, strain = deflection_over_length(block), link_strains(block)
+        for li, ln in enumerate(block.case["links"]):
+            if ln.get("rigid"):
+                continue
+            new = per_link[ln["name"]]
+            comp = np.maximum(0.0, -block.axial[fe.link_elements(li)].min(axis=0)) / new["euler_load_N"]
+            new.update(max_deflection_over_length=float(defl[li].max()), max_strain=float(strain[li].max()),
+                       yield_strain=ln.get("yield_strain"),
+                       deflection_exceeds_at_s=_first(t, defl[li] > THRESHOLDS["displacement_over_length"]),
+                       compression_exceeds_at_s=_first(t, comp > THRESHOLDS["compression_over_euler"]),
+                       strain_exceeds_yield_at_s=(_first(t, strain[li] > ln["yield_strain"])
+                                                  if ln.get("yield_strain") else None))
+            old = self.links.get(ln["name"])
+            if old is not None:
+                for k, v in old.items():
+                    if k.startswith("max_"):
+                        new[k] = max(v, new[k])
+                    elif k.endswith("_at_s") and v is not None:
+                        new[k] = v
+            self.links[ln["name"]] = new
+            for key in _FIRST_TIMES.values():
+                tk = new[key]
+                if tk is not None and tk not in self.speeds and block.qd is not None and block.qd.size:
+                    k = int(np.searchsorted(t, tk))
+                    self.speeds[tk] = float(block.qd[min(k, t.size - 1), 0])
+        tr = fe.trans_dof.ravel()
+        amp = np.max(np.abs(block.u[tr]), axis=0)
+        self.max_displacement = max(self.max_displacement, float(np.max(amp)))
+        self.last_displacement = float(amp[-1])
+        self.frames += int(t.size)
+
+    def grew(self) -> bool:
+        """Evidence of growth before a failure: at least 3 frames and the largest elastic displacement
+        of the last frame is (within 10 %) the largest of the run, and not zero."""
+        return self.frames >= 3 and 0 < self.last_displacement >= 0.9 * self.max_displacement
+
+    def finish(self, res) -> dict:
+        """``validity`` (per link), ``validity_overall`` and the validity ``warnings`` into res.extra;
+        returns ``validity_overall``."""
+        overall = {"thresholds": {"deflection_over_length": THRESHOLDS["displacement_over_length"],
+                                  "compression_over_euler": THRESHOLDS["compression_over_euler"]},
+                   "max_deflection_over_length": 0.0, "max_deflection_link": None, "max_strain": 0.0,
+                   "max_strain_link": None, "max_compression_over_euler": 0.0, "max_compression_link": None,
+                   "valid_until_s": None, "max_elastic_displacement_m": self.max_displacement,
+                   "final_elastic_displacement_m": self.last_displacement}
+        events = []   # (time, link, kind, measures)
+        for name, v in self.links.items():
+            for key, lk in (("max_deflection_over_length", "max_deflection_link"), ("max_strain", "max_strain_link"),
+                            ("max_compression_over_euler", "max_compression_link")):
+                if v[key] >= overall[key] and (v[key] > 0 or overall[lk] is None):
+                    overall[key], overall[lk] = v[key], name
+            for kind in ("compression", "deflection", "strain"):
+                if v[_FIRST_TIMES[kind]] is not None:
+                    events.append((v[_FIRST_TIMES[kind]], name, kind, v))
+        events.sort(key=lambda e: e[0])
+        model = res.model
+        geo = res.extra.get("geometric_stiffness", {}).get("source", "none")
+        # the nonlinear model follows large deflections and buckling: only yielding leaves its validity
+        limiting = [e for e in events if model != "nonlinear" or e[2] == "strain"]
+        overall["valid_until_s"] = limiting[0][0] if limiting else None
+        overall["first_limit"] = ({"link": limiting[0][1], "kind": limiting[0][2], "time_s": limiting[0][0]}
+                                  if limiting else None)
+        res.extra["validity"] = {k: dict(v) for k, v in self.links.items()}
+        res.extra["validity_overall"] = overall
+        res.extra["warnings"] = _validity_warnings(res, events, limiting, model, geo, self.speeds)
+        return overall
+
+
 def check_validity(res) -> dict:
-    """Validity measures of a run (or of its partial frames); fills ``res.extra`` and returns
-    ``validity_overall``."""
-    fe, t, links = res.fe, res.t, res.case["links"]
-    per_link = res.extra.get("validity") or coupled.validity(fe, res.axial, res.u)
-    defl = deflection_over_length(res)
-    strain = link_strains(res)
-    overall = {"thresholds": {"deflection_over_length": THRESHOLDS["displacement_over_length"],
-                              "compression_over_euler": THRESHOLDS["compression_over_euler"]},
-               "max_deflection_over_length": 0.0, "max_deflection_link": None, "max_strain": 0.0,
-               "max_strain_link": None, "max_compression_over_euler": 0.0, "max_compression_link": None,
-               "valid_until_s": None}
-    events = []   # (time, link, kind, peak)
-    for li, ln in enumerate(links):
-        if ln.get("rigid"):
-            continue
-        name = ln["name"]
-        v = per_link[name]
-        comp = np.maximum(0.0, -res.axial[fe.link_elements(li)].min(axis=0)) / v["euler_load_N"]
-        v.update(max_deflection_over_length=float(defl[li].max()), max_strain=float(strain[li].max()),
-                 yield_strain=ln.get("yield_strain"),
-                 deflection_exceeds_at_s=_first(t, defl[li] > THRESHOLDS["displacement_over_length"]),
-                 compression_exceeds_at_s=_first(t, comp > THRESHOLDS["compression_over_euler"]),
-                 strain_exceeds_yield_at_s=(_first(t, strain[li] > ln["yield_strain"])
-                                            if ln.get("yield_strain") else None))
-        for key, vk, lk in (("max_deflection_over_length", "max_deflection_over_length", "max_deflection_link"),
-                            ("max_strain", "max_strain", "max_strain_link"),
-                            ("max_compression_over_euler", "max_compression_over_euler", "max_compression_link")):
-            if v[vk] >= overall[key] and (v[vk] > 0 or overall[lk] is None):
-                overall[key], overall[lk] = v[vk], name
-        for kind in ("compression", "deflection", "strain"):
-            tk = v[{"compression": "compression_exceeds_at_s", "deflection": "deflection_exceeds_at_s",
-                    "strain": "strain_exceeds_yield_at_s"}[kind]]
-            if tk is not None:
-                events.append((tk, name, kind, v))
-    events.sort(key=lambda e: e[0])
-    model = res.model
-    geo = res.extra.get("geometric_stiffness", {}).get("source", "none")
-    # the nonlinear model follows large deflections and buckling: only yielding leaves its validity
-    limiting = [e for e in events if model != "nonlinear" or e[2] == "strain"]
-    overall["valid_until_s"] = limiting[0][0] if limiting else None
-    overall["first_limit"] = ({"link": limiting[0][1], "kind": limiting[0][2], "time_s": limiting[0][0]}
-                              if limiting else None)
-    res.extra["validity"] = per_link
-    res.extra["validity_overall"] = overall
-    res.extra["warnings"] = _validity_warnings(res, events, limiting, model, geo)
-    return overall
+    """Validity measures of a run held in memory (or of its partial frames); fills ``res.extra`` and
+    returns ``validity_overall``."""
+    tracker = ValidityTracker()
+    tracker.add(res)
+    return tracker.finish(res)
 
 
 def _advice(model: str, geo: str) -> str:
@@ -167,15 +218,15 @@ def _first_coordinate(case) -> tuple[str, str]:
     return f"joint {name}", unit
 
 
-def _validity_warnings(res, events, limiting, model, geo) -> list[str]:
+def _validity_warnings(res, events, limiting, model, geo, speeds: dict) -> list[str]:
+    """The validity warnings; ``speeds`` {time: speed of the first rigid coordinate then}."""
     out = []
     if limiting:
         t0 = limiting[0][0]
-        k = int(np.searchsorted(res.t, t0))
         speed = ""
-        if res.qd is not None and res.qd.size:
+        if speeds.get(t0) is not None:
             who, unit = _first_coordinate(res.case)
-            speed = f" ({who} speed {abs(res.qd[k, 0]):.4g} {unit}/s)"
+            speed = f" ({who} speed {abs(speeds[t0]):.4g} {unit}/s)"
         if model == "nonlinear":
             out.append(f"the {model} model's results after t = {_fmt_t(t0)} s{speed} are outside its validity: "
                        "the material yields there and every flexmech model is elastic")
@@ -211,16 +262,6 @@ def rigid_failure(res, exc: MechanismError) -> MechanismError:
                    "what": kernels.STATUS_WHAT.get(exc.code, "the rigid-body motion stopped"),
                    "likely_cause": "mechanism", "message": str(exc)}
     return MechanismError(str(exc), time=exc.time, code=exc.code, partial=res)
-
-
-def partial_or(res, failure: SolverError | None, geometric: str, cm=None):
-    """Return ``res``, or, when the time loop stopped (``failure``), raise a SolverError carrying
-    ``res`` (its frames end before the failed step) as ``partial``."""
-    if failure is None:
-        return res
-    res.failure = {"code": failure.code, "step": failure.step, "time_s": failure.time}
-    raise SolverError(str(failure), time=failure.time, code=failure.code, step=failure.step,
-                      data=dict(failure.data, cm=cm, geometric=geometric), partial=res)
 
 
 def _limits_before(res, t_fail: float) -> str:
@@ -272,12 +313,9 @@ def _largest_displacement(res) -> tuple[str, dict]:
 def _grew(res) -> bool:
     """Evidence of growth before a failure: at least 3 frames and the largest elastic displacement
     of the last frame is (within 10 %) the largest of the run, and not zero."""
-    if res.t.size < 3:
-        return False
-    fe = res.fe
-    tr = fe.trans_dof.ravel()
-    amp = np.max(np.abs(res.u[tr]), axis=0)
-    return bool(amp[-1] > 0 and amp[-1] >= 0.9 * np.max(amp))
+    ov = res.extra["validity_overall"]
+    last, top = ov["final_elastic_displacement_m"], ov["max_elastic_displacement_m"]
+    return bool(res.all_stats().frames >= 3 and last > 0 and last >= 0.9 * top)
 
 
 def _shortest_period(prep, model: str, res, data) -> float | None:
@@ -292,8 +330,7 @@ def _shortest_period(prep, model: str, res, data) -> float | None:
             cm = data["cm"]
             if cm is None or int(cm.free_of.max()) > 1500:
                 return None
-            _, m, _, k, _ = cm.dense(data["qf"][:, res.t.size - 1], np.zeros(cm.ndof), np.zeros(cm.ndof),
-                                     gravity=prep.gravity)
+            _, m, _, k, _ = cm.dense(data["q_last"], np.zeros(cm.ndof), np.zeros(cm.ndof), gravity=prep.gravity)
             lam = squared_frequencies(m, k)
     except Exception:   # a diagnosis must never hide the original failure
         return None
@@ -312,7 +349,8 @@ def _half_step_check(prep, model: str, geometric, t_fail: float) -> dict:
     try:
         p2 = type(prep)(case, dt=prep.dt / 2, out_every=max(1, nsteps // 50))   # a Prepared
         out["dt"] = p2.dt
-        p2._run_raw(model, geometric)
+        for _ in p2.blocks(model, geometric):   # the frames are not needed: only whether it fails
+            pass
     except SolverError as exc:
         out["failed_at_s"] = exc.time
     except Exception as exc:   # the check is evidence only; record why it is missing
@@ -420,75 +458,192 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
 SKIP_COLUMNS = ("newton_iterations",)   # solver statistics, not outputs
 
 
-def _on_coarse_frames(fine_prep, fine, coarse) -> int:
-    """Stride of ``fine``'s frames that fall on ``coarse``'s (a run of ``fine_prep.coarsened()``)."""
-    stride = 1 if fine_prep.out_every % 2 == 0 else 2
-    nf = coarse.t.size
-    assert np.allclose(fine.t[::stride][:nf], coarse.t, rtol=0, atol=1e-9 * fine_prep.t[-1])
-    return stride
+def coarse_grid(nsteps: int, out_every: int) -> tuple[int, int]:
+    """(steps, output decimation) of a run on every second step of a grid of ``nsteps`` steps with
+    frames every ``out_every``: frames on the fine run's frames (every frame when out_every is even,
+    every second one when it is odd; the grid then ends at the last frame both share)."""
+    if out_every % 2 == 0:
+        return nsteps // 2, out_every // 2
+    return out_every * (nsteps // (2 * out_every)), out_every
+
+
+class _Frames:
+    """Frames of one run waiting to be compared: steps (on the fine grid), times and columns."""
+
+    def __init__(self):
+        self.steps, self.t, self.cols = np.zeros(0, np.int64), np.zeros(0), {}
+        self.last = -1
+
+    def add(self, steps, t, columns) -> None:
+        self.steps, self.t = np.r_[self.steps, steps], np.r_[self.t, t]
+        for name, y in columns.items():
+            if name not in SKIP_COLUMNS:
+                self.cols[name] = np.r_[self.cols.get(name, np.zeros(0)), np.asarray(y, float)]
+        self.last = int(self.steps[-1]) if self.steps.size else self.last
+
+    def drop_through(self, step: int) -> None:
+        keep = self.steps > step
+        self.steps, self.t = self.steps[keep], self.t[keep]
+        self.cols = {n: y[keep] for n, y in self.cols.items()}
+
+
+class StepComparison:
+    """max |y_fine - y_coarse| of every column where a run (fed block by block, :meth:`add_fine`) and
+    the same run on every second step (``coarse_prep``, advanced block by block beside it) have a
+    frame at the same step.  Also over the frames of the run at four times the step (``sub``: every
+    and last fine step of that grid's frames), for the observed order.  Holds about one block of each."""
+
+    def __init__(self, coarse_prep, model: str, geometric, sub: tuple[int, int] | None = None):
+        self.coarse = coarse_prep.blocks(model, geometric)
+        self.sub = sub
+        self.diff, self.t_at, self.diff_sub = {}, {}, {}
+        self.frames = 0
+        self.failed = None                   # the coarse run's SolverError, if it stopped
+        self.done = False
+        self.kernel_s, self.wall_s = 0.0, 0.0
+        self._fine, self._coarse = _Frames(), _Frames()
+
+    @property
+    def coarse_last(self) -> int:
+        """The last step the coarse run reached, on the fine grid."""
+        return self._coarse.last
+
+    def add_fine(self, block) -> None:
+        """Take the block's frames and advance the coarse run to them."""
+        if block.t.size == 0:
+            return
+        self._fine.add(block.steps, block.t, block.columns)
+        while not self.done and self._coarse.last < self._fine.last:
+            self._advance()
+        self._match()
+
+    def _advance(self) -> None:
+        t0 = time.perf_counter()
+        try:
+            cb = next(self.coarse)
+        except StopIteration:
+            self.done = True
+            return
+        except SolverError as exc:
+            self.failed, self.done = exc, True
+            cb = exc.partial
+        except MechanismError:     # the rigid motion stops here too: compare what both have
+            self.done = True
+            return
+        finally:
+            self.wall_s += time.perf_counter() - t0
+        if cb is None or cb.t.size == 0:
+            return
+        self.kernel_s = cb.timing.get("kernel_s", self.kernel_s)
+        self._coarse.add(2 * cb.steps, cb.t, cb.columns)
+
+    def _match(self) -> None:
+        f, c = self._fine, self._coarse
+        common, fi, ci = np.intersect1d(f.steps, c.steps, assume_unique=True, return_indices=True)
+        self.frames += int(common.size)
+        if common.size:
+            on_sub = ((common % self.sub[0] == 0) & (common <= self.sub[1])) if self.sub else np.zeros(common.size, bool)
+            for name, y in f.cols.items():
+                if name not in c.cols:
+                    continue
+                d = np.abs(y[fi] - c.cols[name][ci])
+                k = int(np.argmax(d))
+                if not (self.diff.get(name, -1.0) >= d[k]):
+                    self.diff[name], self.t_at[name] = float(d[k]), float(c.t[ci[k]])
+                if on_sub.any():
+                    self.diff_sub[name] = max(self.diff_sub.get(name, 0.0), float(np.max(d[on_sub])))
+        upto = max(f.last, c.last) if self.done else min(f.last, c.last)   # compared, or without a partner
+        f.drop_through(upto)
+        c.drop_through(upto)
+
+    def finish(self) -> None:
+        """Advance the coarse run to its end (the fine run has ended)."""
+        while not self.done:
+            self._advance()
+        self._match()
 
 
 def error_estimate(prep, res, geometric=None) -> dict:
-    """Step-doubling estimate of the time-discretization error of every output column of ``res``;
-    past ERROR_WARN a warning (with the step that would meet it, :func:`_estimate_warning`)."""
-    pc = prep.coarsened()   # the same rigid solution on every second step
-    out = {"method": "time", "order": ORDER, "dt": prep.dt}
-    if pc is None:
-        return dict(out, method="none", reason="too few steps for a run at 2 dt")
-    out["coarse_dt"] = pc.dt
-    t0 = time.perf_counter()
-    try:
-        rc = pc._run_raw(res.model, geometric)
-    except SolverError as exc:
-        out.update(failed=f"the run at 2 dt stopped at t = {_fmt_t(exc.time)} s", columns={}, worst_column=None)
-        res.extra.setdefault("warnings", []).append(
-            f"error estimate: the same run at 2 dt = {pc.dt:.3g} s stopped at t = {_fmt_t(exc.time)} s, so the step "
-            "dt is close to the limit of this model; check with a smaller solver.dt")
+    """The step-doubling estimate of a run already held in memory (``res``, a run of ``prep``)."""
+    sd = StepDoubling(prep, res.model, geometric)
+    sd.add(res)
+    return sd.finish(res)
+
+
+class StepDoubling:
+    """Step-doubling estimate of the time-discretization error of every output column, made while the
+    run goes (the same model at 2 dt on the same rigid motion, ``prep.coarsened()``): the error of the
+    dt run ~ |y_dt - y_2dt| / (2^p - 1), p = ORDER; past ERROR_WARN a warning with the step that would
+    meet it (:func:`_estimate_warning`)."""
+
+    def __init__(self, prep, model: str, geometric=None):
+        self.prep, self.model, self.geometric = prep, model, geometric
+        self.pc = prep.coarsened()
+        self.cmp = None
+        if self.pc is not None:
+            ncc, occ = coarse_grid(self.pc.nsteps, self.pc.out_every)
+            self.cmp = StepComparison(self.pc, model, geometric, sub=(4 * occ, 4 * ncc) if ncc >= occ >= 1 else None)
+
+    @property
+    def coarse_steps(self) -> int:
+        return 0 if self.pc is None else self.pc.nsteps
+
+    def add(self, block) -> None:
+        if self.cmp is not None:
+            self.cmp.add_fine(block)
+
+    def finish(self, res) -> dict:
+        """The ``error_estimate`` entry of the finished run ``res`` (a warning also into its warnings)."""
+        out = {"method": "time", "order": ORDER, "dt": self.prep.dt}
+        if self.cmp is None:
+            return dict(out, method="none", reason="too few steps for a run at 2 dt")
+        cmp = self.cmp
+        cmp.finish()
+        out["coarse_dt"] = self.pc.dt
+        if cmp.failed is not None:
+            exc = cmp.failed
+            out.update(failed=f"the run at 2 dt stopped at t = {_fmt_t(exc.time)} s", columns={}, worst_column=None)
+            res.extra.setdefault("warnings", []).append(
+                f"error estimate: the same run at 2 dt = {self.pc.dt:.3g} s stopped at t = {_fmt_t(exc.time)} s, so "
+                "the step dt is close to the limit of this model; check with a smaller solver.dt")
+            return out
+        out.update(kernel_s=cmp.kernel_s, wall_s=cmp.wall_s, frames_compared=cmp.frames)
+        fac = 1.0 / (2 ** ORDER - 1)
+        stats = res.all_stats().columns
+        cols, worst = {}, (None, -1.0)
+        for name, d in cmp.diff.items():
+            emax, peak = fac * d, stats[name]["peak_abs"]
+            rel = emax / peak if peak > 0 else (0.0 if emax == 0 else float("inf"))
+            cols[name] = {"max_abs": emax, "relative": rel, "t_max_s": cmp.t_at[name]}
+            if rel > worst[1]:
+                worst = (name, rel)
+        out.update(columns=cols, worst_column=worst[0], worst_relative=worst[1] if worst[0] else None)
+        over = {n: c["relative"] for n, c in cols.items() if np.isfinite(c["relative"]) and c["relative"] > ERROR_WARN}
+        if over:
+            name = max(over, key=over.get)
+            out["warning"] = _estimate_warning(self.prep.dt, name, over, self._observed_order(name))
+            res.extra.setdefault("warnings", []).append(out["warning"]["message"])
         return out
-    out["kernel_s"] = rc.timing.get("kernel_s", 0.0)
-    out["wall_s"] = time.perf_counter() - t0
-    stride = _on_coarse_frames(prep, res, rc)
-    nf = rc.t.size
-    out["frames_compared"] = int(nf)
-    cols, worst = {}, (None, -1.0)
-    fac = 1.0 / (2 ** ORDER - 1)
-    for name, y in res.columns.items():
-        if name in SKIP_COLUMNS or name not in rc.columns:
-            continue
-        yf = np.asarray(y)[::stride][:nf]
-        e = fac * np.abs(yf - rc.columns[name])
-        peak = float(np.max(np.abs(y)))
-        emax = float(np.max(e))
-        rel = emax / peak if peak > 0 else (0.0 if emax == 0 else float("inf"))
-        cols[name] = {"max_abs": emax, "relative": rel, "t_max_s": float(rc.t[int(np.argmax(e))])}
-        if rel > worst[1]:
-            worst = (name, rel)
-    out.update(columns=cols, worst_column=worst[0], worst_relative=worst[1] if worst[0] else None)
-    over = {n: c["relative"] for n, c in cols.items() if np.isfinite(c["relative"]) and c["relative"] > ERROR_WARN}
-    if over:
-        name = max(over, key=over.get)
-        out["warning"] = _estimate_warning(prep.dt, name, over, _observed_order(prep, pc, res, rc, name, geometric))
-        res.extra.setdefault("warnings", []).append(out["warning"]["message"])
-    return out
 
-
-def _observed_order(prep, pc, res, rc, name: str, geometric) -> float | None:
-    """Observed order of ``name``'s time error from the runs at dt, 2 dt and a third one at 4 dt (made only
-    when the estimate passes ERROR_WARN): log2 of max |y_2dt - y_4dt| over max |y_dt - y_2dt| on the 4 dt
-    frames.  None when there is no run at 4 dt (too few steps, or it failed)."""
-    pcc = pc.coarsened()
-    if pcc is None:
-        return None
-    try:
-        r4 = pcc._run_raw(res.model, geometric)
-    except SolverError:
-        return None
-    s2 = _on_coarse_frames(pc, rc, r4)
-    n4 = r4.t.size
-    s1 = _on_coarse_frames(prep, res, rc) * s2
-    y1, y2 = np.asarray(res.columns[name])[::s1][:n4], np.asarray(rc.columns[name])[::s2][:n4]
-    d12, d24 = float(np.max(np.abs(y1 - y2))), float(np.max(np.abs(y2 - r4.columns[name])))
-    return float(np.log2(d24 / d12)) if d12 > 0 and d24 > 0 else None
+    def _observed_order(self, name: str) -> float | None:
+        """Observed order of ``name``'s time error from the runs at dt, 2 dt and a third one at 4 dt (made
+        only when the estimate passes ERROR_WARN): log2 of max |y_2dt - y_4dt| over max |y_dt - y_2dt| on
+        the 4 dt frames.  None when there is no run at 4 dt (too few steps, or it failed)."""
+        d12 = self.cmp.diff_sub.get(name)
+        pc = self.prep.coarsened()       # the 2 dt run again, now beside the one at 4 dt
+        if d12 is None or pc is None or pc.coarsened() is None:
+            return None
+        second = StepComparison(pc.coarsened(), self.model, self.geometric)
+        try:
+            for block in pc.blocks(self.model, self.geometric):
+                second.add_fine(block)
+        except (SolverError, MechanismError):
+            return None
+        second.finish()
+        d24 = second.diff.get(name)
+        if second.failed is not None or not d24 or not d12:
+            return None
+        return float(np.log2(d24 / d12))
 
 
 def _round_down(x: float, digits: int = 2) -> float:

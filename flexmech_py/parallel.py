@@ -46,7 +46,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import CaseError, FlexmechError
+from .errors import CaseError
 from .worker import call_task, default_jobs, worker_lost, worker_name  # noqa: F401 (re-exported)
 from .results import _atomic_write, _json_default
 

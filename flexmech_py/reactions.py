@@ -44,6 +44,17 @@ class ModelReactions:
     def checked(self) -> bool:
         return self._out is not None
 
+    def over(self, res, sel=None) -> "ModelReactions":
+        """The same reactions over the frames of ``res`` (a block, or blocks joined); ``sel``: when
+        ``res`` holds this one's frames ``sel``, the reactions already solved are kept."""
+        other = ModelReactions.__new__(ModelReactions)
+        other.__dict__.update(self.__dict__)
+        other.rm, other.rig, other.state = res.rigid, res.rig, (res.u, res.v, res.a)
+        other.axial = None if self.axial is None else res.axial
+        other._elements = {}
+        other._out = None if (self._out is None or sel is None) else {k: v[sel] for k, v in self._out.items()}
+        return other
+
     def __call__(self, name: str) -> np.ndarray:
         if self._out is None:
             self._out = self._solve()
@@ -56,7 +67,7 @@ class ModelReactions:
 
     # ------------------------------------------------------------------ the equations
     def _solve(self) -> dict:
-        fe, mech = self.fe, self.fe.case.mechanism
+        mech = self.fe.case.mechanism
         nf = self.rm.t.size
         eqs = {}                 # body key -> row offset; key: ("node", node, link) or ("part", name)
         unknowns = []            # (joint, component kind, offset)

@@ -2,14 +2,15 @@
 
 Files (``docs/cli.md``):
 
-- ``timeseries.csv``: two ``#`` comment lines (provenance; units per column),
-  then a header ``t,<output names>`` and one row per output frame.  A run that
-  stopped (partial result) has a third comment line ``# partial: ...`` first.
+- ``timeseries.csv``: three ``#`` comment lines (the run's status: ``# complete: N frames``,
+  ``# partial: the run stopped at ...`` or, while a run writes it as ``timeseries.csv.part``,
+  ``# running: ...``, padded to STATUS_BYTES; provenance; units per column), then a header
+  ``t,<output names>`` and one row per output frame.
 - ``summary.json``: status, peaks, final values, steps, DOFs, timings, validity,
   warnings, error estimate, versions and the fully resolved input.
 
 Files are written to a temporary name and renamed, so a failed run never
-leaves a half-written file behind.
+leaves a half-written file under the final name.
 """
 
 from __future__ import annotations
@@ -17,12 +18,12 @@ from __future__ import annotations
 import json
 import os
 import platform
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Result", "read_timeseries", "versions"]
+__all__ = ["Result", "TimeseriesWriter", "read_timeseries", "versions"]
 
 
 def versions() -> dict:
@@ -36,9 +37,13 @@ def versions() -> dict:
 
 @dataclass
 class Result:
-    """One run.  ``t`` (nf,) frame times [s]; ``columns[name]`` (nf,) outputs; ``u, v, a`` (ndof, nf)
-    elastic displacements, velocities, accelerations over all DOFs (zeros at constrained DOFs);
-    ``q, qd, qdd`` (nf, ndof_rigid) rigid generalized coordinates."""
+    """One run, or one block of a run's frames.  ``t`` (nf,) frame times [s]; ``columns[name]`` (nf,)
+    outputs; ``u, v, a`` (ndof, nf) elastic displacements, velocities, accelerations over all DOFs
+    (zeros at constrained DOFs); ``q, qd, qdd`` (nf, ndof_rigid) rigid generalized coordinates.
+
+    A run streamed to files (:class:`flexmech_py.runner.FileSink`) keeps only its last block's frames
+    here; ``stats`` (:class:`~flexmech_py.frames.ColumnStats`) then describes every frame and
+    ``envelope`` holds the frames to draw (:meth:`plot_view`)."""
 
     case: dict
     model: str
@@ -58,27 +63,51 @@ class Result:
     timing: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)   # model-specific summary entries (e.g. the coupled model's)
     axial: np.ndarray | None = None             # (nel, nf) element axial forces [N], tension > 0
-    curvature: object = field(default=None, repr=False)   # callable(link, fraction) -> (nf,) curvature [1/m]
     failure: dict | None = None                 # set when the run stopped: a partial result (guards.failed)
     motion: object = field(default=None, repr=False)   # LinkMotion of the rigid-body solution at the frames
+    rigid: object = field(default=None, repr=False)    # RigidMotion (the rigid-body solution) at the frames
+    steps: np.ndarray | None = None             # (nf,) step number of each frame on the run's time grid
+    state: np.ndarray | None = field(default=None, repr=False)   # (n, nf) the model's own coordinates (coupled: q)
+    curvature_of: object = field(default=None, repr=False)       # f(result, link, fraction) -> (nf,) curvature [1/m]
+    reactions: object = field(default=None, repr=False)          # superposition: joint -> (nf, 3) model reactions
+    stats: object = field(default=None, repr=False)              # ColumnStats over every frame of the run
+    envelope: object = field(default=None, repr=False)           # Envelope: the frames to draw of a streamed run
 
     @property
     def status(self) -> str:
-        """``"completed"``, or ``"failed"`` for the partial result of a run that stopped."""
-        return "failed" if self.failure else "completed"
+        """``"completed"``; ``"failed"`` for the partial result of a run that stopped, ``"interrupted"``
+        for one stopped by the user."""
+        if not self.failure:
+            return "completed"
+        return "interrupted" if self.failure.get("cause") == "interrupted" else "failed"
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "t":
             return self.t
         return self.columns[name]
 
+    def curvature(self, li: int, frac: float) -> np.ndarray:
+        """(nf,) curvature [1/m] of link ``li`` at ``frac`` of its length over the frames."""
+        return self.curvature_of(self, li, frac)
+
+    def all_stats(self):
+        """ColumnStats over every frame of the run (those of the frames held when not streamed)."""
+        if self.stats is None:
+            from .frames import ColumnStats
+
+            self.stats = ColumnStats.of(self.t, self.columns)
+        return self.stats
+
+    def plot_view(self) -> "Result":
+        """This result with the frames to draw: the envelope of a streamed run, else itself."""
+        if self.envelope is None or self.envelope.names is None:
+            return self
+        return replace(self, t=self.envelope.t, columns=self.envelope.columns)
+
     # ------------------------------------------------------------------ summary
     def summary(self) -> dict:
-        outs = {}
-        for name, y in self.columns.items():
-            i = int(np.argmax(np.abs(y)))
-            outs[name] = {"unit": self.units[name], "min": float(y.min()), "max": float(y.max()),
-                          "peak_abs": float(abs(y[i])), "t_peak_abs": float(self.t[i]), "final": float(y[-1])}
+        stats = self.all_stats()
+        outs = {name: {"unit": self.units[name], **st} for name, st in stats.columns.items()}
         fe = self.fe
         fail = {"failed_at_s": self.failure["time_s"], "failure": self.failure} if self.failure else {}
         return {
@@ -88,8 +117,8 @@ class Result:
             "model": self.model,
             "steps": self.nsteps,
             "dt": self.dt,
-            "frames": int(self.t.size),
-            "t_end": float(self.t[-1]),
+            "frames": int(stats.frames),
+            "t_end": stats.t_last,
             "dofs": {"all": fe.ndof, "free": fe.nfree, "half_bandwidth": fe.bandwidth, "elements": fe.nel},
             "wall_time_s": {k: round(v, 6) for k, v in self.timing.items()},
             "outputs": outs,
@@ -111,7 +140,7 @@ class Result:
             lines.append(f"{name:<{w}}  {o['unit']:<7} {o['min']:>12.5g} {o['max']:>12.5g} {o['final']:>12.5g}")
         if self.failure:
             lines.insert(1, f"PARTIAL: the run stopped at t = {self.failure['time_s']:.6g} s; frames up to "
-                            f"t = {self.t[-1]:.6g} s")
+                            f"t = {self.all_stats().t_last:.6g} s")
         return "\n".join(lines + self._assembly_lines() + self._validity_lines() + self._estimate_lines())
 
     def _assembly_lines(self) -> list[str]:
@@ -157,26 +186,107 @@ class Result:
                 f"of its peak (extra run {est.get('kernel_s', 0):.3f} s)"]
 
     # ------------------------------------------------------------------ files
+    def csv_head(self, running: bool = False) -> list[str]:
+        """The comment lines and the header of timeseries.csv.  The first line says the run's status
+        (running, complete, or partial with where it stopped), padded to STATUS_BYTES so that a file
+        written while the run goes gets its final status in place (:class:`TimeseriesWriter`)."""
+        names = list(self.columns)
+        return [self.status_line(running),
+                f"# flexmech {versions()['flexmech']}; case {self.case['case']['title']!r}; model {self.model}; "
+                f"dt {self.dt:.6g} s; {self.nsteps} steps",
+                "# units: " + ",".join(["s"] + [self.units[n] for n in names]),
+                ",".join(["t"] + names)]
+
+    def status_line(self, running: bool = False) -> str:
+        """timeseries.csv's first line, exactly STATUS_BYTES long in UTF-8 (message cut if longer;
+        summary.json holds it whole)."""
+        if running:
+            text = "# running: flexmech is writing this file; if no run is going on, it was killed"
+        elif self.failure and self.failure.get("cause") == "interrupted":
+            text = f"# partial: {self.failure.get('message', 'interrupted by the user')}"
+        elif self.failure:
+            text = (f"# partial: the run stopped at t = {self.failure['time_s']:.6g} s; frames up to t = "
+                    f"{self.all_stats().t_last:.6g} s only ({self.failure.get('message', '')})")
+        else:
+            text = f"# complete: {int(self.all_stats().frames)} frames"
+        raw = text.encode("utf-8")
+        if len(raw) > STATUS_BYTES:
+            raw = raw[:STATUS_BYTES - 24].decode("utf-8", "ignore").encode("utf-8") + b" ... (summary.json)"
+        return raw.ljust(STATUS_BYTES).decode("utf-8")
+
     def write(self, out_dir) -> list[Path]:
         """Write timeseries.csv and summary.json into out_dir (created); returns the paths."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        names = list(self.columns)
-        data = np.column_stack([self.t] + [self.columns[n] for n in names])
-        head = ([f"# partial: the run stopped at t = {self.failure['time_s']:.6g} s; frames up to t = {self.t[-1]:.6g} s "
-                 f"only ({self.failure.get('message', '')})"] if self.failure else [])
-        head += [f"# flexmech {versions()['flexmech']}; case {self.case['case']['title']!r}; model {self.model}; "
-                f"dt {self.dt:.6g} s; {self.nsteps} steps",
-                "# units: " + ",".join(["s"] + [self.units[n] for n in names]),
-                ",".join(["t"] + names)]
-        paths = []
         csv = out / "timeseries.csv"
-        _atomic_write(csv, "\n".join(head) + "\n" + "\n".join(",".join(f"{x:.10g}" for x in row) for row in data) + "\n")
-        paths.append(csv)
-        js = out / "summary.json"
+        _atomic_write(csv, "\n".join(self.csv_head()) + "\n" + csv_rows(self.t, self.columns))
+        return [csv, self.write_summary(out)]
+
+    def write_summary(self, out_dir) -> Path:
+        js = Path(out_dir) / "summary.json"
         _atomic_write(js, json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
-        paths.append(js)
-        return paths
+        return js
+
+
+#: bytes of timeseries.csv's first (status) line, padding included
+STATUS_BYTES = 240
+
+
+def csv_rows(t: np.ndarray, columns: dict) -> str:
+    """Rows of timeseries.csv (10 significant digits), each ending in a newline."""
+    data = np.column_stack([t] + list(columns.values()))
+    if data.shape[0] == 0:
+        return ""
+    fmt = ",".join(["%.10g"] * data.shape[1])
+    return "\n".join(fmt % tuple(row) for row in data.tolist()) + "\n"
+
+
+class TimeseriesWriter:
+    """timeseries.csv written block by block, so a run of any length keeps none of its frames: the
+    head and the rows go to ``timeseries.csv.part``, whose first line says the run is still going;
+    :meth:`finish` writes the run's final status over that line (same length) and renames the file
+    to ``timeseries.csv`` (no copy: the disk holds the rows once).  A run killed outright leaves
+    only the part file."""
+
+    def __init__(self, out_dir):
+        self.path = Path(out_dir) / "timeseries.csv"
+        self.part = self.path.with_name("timeseries.csv.part")
+        self._file = None
+        self.bytes = 0
+        self.rows = 0
+
+    def add(self, block) -> None:
+        if block.t.size == 0:
+            return
+        if self._file is None:
+            self._file = open(self.part, "wb")
+            self._write("\n".join(block.csv_head(running=True)) + "\n")
+        self._write(csv_rows(block.t, block.columns))
+        self.rows += block.t.size
+
+    def _write(self, text: str) -> None:
+        raw = text.encode("utf-8")
+        self._file.write(raw)
+        self.bytes += len(raw)
+
+    def finish(self, res) -> Path | None:
+        """timeseries.csv of the run ``res`` (its status line, then what was written); None when no
+        frame came."""
+        if self._file is None:
+            return None
+        self._file.seek(0)
+        self._file.write(res.status_line().encode("utf-8"))
+        self._file.close()
+        self._file = None
+        os.replace(self.part, self.path)
+        return self.path
+
+    def abandon(self) -> None:
+        """Close and remove the part file (a run that produced nothing worth keeping)."""
+        if self._file is not None:
+            self._file.close()
+            self.part.unlink(missing_ok=True)
+            self._file = None
 
 
 def _json_default(o):

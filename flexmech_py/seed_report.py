@@ -96,7 +96,6 @@ def _validity_facts(res) -> dict:
 def _summary(runs: dict, dvec: dict) -> list[str]:
     fb, man = runs["fourbar_hac"], runs["manipulator_bricout"]
     vf = _validity_facts(fb["hac"])
-    o = vf["overall"]
     d = model_differences(fb, ["strain_coupler_mid", "strain_follower_mid"])
     dm = model_differences(man, ["tip_dy_elastic"])
     L = ["## Summary", "",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import time
 
@@ -10,14 +11,15 @@ import numpy as np
 
 from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients
 from .errors import CaseError, MechanismError, SolverError
-from . import coupled, guards
+from . import guards
 from . import coupled_outputs as cpl_out
 from .coupled import CoupledModel
 from .mechanism import MotionSource, prepare_motion
-from .mechanism.motion import LinkMotion, RigidMotion
+from .mechanism.motion import RigidMotion
 from .model import FEModel
 from .outputs import evaluate_outputs, link_curvature, output_unit
 from .reactions import ModelReactions
+from .frames import continue_angles, select_frames
 from .results import Result
 
 __all__ = ["simulate", "simulate_models", "Prepared", "motion_source", "rigid_motion", "time_grid", "RigidMotion"]
@@ -123,13 +125,24 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray, dof: int | None = None)
                                   "(crank_pivot/base = 'clamp') or lock a joint")
 
 
-class Prepared:
-    """A case made ready to run: FE model, time grid and rigid motion (shared by every model).
+#: floats of frame data one chunk may hold (about 32 MB): bounds a chunk's frames on fine meshes
+FRAME_BUDGET = 4_000_000
+#: steps of a run's first chunk; every next chunk has twice the steps of the last, up to chunk_steps
+FIRST_CHUNK_STEPS = 256
 
-    The superposition models run in chunks of ``chunk_steps`` steps (rounded up to a multiple of the
-    output decimation): the rigid motion is sampled and the kernel called per chunk, continuing from
-    the last state, so memory is O(frames), not O(steps).  ``rm``, ``rig``, ``q_free`` and ``q_val``
-    (the rigid motion on the whole grid) are computed when first used (the coupled models use them)."""
+
+class Prepared:
+    """A case made ready to run: time grid, rigid-motion source and, on first use, FE model.
+
+    A run goes chunk by chunk (:meth:`blocks`): per chunk the rigid motion is sampled, the Fortran
+    loop continues from the state the last chunk left and the frames are evaluated into a *block*
+    (a Result over those frames), so a run of any length holds one chunk at a time.  The first chunk
+    has FIRST_CHUNK_STEPS steps and each next one twice the last, up to CHUNK_STEPS (rounded up to a
+    multiple of the output decimation; at most FRAME_BUDGET floats of frames); a ``chunk_steps``
+    given fixes every chunk at that size.  The results do not depend on the chunking.  :meth:`run` keeps every frame (a Result in memory), :meth:`stream`
+    writes them to files as they come (:mod:`flexmech_py.runner`).  ``rm``, ``rig``, ``q_free`` and
+    ``q_val`` (the rigid motion on the whole grid) and ``rm_frames`` (at the output frames) are
+    computed when first used, for the studies that need them."""
 
     CHUNK_STEPS = 10_000
 
@@ -144,36 +157,23 @@ class Prepared:
         self._t = None
         chunk = self.CHUNK_STEPS if chunk_steps is None else int(chunk_steps)
         self.chunk_steps = self.out_every * max(1, math.ceil(chunk / self.out_every))
+        self.first_chunk_steps = FIRST_CHUNK_STEPS if chunk_steps is None else self.chunk_steps
         self._fe = None
-        t0, c0 = time.perf_counter(), time.thread_time()
         self.source = motion_source(case)
         self.setup = self.source.setup
-        self.rigid_failure = None
-        try:
-            self.rm_frames = self.source(self.times(0, self.nsteps, self.out_every))   # the motion at the output frames
-        except MechanismError as exc:
-            self._stop_at(exc)
-        self.t_rigid, self.t_rigid_cpu = time.perf_counter() - t0, time.thread_time() - c0
         self.gravity = case["loads"]["gravity"]
         self._checked = False
         self._full = None
         self._rm = None
+        self._rm_frames = None
         self.coupled = {}
+        self.last_cpu = {}
         self.t_prepare = time.perf_counter() - t_start
 
-    def _stop_at(self, exc: MechanismError) -> None:
-        """The rigid motion reached a singular position or an assembly limit: keep the grid up to the last
-        output frame before it (every model runs that far and its result is marked partial), or re-raise
-        when not even two frames are left."""
-        frames = exc.partial
-        if frames is None or frames.t.size < 2:
-            exc.partial = None
-            raise exc
-        n_new = (frames.t.size - 1) * self.out_every
-        t_new = float(self.times(n_new, n_new)[0])
-        self.case = Case(self.case, solver=dict(self.case["solver"], t_end=t_new))
-        self.nsteps, self.rm_frames, self.rigid_failure = n_new, frames, exc
-        exc.partial = None
+    @property
+    def frames(self) -> int:
+        """Number of output frames of a run that completes."""
+        return self.nsteps // self.out_every + 1
 
     def times(self, i0: int, i1: int, every: int = 1) -> np.ndarray:
         """Step times t_i = i t_end/N [s] for i = i0, i0 + every, ..., i1 (bit-equal to
@@ -220,6 +220,13 @@ class Prepared:
         return self._rm
 
     @property
+    def rm_frames(self) -> RigidMotion:
+        """Rigid motion at the output frames (computed on first use)."""
+        if self._rm_frames is None:
+            self._rm_frames = self.source(self.times(0, self.nsteps, self.out_every))
+        return self._rm_frames
+
+    @property
     def rig(self) -> np.ndarray:
         """Kernel samples (5, nlinks, nsteps+1) on the whole grid (computed on first use)."""
         return self._full_grid()[1]
@@ -239,70 +246,258 @@ class Prepared:
     def q_val(self):
         return self._full_grid()[3]
 
-    def _chunk(self, i0: int, i1: int):
-        """(rig, q_free, q_val) of steps i0..i1 (grid samples i0..i1 inclusive)."""
-        if self._full is not None or (i0 == 0 and i1 == self.nsteps):
-            _, rig, qf, qv = self._full_grid()
-            if qv is not None:
-                qv = np.asfortranarray(qv[:, i0:i1 + 1])
-            return np.asfortranarray(rig[:, :, i0:i1 + 1]), qf, qv
-        rm = self.source(self.times(i0, i1))
-        rig = self.fe.rig_samples(rm, self.gravity)
-        return (rig,) + elastic_torque_loads(self.case, self.fe, rm, rig)
-
     def coarsened(self):
-        """This case on every second step of its grid (the same rigid solution), for the step-doubling
-        error estimate: output frames on this run's frames (every frame when out_every is even, every
-        second one when it is odd; the grid then ends at the last frame both share).  None when the
-        coarse grid would have fewer than two frames."""
-        oe, n = self.out_every, self.nsteps
-        if oe % 2 == 0:
-            oc, nc = oe // 2, n // 2
-        else:
-            oc, nc = oe, oe * (n // (2 * oe))
+        """This case on every second step of its grid (the same rigid solution, followed by a source of
+        its own), for the step-doubling error estimate: output frames on this run's frames (every frame
+        when out_every is even, every second one when it is odd; the grid then ends at the last frame
+        both share).  None when the coarse grid would have fewer than two frames."""
+        nc, oc = guards.coarse_grid(self.nsteps, self.out_every)
         if nc < oc or nc < 1:
             return None
         pc = copy.copy(self)
-        if 2 * nc != n:   # the grid ends earlier: at the fine grid's step 2 nc
+        if 2 * nc != self.nsteps:   # the grid ends earlier: at the fine grid's step 2 nc
             pc.case = Case(self.case, solver=dict(self.case["solver"], t_end=float(self.times(2 * nc, 2 * nc)[0])))
         pc.nsteps, pc.dt, pc.out_every = nc, 2.0 * self.dt, oc
         pc.chunk_steps = oc * max(1, math.ceil(self.chunk_steps / 2 / oc))
-        pc._t, pc._full, pc._rm = None, None, None
-        if oe % 2 == 0:
-            pc.rm_frames = self.rm_frames
-        else:
-            sel = slice(0, 2 * (nc // oc) + 1, 2)   # coarse frame k is fine frame 2 k
-            pc.rm_frames = self.rm_frames.select(sel)
+        pc._t, pc._full, pc._rm, pc._rm_frames = None, None, None, None
+        pc.source = self.source.fork()
+        pc.coupled = {}
         return pc
 
+    # ------------------------------------------------------------------ runs
     def run(self, model: str | None = None, geometric: str | None = None, *, estimate: bool | None = None,
             diagnose: bool = True, u0=None, v0=None) -> Result:
-        """Integrate the elastic equations with one model (``geometric`` overrides
+        """Integrate the elastic equations with one model and keep every frame (``geometric`` overrides
         ``solver.geometric_stiffness`` for a superposition model; ``u0``, ``v0`` (nfree,) an
         initial elastic state other than rest, superposition models only).
 
         Every run gets the validity report and warnings (:mod:`flexmech_py.guards`);
         ``estimate`` (default: ``solver.error_estimate != "none"``) adds the step-doubling error
-        estimate (one more run at 2 dt).  A failed run raises SolverError carrying the partial
-        result and, with ``diagnose``, the likely cause (which may cost a short run at dt/2)."""
+        estimate (the run at 2 dt, made alongside).  A failed run raises SolverError carrying the partial
+        result and, with ``diagnose``, the likely cause (which may cost a short run at dt/2); a run
+        whose rigid motion reaches a singular position raises MechanismError carrying the frames before
+        it.  A run whose frames would not fit in memory is refused (CaseError naming
+        ``solver.output_every``): :meth:`stream` writes any length to files."""
+        from .runner import MemorySink, execute
+
+        return execute(self, model, MemorySink(self.frames), geometric=geometric, estimate=estimate,
+                       diagnose=diagnose, u0=u0, v0=v0)
+
+    def stream(self, out_dir, model: str | None = None, geometric: str | None = None, *,
+               estimate: bool | None = None, diagnose: bool = True, progress=None, force: bool = False) -> Result:
+        """Run one model writing its frames to ``out_dir``/timeseries.csv as they come and its summary to
+        summary.json (memory does not grow with the run's length).  Returns a Result holding the last
+        block's frames, the statistics of all (``stats``) and the frames to draw (``plot_view()``);
+        failures raise as in :meth:`run`, after the files are written (marked partial); Ctrl-C raises
+        :class:`~flexmech_py.errors.Interrupted` after writing the frames so far.  A run whose CSV
+        would not fit on the disk is refused (CaseError) unless ``force``.  ``progress``: called as
+        progress(done, total) [steps] after every block."""
+        from .runner import FileSink, execute
+
+        sink = FileSink(out_dir, frames_total=self.frames, force=force)
+        return execute(self, model, sink, geometric=geometric, estimate=estimate, diagnose=diagnose,
+                       progress=progress)
+
+    def blocks(self, model: str | None = None, geometric: str | None = None, *, u0=None, v0=None):
+        """The run of one model as blocks of frames: Results over consecutive frames, the first from
+        t = 0, each with its frames' ``steps`` and the run-level entries (timing, ``extra``) accumulated
+        so far.  A failed step raises SolverError whose ``partial`` is the block of the frames before it
+        (maybe none) and ``data`` the state; a rigid motion that stops raises MechanismError after the
+        block that ends at the last output frame before the singular position."""
         model = self.case["solver"]["model"] if model is None else model
         if model not in MODELS:
             raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
+        if model in ("coupled", "nonlinear"):
+            if u0 is not None or v0 is not None:
+                raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
+            return self._coupled_blocks(model)
+        return self._superposition_blocks(model, geometric, u0, v0)
+
+    def _chunks(self, floats_per_frame: int, clock: dict):
+        """(i0, i1, rm): step ranges [i0, i1] (at multiples of out_every) and their rigid motion.  When the
+        rigid motion stops inside a chunk, the chunk ends at the last output frame before it and the
+        MechanismError follows it (at once when not even the chunk's first frame can be kept after
+        its start)."""
+        oe = self.out_every
+        cap = min(self.chunk_steps, oe * max(1, FRAME_BUDGET // max(1, floats_per_frame)))
+        size = min(cap, oe * max(1, self.first_chunk_steps // oe))
+        i0 = 0
+        while i0 < self.nsteps:
+            i1 = min(i0 + size, self.nsteps)
+            t0, c0 = time.perf_counter(), time.thread_time()
+            rm, stop = self._rigid_chunk(i0, i1)
+            clock["rigid_s"] += time.perf_counter() - t0
+            clock["rigid_cpu_s"] += time.thread_time() - c0
+            if stop is not None:
+                i1 = i0 + oe * ((rm.t.size - 1) // oe)
+                stop.partial = None
+                if i1 == i0:
+                    raise stop
+                rm = rm.select(slice(0, i1 - i0 + 1))
+            yield i0, i1, rm
+            if stop is not None:
+                raise stop
+            i0, size = i1, min(2 * size, cap)
+
+    def _rigid_chunk(self, i0: int, i1: int):
+        """(rm, None) the rigid motion of steps i0..i1, or (rm up to the stop, MechanismError)."""
+        if self._full is not None:
+            return self._full[0].select(slice(i0, i1 + 1)), None
         try:
-            res = self._run_raw(model, geometric, u0=u0, v0=v0)
-        except SolverError as exc:
-            if exc.partial is None:
+            return self.source(self.times(i0, i1)), None
+        except MechanismError as exc:
+            if exc.partial is None or exc.partial.t.size == 0:
                 raise
-            guards.check_validity(exc.partial)
-            raise guards.failed(self, model, geometric, exc, diagnose=diagnose) from None
-        guards.check_validity(res)
-        self._report_mechanism(res)
-        if estimate is None:
-            estimate = self.case["solver"].get("error_estimate", "time") != "none"
-        res.extra["error_estimate"] = guards.error_estimate(self, res, geometric) if estimate else {"method": "none"}
-        if self.rigid_failure is not None:
-            raise guards.rigid_failure(res, self.rigid_failure)
-        return res
+            return exc.partial, exc
+
+    def _loads(self, i0: int, i1: int, rm: RigidMotion):
+        """(rig, q_free, q_val) of steps i0..i1: kernel samples and the force drives' elastic loads."""
+        if self._full is not None:
+            _, rig, qf, qv = self._full
+            if qv is not None:
+                qv = np.asfortranarray(qv[:, i0:i1 + 1])
+            return np.asfortranarray(rig[:, :, i0:i1 + 1]), qf, qv
+        rig = self.fe.rig_samples(rm, self.gravity)
+        return (rig,) + elastic_torque_loads(self.case, self.fe, rm, rig)
+
+    def _superposition_blocks(self, model: str, geometric: str | None, u0, v0):
+        fe, oe = self.fe, self.out_every
+        sol = dict(self.case["solver"])
+        if geometric is not None:
+            sol["geometric_stiffness"] = geometric
+        am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
+        acc = _Accumulated()
+        state, prev = {"u0": u0, "v0": v0}, None
+        for i0, i1, rm in self._chunks(3 * fe.nfree + 4 * fe.ndof + fe.nel, acc.clock):
+            ts, cs = time.perf_counter(), time.thread_time()
+            rig, q_free, q_val = self._loads(i0, i1, rm)
+            if not self._checked:
+                check_elastic_problem(fe, rig[:, :, :1], self.setup.dof)
+                self._checked = True
+            acc.add_time("samples", ts, cs)
+            t0, c0 = time.perf_counter(), time.thread_time()
+            try:
+                out = fe.run(rig, model, self.dt, alpha_m=am, alpha_f=af_, beta=beta, gamma=gamma, out_every=oe,
+                             rayleigh=sol["rayleigh"], q_free=q_free, q_val=q_val, t0=i0 * self.dt,
+                             geometric=sol["geometric_stiffness"], geo_tol=sol["geometric_tol"],
+                             geo_maxit=sol["geometric_maxit"], div_limit=sol.get("divergence_limit"), full=True, **state)
+            except SolverError as exc:   # keep the frames before the failed step
+                acc.add_time("kernel", t0, c0)
+                if exc.data is None or exc.step is None or exc.step < 1:
+                    raise
+                k, d = guards.frames_before(exc.step, oe), exc.data
+                acc.geo_iters += int(d["geo_iters"])
+                exc.partial = self._superposition_block(model, sol, rm, i0, [d[n][:, :k] for n in ("uf", "vf", "af", "nf")],
+                                                        prev, acc, i0 + exc.step)
+                exc.step += i0                  # the chunk's step -> the run's step (exc.time is already global)
+                exc.data = dict(d, cm=None, geometric=sol["geometric_stiffness"])
+                raise
+            acc.add_time("kernel", t0, c0)
+            acc.geo_iters += int(out[4])
+            block = self._superposition_block(model, sol, rm, i0, out[:4], prev, acc, i1)
+            lr = fe.last_run                    # the state at step i1: the next chunk continues from it
+            state = {"u0": lr["u"], "v0": lr["v"], "a0": lr["a"], "p0": lr["p"]}
+            prev = _last_values(block, prev)
+            self.last_cpu = acc.cpu()
+            yield block
+
+    def _superposition_block(self, model: str, sol: dict, rm: RigidMotion, i0: int, frames, prev, acc, steps_done):
+        """The block of a chunk's frames (uf, vf, af, nf over the free DOFs; frame 0 at step i0, the
+        previous block's last frame when i0 > 0, evaluated again for the continuity of angles and dropped)."""
+        fe, case, oe = self.fe, self.case, self.out_every
+        uf, vf, af, nf = frames
+        sel = slice(0, oe * (uf.shape[1] - 1) + 1, oe)
+        rmf = rm.select(sel)
+        motion_f = rmf.motion
+        rig_f = fe.rig_samples(rm, self.gravity, sel)
+        u_all, v_all, a_all = fe.expand_state(uf, vf, af, rig_f)
+        if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
+            nf = np.array([[fe.el_prop[3, e] / fe.el_prop[0, e]] for e in range(fe.nel)]) * _axial_stretch(fe, u_all, motion_f)
+        reactions = ModelReactions(fe, model, rmf, rig_f, (u_all, v_all, a_all), sol, nf)
+        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rmf, axial=nf,
+                                   rates=(v_all, a_all), reactions=reactions)
+        extra = {"integrator": integrator_summary(sol)}
+        if sol["geometric_stiffness"] != "none":
+            extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": acc.geo_iters,
+                                            "mean_per_step": acc.geo_iters / max(steps_done, 1)}
+        if reactions.checked:
+            acc.reaction_residual = max(acc.reaction_residual, reactions.residual)
+            extra["reactions"] = dict(reactions.summary(), equilibrium_residual=acc.reaction_residual)
+        res = Result(case=case, model=model, t=rmf.t, columns=columns,
+                     units={name: output_unit(sp, case) for name, sp in case["outputs"].items()}, fe=fe,
+                     q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_all, v=v_all, a=a_all, rig=rig_f, nsteps=self.nsteps,
+                     dt=self.dt, timing=acc.timing(), extra=extra, axial=nf, motion=motion_f, rigid=rmf,
+                     steps=i0 + oe * np.arange(uf.shape[1]), curvature_of=_superposition_curvature,
+                     reactions=reactions)
+        return _after(res, prev)
+
+    def _coupled_blocks(self, model: str):
+        """The one-pass coupled model (one chord frame per flexible link) or the nonlinear co-rotational
+        model (one per element); the rigid-body solution on the grid is their reference."""
+        case, sol, oe = self.case, self.case["solver"], self.out_every
+        if model not in self.coupled:
+            self.coupled[model] = CoupledModel.from_case(case, split=(model == "nonlinear"))
+        cm = self.coupled[model]
+        am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
+        acc, diag = _Accumulated(), cpl_out.Diagnostics(cm)
+        state, prev, first = None, None, None
+        for i0, i1, rm in self._chunks(6 * cm.ndof + 3 * len(cm.markers), acc.clock):
+            first = rm.select(slice(0, 1)) if first is None else first
+            cval = cm.constraint_values(rm, first)
+            q0, v0 = cm.initial_state(rm.select(slice(0, 1))) if state is None else (None, None)
+            t0, c0 = time.perf_counter(), time.thread_time()
+            try:
+                qf, vf, af, lf, ef, iters = cm.run(q0, v0, rm.t, cval, self.dt, alpha_m=am, alpha_f=af_, beta=beta,
+                                                   gamma=gamma, out_every=oe, tol=sol["newton_tol"],
+                                                   maxit=sol["newton_maxit"], gravity=self.gravity,
+                                                   rayleigh=sol["rayleigh"], div_limit=sol.get("divergence_limit"),
+                                                   state=state)
+            except SolverError as exc:   # keep the frames before the failed step
+                acc.add_time("kernel", t0, c0)
+                if exc.data is None or exc.step is None or exc.step < 1:
+                    raise
+                k, d = guards.frames_before(exc.step, oe), exc.data
+                frames = [d[n][:, :k] for n in ("qf", "vf", "af", "lf", "ef")]
+                exc.partial = self._coupled_block(cm, model, rm, cval, i0, frames, d["iters"], prev, diag, acc,
+                                                  i0 + exc.step)
+                exc.data = dict(d, cm=cm, geometric="coupled", q_last=frames[0][:, -1])
+                exc.step += i0
+                raise
+            acc.add_time("kernel", t0, c0)
+            block = self._coupled_block(cm, model, rm, cval, i0, (qf, vf, af, lf, ef), iters, prev, diag, acc, i1)
+            state, prev = cm.last_run, _last_values(block, prev)
+            self.last_cpu = acc.cpu()
+            yield block
+
+    def _coupled_block(self, cm, model: str, rm: RigidMotion, cval, i0: int, frames, iters: int, prev, diag, acc,
+                       steps_done: int):
+        """The block of a chunk's frames of the coupled or nonlinear model (frame 0 as in
+        :meth:`_superposition_block`)."""
+        case, sol, oe = self.case, self.case["solver"], self.out_every
+        qf, vf, af, lf, ef = frames
+        idx = slice(0, oe * (qf.shape[1] - 1) + 1, oe)
+        rmf = rm.select(idx)
+        ref = rmf.motion
+        fr = cpl_out.model_frames(cm, qf, vf, af, lf, rmf.t, self.gravity, sol["rayleigh"])
+        u_dev = cpl_out.deviation(cm, qf, ref)
+        axial = cpl_out.axial_forces(cm, qf)
+        columns = cpl_out.evaluate(cm, case["outputs"], fr, rmf, ref, u_dev, axial, superposition_fe=lambda: self.fe)
+        units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
+        for k, y in {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}.items():
+            columns[k], units[k] = y, "J"
+        columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
+        columns.update(_drive_columns(cm, fr, units))
+        diag.add(fr, ef, rmf, iters, cval[:, :, idx])
+        extra = {"integrator": integrator_summary(sol), "coupled": diag.summary(steps_done)}
+        rig_chord = np.asfortranarray(np.stack([fr.chord.phi, fr.chord.omega, fr.chord.alpha,
+                                                fr.chord.ax - self.gravity[0],
+                                                fr.chord.ay - self.gravity[1]]).transpose(0, 2, 1))
+        res = Result(case=case, model=model, t=rmf.t, columns=columns, units=units, fe=cm.mesh,
+                     q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_dev, v=np.zeros_like(u_dev), a=np.zeros_like(u_dev),
+                     rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=acc.timing(), extra=extra, axial=axial,
+                     motion=ref, rigid=rmf, steps=i0 + oe * np.arange(qf.shape[1]), state=qf,
+                     curvature_of=functools.partial(_coupled_curvature, cm))
+        return _after(res, prev)
 
     def _report_mechanism(self, res: Result) -> None:
         """summary.json's ``mechanism`` entry (degrees of freedom, mode, the joints of q, how far the
@@ -318,140 +513,51 @@ class Prepared:
                                   "rigid_steps": self.source.stats.get("steps", 0)}
         res.extra["warnings"] = list(st.warnings) + list(res.extra.get("warnings", []))
 
-    def _run_raw(self, model: str, geometric: str | None, u0=None, v0=None) -> Result:
-        t_start = time.perf_counter()
-        if model in ("coupled", "nonlinear"):
-            if u0 is not None or v0 is not None:
-                raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
-            return self._run_coupled(t_start, model)
-        case, fe = self.case, self.fe
-        if not self._checked:
-            check_elastic_problem(fe, fe.rig_samples(self.rm_frames, self.gravity, slice(0, 1)), self.setup.dof)
-            self._checked = True
-        sol = dict(case["solver"])
-        if geometric is not None:
-            sol["geometric_stiffness"] = geometric
-        am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
-        oe, nfr = self.out_every, self.nsteps // self.out_every + 1
-        uf, vf, af = (np.empty((fe.nfree, nfr), order="F") for _ in range(3))
-        nf, geo_iters = np.zeros((fe.nel, nfr), order="F"), 0
-        u, v, a, p = u0, v0, None, None
-        t_kernel = t_samples = c_kernel = 0.0
-        failure, nvalid = None, nfr
-        for i0 in range(0, self.nsteps, self.chunk_steps):
-            i1 = min(i0 + self.chunk_steps, self.nsteps)
-            ts = time.perf_counter()
-            rig, q_free, q_val = self._chunk(i0, i1)
-            t0, c0 = time.perf_counter(), time.thread_time()
-            f0 = i0 // oe                       # a chunk's first frame is the previous chunk's last
-            try:
-                out = fe.run(rig, model, self.dt, alpha_m=am, alpha_f=af_, beta=beta, gamma=gamma, out_every=oe,
-                             rayleigh=sol["rayleigh"], q_free=q_free, q_val=q_val, u0=u, v0=v, a0=a, p0=p,
-                             t0=i0 * self.dt, geometric=sol["geometric_stiffness"], geo_tol=sol["geometric_tol"],
-                             geo_maxit=sol["geometric_maxit"], div_limit=sol.get("divergence_limit"), full=True)
-            except SolverError as exc:   # keep the frames before the failed step
-                if exc.data is None or exc.step is None or exc.step < 1:
-                    raise
-                k = guards.frames_before(exc.step, oe)
-                for arr, name in ((uf, "uf"), (vf, "vf"), (af, "af"), (nf, "nf")):
-                    arr[:, f0:f0 + k] = exc.data[name][:, :k]
-                geo_iters += int(exc.data["geo_iters"])
-                exc.step += i0                  # the chunk's step -> the run's step (exc.time is already global)
-                failure, nvalid = exc, f0 + k
-                break
-            finally:
-                t_kernel += time.perf_counter() - t0
-                c_kernel += time.thread_time() - c0
-                t_samples += t0 - ts
-            f = slice(f0, i1 // oe + 1)
-            uf[:, f], vf[:, f], af[:, f], nf[:, f] = out[:4]
-            geo_iters += int(out[4])
-            lr = fe.last_run                    # the state at step i1: continue from it
-            u, v, a, p = lr["u"], lr["v"], lr["a"], lr["p"]
-        if nvalid < nfr:
-            uf, vf, af, nf = uf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid], nf[:, :nvalid]
-        sel = slice(0, nvalid)
-        rmf = self.rm_frames
-        motion_f = rmf.motion.select(sel)
-        rig_f = fe.rig_samples(rmf, self.gravity, sel)
-        u_all, v_all, a_all = fe.expand_state(uf, vf, af, rig_f)
-        if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
-            nf = np.array([[fe.el_prop[3, e] / fe.el_prop[0, e]] for e in range(fe.nel)]) * _axial_stretch(fe, u_all, motion_f)
-        rm_f = rmf.select(sel)
-        reactions = ModelReactions(fe, model, rm_f, rig_f, (u_all, v_all, a_all), sol, nf)
-        columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rm_f, axial=nf,
-                                   rates=(v_all, a_all), reactions=reactions)
-        units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
-        self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": t_samples}
-        timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
-                  "total_s": self.t_prepare + time.perf_counter() - t_start}
-        extra = {"integrator": integrator_summary(sol), "validity": coupled.validity(fe, nf, u_all)}
-        if sol["geometric_stiffness"] != "none":
-            extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": int(geo_iters),
-                                            "mean_per_step": geo_iters / self.nsteps}
-        if reactions.checked:
-            extra["reactions"] = reactions.summary()
-        res = Result(case=case, model=model, t=rmf.t[sel], columns=columns, units=units, fe=fe,
-                     q=rmf.q[sel], qd=rmf.qd[sel], qdd=rmf.qdd[sel], u=u_all, v=v_all,
-                     a=a_all, rig=rig_f, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
-                     axial=nf, motion=motion_f)
-        res.reactions = reactions
-        res.curvature = lambda li, frac: link_curvature(fe, u_all, motion_f.phi[:, li], li, frac)
-        return guards.partial_or(res, failure, sol["geometric_stiffness"])
+
+class _Accumulated:
+    """What a run's blocks carry accumulated: wall and CPU time of the rigid motion, the kernel's
+    samples and the kernel, geometric-stiffness iterations, the largest reaction residual."""
+
+    def __init__(self):
+        self.clock = dict.fromkeys(("rigid_s", "rigid_cpu_s", "samples_s", "samples_cpu_s", "kernel_s",
+                                    "kernel_cpu_s"), 0.0)
+        self.geo_iters = 0
+        self.reaction_residual = 0.0
+
+    def add_time(self, what: str, t0: float, c0: float) -> None:
+        self.clock[f"{what}_s"] += time.perf_counter() - t0
+        self.clock[f"{what}_cpu_s"] += time.thread_time() - c0
+
+    def timing(self) -> dict:
+        return {"rigid_s": self.clock["rigid_s"], "kernel_s": self.clock["kernel_s"]}
+
+    def cpu(self) -> dict:
+        return {"rigid_cpu_s": self.clock["rigid_cpu_s"], "kernel_cpu_s": self.clock["kernel_cpu_s"],
+                "rigid_samples_s": self.clock["samples_s"]}
 
 
-    def _run_coupled(self, t_start: float, model: str) -> Result:
-        """The one-pass coupled model (one chord frame per flexible link) or the nonlinear co-rotational
-        model (one per element); the rigid-body solution on the grid is their reference."""
-        case, sol = self.case, self.case["solver"]
-        if model not in self.coupled:
-            self.coupled[model] = CoupledModel.from_case(case, split=(model == "nonlinear"))
-        cm = self.coupled[model]
-        q0, v0 = cm.initial_state(self.rm.select(slice(0, 1)))
-        cval = cm.constraint_values(self.rm)
-        am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
-        t0, c0 = time.perf_counter(), time.thread_time()
-        failure = None
-        try:
-            qf, vf, af, lf, ef, iters = cm.run(q0, v0, self.t, cval, self.dt, alpha_m=am, alpha_f=af_, beta=beta,
-                                               gamma=gamma, out_every=self.out_every, tol=sol["newton_tol"],
-                                               maxit=sol["newton_maxit"], gravity=self.gravity, rayleigh=sol["rayleigh"],
-                                               div_limit=sol.get("divergence_limit"))
-        except SolverError as exc:   # keep the frames before the failed step
-            if exc.data is None or exc.step is None or exc.step < 1:
-                raise
-            failure, k = exc, guards.frames_before(exc.step, self.out_every)
-            qf, vf, af, lf, ef = (exc.data[n][:, :k] for n in ("qf", "vf", "af", "lf", "ef"))
-            iters = exc.data["iters"]
-        t_kernel, c_kernel = time.perf_counter() - t0, time.thread_time() - c0
-        idx = slice(0, self.out_every * (qf.shape[1] - 1) + 1, self.out_every)
-        rmf = self.rm.select(idx)
-        ref = rmf.motion
-        fr = cpl_out.model_frames(cm, qf, vf, af, lf, self.t[idx], self.gravity, sol["rayleigh"])
-        u_dev = cpl_out.deviation(cm, qf, ref)
-        axial = cpl_out.axial_forces(cm, qf)
-        columns = cpl_out.evaluate(cm, case["outputs"], fr, rmf, ref, u_dev, axial, superposition_fe=lambda: self.fe)
-        units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
-        energy = {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}
-        for k, y in energy.items():
-            columns[k], units[k] = y, "J"
-        columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
-        columns.update(_drive_columns(cm, fr, units))
-        self.last_cpu = {"rigid_cpu_s": self.t_rigid_cpu, "kernel_cpu_s": c_kernel, "rigid_samples_s": 0.0}
-        timing = {"rigid_s": self.t_rigid, "kernel_s": t_kernel,
-                  "total_s": self.t_prepare + time.perf_counter() - t_start}
-        extra = {"integrator": integrator_summary(sol),
-                 "coupled": cpl_out.diagnostics(cm, fr, ef, rmf, iters, self.nsteps, cval[:, :, idx]),
-                 "validity": coupled.validity(cm.mesh, axial, u_dev)}
-        rig_chord = np.asfortranarray(np.stack([fr.chord.phi, fr.chord.omega, fr.chord.alpha,
-                                                fr.chord.ax - self.gravity[0],
-                                                fr.chord.ay - self.gravity[1]]).transpose(0, 2, 1))
-        res = Result(case=case, model=model, t=self.t[idx], columns=columns, units=units, fe=cm.mesh,
-                     q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_dev, v=np.zeros_like(u_dev),
-                     a=np.zeros_like(u_dev), rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=timing, extra=extra,
-                     axial=axial, motion=ref)
-        res.curvature = lambda li, frac: cpl_out.curvature(cm, qf, li, frac)
-        return guards.partial_or(res, failure, "coupled", cm=cm)
+def _last_values(block: Result, prev: dict | None) -> dict | None:
+    """The last frame's value of every column (what the next block continues from)."""
+    if block.t.size == 0:
+        return prev
+    return {k: float(y[-1]) for k, y in block.columns.items()}
+
+
+def _after(res: Result, prev: dict | None) -> Result:
+    """A chunk's block without its first frame when a block came before (that frame is the previous
+    block's last, evaluated again: angle columns continue from it)."""
+    if prev is None:
+        return res
+    continue_angles(res.columns, prev)
+    return select_frames(res, slice(1, None))
+
+
+def _superposition_curvature(res: Result, li: int, frac: float) -> np.ndarray:
+    return link_curvature(res.fe, res.u, res.motion.phi[:, li], li, frac)
+
+
+def _coupled_curvature(cm, res: Result, li: int, frac: float) -> np.ndarray:
+    return cpl_out.curvature(cm, res.state, li, frac)
 
 
 def _drive_columns(cm, fr, units: dict) -> dict:

@@ -37,7 +37,7 @@ has none of this (the seed cases keep their path bit for bit).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -930,25 +930,31 @@ contains
   !> g_i(q) = cval(1, i, k) at step k (angles wrapped to the principal value), enforced at the position
   !> level with Lagrange multipliers lam (the constraint forces: the residual holds G^T lam).
   !> t0: time of the first step [s] (the force laws depend on time); nsteps = size(cval, 3) - 1.
-  !> a is the true acceleration (made consistent with the equations and constraints at the start),
-  !> p the pseudo-acceleration (init_pseudo /= 0: p = a at the start, a fresh run; else p as given,
-  !> continuing a run).  On return (q, v, a, p) is the last state reached.
+  !> start selects how the run begins:
+  !>   1  a fresh run: a (true acceleration) and the multipliers made consistent with the equations and
+  !>      constraints at t0, p (pseudo-acceleration) = a, no work done yet;
+  !>   0  as 1 but p as given;
+  !>   2  the continuation of a run (docs/theory.md section 11.7): q, v, a, p and carry as a run left
+  !>      them, so the steps are the ones an uninterrupted run takes.
+  !> carry(nc1 + 2) = [multipliers (nc1), Newton length scale lref [m], work of the inputs [J]]: read
+  !> when start = 2, on return the state reached (like q, v, a, p).
   !> Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes), lf (nc, nframes) multipliers,
   !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the inputs (force drives and
   !> moving constraint rows), max Newton iterations since the last frame]; nvalid frames are valid.
   !> Divergence guard: coupled_elastic_measure > div_limit [m] after a step stops the run with
   !> STATUS_DIVERGED (fail_step = that step).
   subroutine coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
-                         init_pseudo, div_limit, seg_link, q, v, a, p, qf, vf, af, lf, ef, status, fail_step, &
+                         start, div_limit, seg_link, q, v, a, p, carry, qf, vf, af, lf, ef, status, fail_step, &
                          iters, nvalid)
     type(coupled_system), intent(in) :: sys
     real(dp), intent(in) :: cval(:, :, :)        !< (3, >= nc, nsteps+1) [value, rate, acceleration] of the rows
     real(dp), intent(in) :: t0, dt, tol
     real(dp), intent(in) :: alpha_m, alpha_f, beta, gamma   !< generalized-alpha parameters
-    integer, intent(in) :: out_every, maxit, init_pseudo
+    integer, intent(in) :: out_every, maxit, start
     real(dp), intent(in) :: div_limit              !< divergence limit [m]
     integer, intent(in) :: seg_link(:)             !< (nseg) link of each segment
     real(dp), intent(inout) :: q(:), v(:), a(:), p(:)
+    real(dp), intent(inout) :: carry(:)            !< (nc1 + 2) [multipliers, lref [m], work [J]]
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
@@ -966,7 +972,8 @@ contains
     if (out_every < 1 .or. dt <= 0.0_dp .or. nsteps < 0 .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
         size(cval, 2) < nc .or. size(lf, 1) < nc .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
         alpha_m >= 1.0_dp .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. &
-        size(seg_link) /= sys%nseg .or. size(p) /= sys%ndof) then
+        size(seg_link) /= sys%nseg .or. size(p) /= sys%ndof .or. size(carry) < max(1, nc) + 2 .or. &
+        start < 0 .or. start > 2) then
       status = STATUS_BAD_INPUT
       return
     end if
@@ -979,6 +986,7 @@ contains
     ! length scale of the mechanism [m] (largest nodal coordinate at the start): the absolute floor of
     ! the Newton test, for steps where the accelerations themselves vanish (a smooth start from rest)
     lref = max(maxval(abs(q)), tiny(1.0_dp))
+    if (start == 2) lref = carry(size(carry) - 1)
     gammap = gamma*(1.0_dp - alpha_f)*c1
     call lm_setup(sys, nc, lm)
     use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
@@ -999,17 +1007,25 @@ contains
       if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
     end do
     call gradient_pattern()
-    call initial_acceleration()
-    if (status /= STATUS_OK) return
-    if (init_pseudo /= 0) p = a
-    work = 0.0_dp
+    if (start == 2) then
+      lam = 0.0_dp
+      lam(1:nc) = carry(1:nc)
+      work = carry(size(carry))
+      call assemble(sys, q, v, a, t0, .false., 0.0_dp, 0.0_dp, res, lm, energy)
+    else
+      call initial_acceleration()
+      if (status /= STATUS_OK) return
+      if (start == 1) p = a
+      work = 0.0_dp
+    end if
     call drive_state(t0, th0, tau0)
     call row_values(g0)
     lam0 = lam
     frame = 1
     qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; lf(1:nc, 1) = lam(1:nc)
-    ef(:, 1) = [energy(1), energy(2), 0.0_dp, 0.0_dp]
+    ef(:, 1) = [energy(1), energy(2), work, 0.0_dp]
     nvalid = 1
+    call save_carry()
     itmax_frame = 0
     do n = 1, nsteps
       t = t0 + n*dt
@@ -1079,8 +1095,17 @@ contains
         itmax_frame = 0
       end if
     end do
+    call save_carry()
 
   contains
+
+    !> The state a continuation needs besides (q, v, a, p): multipliers, lref, work.
+    subroutine save_carry()
+      carry = 0.0_dp
+      carry(1:nc) = lam(1:nc)
+      carry(size(carry) - 1) = lref
+      carry(size(carry)) = work
+    end subroutine save_carry
 
     !> Free DOFs on which row ic's gradient can be nonzero (the columns of its two markers), without
     !> repetitions: gnz(1:ngnz(ic), ic).

@@ -187,8 +187,11 @@ def test_documented_csv_and_summary_format(tmp_path):
                "--out", str(tmp_path)])
     assert rc == 0
     lines = (tmp_path / "timeseries.csv").read_text().splitlines()
-    assert lines[0].startswith("# flexmech ") and lines[1].startswith("# units: s,")
-    assert lines[2].startswith("t,") and not lines[3].startswith("#")
+    assert lines[0].startswith("# complete: ") and len(lines[0].encode()) == 240
+    assert lines[1].startswith("# flexmech ") and lines[2].startswith("# units: s,")
+    assert lines[3].startswith("t,") and not lines[4].startswith("#")
+    np.loadtxt(tmp_path / "timeseries.csv", delimiter=",", skiprows=4)            # as documented
+    np.genfromtxt(tmp_path / "timeseries.csv", delimiter=",", names=True, skip_header=3)
     summary = json.loads((tmp_path / "summary.json").read_text())
     doc = (DOCS / "cli.md").read_text(encoding="utf-8")
     section = doc.split("**summary.json**", 1)[1].split("**stdout**", 1)[0]

@@ -195,7 +195,7 @@ def test_cli_stability_and_steady(tmp_path, capsys):
     assert any("deflection exceeds 2 % of its length" in w for w in s["warnings"])
     assert s["floquet"]["stable"] and len(s["floquet"]["multipliers"]) == 36
     assert s["t_end"] == pytest.approx(2 * math.pi / 120.0)
-    head = (sd / "timeseries.csv").read_text().splitlines()[2].split(",")
+    head = (sd / "timeseries.csv").read_text().splitlines()[3].split(",")
     assert head[:3] == ["t", "crank_angle", "crank_speed"]
     assert main(["steady", str(CASES / "fourbar_hac.toml"), "--out", str(tmp_path / "x")]) == 2
     assert "constant_speed" in capsys.readouterr().err

@@ -355,7 +355,8 @@ def test_reaction_source_rigid_and_model(cases_dir):
     p = Prepared(case)
     res = p.run("classic")
     r = p.rm_frames.reaction("guide")
-    assert np.array_equal(res["rigid"], np.hypot(r[:, 0], r[:, 1]))
+    # the run evaluates the reactions chunk by chunk: equal to the whole-grid ones to round-off
+    np.testing.assert_allclose(res["rigid"], np.hypot(r[:, 0], r[:, 1]), rtol=1e-13, atol=0)
     # undamped, the crank's start-up vibration (the block on its tip) swings the guide force about the rigid one
     assert np.all(np.isfinite(res["model"])) and np.max(np.abs(res["model"] - res["rigid"])) > 0.1 * np.max(res["rigid"])
 

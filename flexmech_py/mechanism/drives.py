@@ -25,8 +25,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import CaseError
-
 __all__ = ["Drive", "KINEMATIC_LAWS", "LAW_CODES", "cubic_spline", "spinup", "constant_speed"]
 
 LAW_CODES = {"constant_speed": 1, "spinup": 2, "harmonic": 3, "table": 4, "force": 11}

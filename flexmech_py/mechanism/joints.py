@@ -16,7 +16,7 @@ the first of ``conditions`` is the default of an undriven joint, ``driven_defaul
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np

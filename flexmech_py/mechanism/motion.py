@@ -11,6 +11,7 @@ models use (:class:`LinkMotion`).
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -47,6 +48,11 @@ class LinkMotion:
         """The samples ``idx`` (an index, slice or mask along time)."""
         return LinkMotion(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
 
+    @staticmethod
+    def concat(parts) -> "LinkMotion":
+        """The samples of consecutive parts, in order."""
+        return LinkMotion(**{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(LinkMotion)})
+
 
 class RigidMotion:
     """The motion sampled at times t (N,): body coordinates z, zd, zdd (N, n) (centre of mass and
@@ -64,6 +70,12 @@ class RigidMotion:
     def select(self, idx) -> "RigidMotion":
         return RigidMotion(self.setup, self.t[idx], self.z[idx], self.zd[idx], self.zdd[idx], self.lam[idx],
                            self.jq[idx], self.dv[idx])
+
+    @staticmethod
+    def concat(parts) -> "RigidMotion":
+        """The samples of consecutive parts (one mechanism), in order."""
+        return RigidMotion(parts[0].setup, *(np.concatenate([getattr(p, k) for p in parts])
+                                             for k in ("t", "z", "zd", "zdd", "lam", "jq", "dv")))
 
     def joint(self, name: str) -> np.ndarray:
         """(N, 3) [coordinate, rate, acceleration] of a joint (rad or m)."""
@@ -151,6 +163,14 @@ class MotionSource:
                                                             self.atol, self.hmax, self.tol)
         kernels.check_status(status, "rigid-body dynamics (start)", time=0.0, detail=self._detail(st.z0, 0.0))
         self._t_from = 0.0
+
+    def fork(self) -> "MotionSource":
+        """An independent source at the same point of the motion (two grids followed in turn, e.g. a
+        run and its step-doubling check, each continue without restarting from t = 0)."""
+        other = copy.copy(self)
+        other._state = self._state.copy()
+        other.stats = dict(self.stats)
+        return other
 
     def __call__(self, t) -> RigidMotion:
         t = np.ascontiguousarray(t, dtype=float).reshape(-1)

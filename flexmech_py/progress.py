@@ -1,0 +1,98 @@
+"""What a long run says while it goes: a one-line cost estimate and a progress bar with an ETA.
+
+Both go to stderr (stdout keeps the run's table).  :class:`RunProgress` is the ``progress(done,
+total)`` callback of :meth:`flexmech_py.simulate.Prepared.stream`: ``done`` and ``total`` are steps
+(of the run and of its error estimate).  The cost estimate is printed once, when the run has been
+going for CALIBRATION_S and the rest would take more than ESTIMATE_OVER_S; the bar appears once the
+run has been going for BAR_AFTER_S and is redrawn at most every REDRAW_S, only when the stream is a
+terminal (or when forced).  Nothing here touches the numerics.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+
+__all__ = ["RunProgress", "format_duration"]
+
+#: seconds of run after which the cost is projected (long enough to cover the set-up)
+CALIBRATION_S = 1.0
+#: a run whose remaining time exceeds this [s] gets the one-line cost estimate
+ESTIMATE_OVER_S = 3.0
+#: seconds of run before the bar appears (a short run shows none)
+BAR_AFTER_S = 2.0
+#: shortest interval between two redraws of the bar [s]
+REDRAW_S = 0.25
+
+
+def format_duration(seconds: float) -> str:
+    """'4.2 s', '3 min 05 s', '2 h 07 min'."""
+    s = max(0.0, float(seconds))
+    if s < 60:
+        return f"{s:.2g} s" if s < 10 else f"{s:.0f} s"
+    if s < 3600:
+        return f"{int(s // 60)} min {int(s % 60):02d} s"
+    return f"{int(s // 3600)} h {int(s % 3600 // 60):02d} min"
+
+
+class RunProgress:
+    """The progress(done, total) callback of a run.
+
+    ``describe``: a callable returning the words after the time in the cost line (e.g. "12 000 000
+    steps of 126 DOFs, about 1.3 GB of timeseries.csv"); ``bar``: True draws the bar, False never,
+    None when ``stream`` is a terminal; ``quiet`` silences everything."""
+
+    def __init__(self, describe=None, *, bar: bool | None = None, quiet: bool = False, stream=None,
+                 clock=time.perf_counter):
+        self.stream = sys.stderr if stream is None else stream
+        self.describe = describe
+        self.quiet = quiet
+        self.bar = (bool(getattr(self.stream, "isatty", lambda: False)()) if bar is None else bar) and not quiet
+        self.clock = clock
+        self.t0 = clock()
+        self.estimated = False
+        self.drawn = False
+        self.last_draw = -1e9
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.quiet or total <= 0:
+            return
+        now = self.clock() - self.t0
+        frac = min(1.0, max(0.0, done / total))
+        if not self.estimated and now >= CALIBRATION_S and frac > 0:
+            self.estimated = True
+            left = now * (1.0 - frac) / frac
+            if left > ESTIMATE_OVER_S:
+                self._line(f"flexmech: this run takes about {format_duration(now + left)}"
+                           + (f" ({self.describe()})" if self.describe else "")
+                           + "; Ctrl-C stops it and keeps the frames so far")
+        if self.bar and now >= BAR_AFTER_S and now - self.last_draw >= REDRAW_S:
+            self.last_draw = now
+            self._draw(frac, now)
+
+    def _draw(self, frac: float, now: float) -> None:
+        width = max(10, min(40, shutil.get_terminal_size((80, 20)).columns - 40))
+        fill = int(round(frac * width))
+        eta = now * (1.0 - frac) / frac if frac > 0 else float("nan")
+        eta_s = format_duration(eta) if frac > 0 else "?"
+        self.stream.write(f"\r[{'#' * fill}{'.' * (width - fill)}] {100 * frac:5.1f} %  "
+                          f"{format_duration(now)} elapsed, {eta_s} left ")
+        self.stream.flush()
+        self.drawn = True
+
+    def _line(self, text: str) -> None:
+        if self.drawn:
+            self.stream.write("\n")
+            self.drawn = False
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def close(self, finished: bool = False) -> None:
+        """End the bar's line (call when the run ended, however it ended; ``finished``: at 100 %)."""
+        if self.drawn and finished:
+            self._draw(1.0, self.clock() - self.t0)
+        if self.drawn:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.drawn = False

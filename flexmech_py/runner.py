@@ -1,0 +1,257 @@
+"""One run carried out: a model's blocks of frames (:meth:`flexmech_py.simulate.Prepared.blocks`)
+through the guards into a sink, and how the run ended (docs/theory.md section 19).
+
+:func:`execute` feeds every block to the validity tracker, to the step-doubling estimate (its
+run at 2 dt advances block by block beside the run) and to a sink: :class:`MemorySink` keeps every
+frame (``Prepared.run``), :class:`FileSink` writes them to timeseries.csv as they come and keeps only
+the last block, the column statistics and a bounded envelope for the plots (``Prepared.stream``, the
+``flexmech run`` command).  A run that stops keeps its frames, marked: a failed step (SolverError,
+with the diagnosis of :func:`flexmech_py.guards.failed`), a singular rigid position (MechanismError),
+or the user's Ctrl-C (:class:`~flexmech_py.errors.Interrupted`).
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from pathlib import Path
+
+from . import guards
+from .case import MODELS
+from .errors import CaseError, Interrupted, MechanismError, SolverError
+from .frames import ColumnStats, Envelope, join
+from .results import TimeseriesWriter, csv_rows
+
+__all__ = ["execute", "MemorySink", "FileSink", "available_memory", "format_bytes"]
+
+#: share of the available memory a run held in memory may take
+MEMORY_SHARE = 0.8
+#: share of the free disk space a streamed run's timeseries.csv may take
+DISK_SHARE = 0.9
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux /proc/meminfo), or None when unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def format_bytes(n: float) -> str:
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if abs(n) < 1000 or unit == "TB":
+            return f"{n:.3g} {unit}"
+        n /= 1000.0
+    return f"{n:.3g} TB"
+
+
+def _block_bytes(block) -> int:
+    arrays = [block.t, block.q, block.qd, block.qdd, block.u, block.v, block.a, block.rig, block.axial, block.state]
+    arrays += list(block.columns.values())
+    if block.rigid is not None:
+        arrays += [block.rigid.z, block.rigid.zd, block.rigid.zdd, block.rigid.lam, block.rigid.jq, block.rigid.dv]
+    return sum(a.nbytes for a in arrays if a is not None)
+
+
+class MemorySink:
+    """Every frame kept: the result is the blocks joined.  A run whose frames would not fit in memory
+    (MEMORY_SHARE of what is available, measured on its first block) is refused."""
+
+    def __init__(self, frames_total: int):
+        self.frames_total = int(frames_total)
+        self.blocks: list = []
+
+    def add(self, block) -> None:
+        if not self.blocks and block.t.size:
+            self._check_memory(block)
+        if block.t.size:
+            self.blocks.append(block)
+
+    def _check_memory(self, block) -> None:
+        per_frame = _block_bytes(block) / block.t.size
+        need, avail = per_frame * self.frames_total, available_memory()
+        if avail is not None and need > MEMORY_SHARE * avail:
+            every = block.case["solver"]["output_every"] * int(need / (0.5 * MEMORY_SHARE * avail) + 1)
+            raise CaseError("solver.output_every",
+                            f"keeping every frame of this run in memory takes about {format_bytes(need)} "
+                            f"({self.frames_total} frames of {format_bytes(per_frame)}) and {format_bytes(avail)} is "
+                            f"available: raise solver.output_every (e.g. --set solver.output_every={every}), or write "
+                            "the frames to files as they come (flexmech run, Prepared.stream)")
+
+    def result(self):
+        return join(self.blocks) if self.blocks else None
+
+    def close(self, res) -> list[Path]:
+        return []
+
+
+class FileSink:
+    """Frames written to ``out_dir``/timeseries.csv as they come (:class:`TimeseriesWriter`); kept: the
+    last block (what the guards read of a stopped run), the statistics of every column and an
+    :class:`Envelope` for the plots.  Nothing is created before the first block; then the files of
+    ``replace`` (an earlier run's, :func:`flexmech_py.outdir.claim`) are removed.  With
+    ``frames_total``, the size of timeseries.csv is projected from the first block, and a run that
+    would not fit on the disk is refused (CaseError naming ``solver.output_every``; the part file is
+    removed) unless ``force``."""
+
+    def __init__(self, out_dir, *, frames_total: int | None = None, replace=(), force: bool = False):
+        self.out = Path(out_dir)
+        self.frames_total = frames_total
+        self.replace, self.force = list(replace), force
+        self.writer = None
+        self.last = None
+        self.stats, self.envelope = ColumnStats(), Envelope()
+        self.paths: list[Path] = []
+
+    def add(self, block) -> None:
+        if block.t.size == 0:
+            return
+        if self.writer is None:
+            if self.frames_total and not self.force:
+                self._check_disk(block)
+            self.out.mkdir(parents=True, exist_ok=True)
+            for p in self.replace:
+                p.unlink(missing_ok=True)
+            self.writer = TimeseriesWriter(self.out)
+        self.writer.add(block)
+        self.stats.add(block.t, block.columns)
+        self.envelope.add(block.t, block.columns)
+        self.last = block
+
+    @property
+    def projected_bytes(self) -> float:
+        """Size timeseries.csv will have [B], projected from the rows written so far."""
+        w = self.writer
+        if w is None or w.rows == 0 or not self.frames_total:
+            return 0.0
+        return w.bytes / w.rows * self.frames_total
+
+    def _check_disk(self, block) -> None:
+        """Refuse a run whose timeseries.csv (projected from the first block's rows) would not fit."""
+        per_row = len(csv_rows(block.t, block.columns).encode("utf-8")) / block.t.size
+        need = per_row * self.frames_total
+        folder = next((p for p in [self.out, *self.out.absolute().parents] if p.exists()), Path("."))
+        free = shutil.disk_usage(folder).free
+        if need > DISK_SHARE * free:
+            every = block.case["solver"]["output_every"] * int(need / (0.5 * DISK_SHARE * free) + 1)
+            raise CaseError("solver.output_every",
+                            f"this run writes about {format_bytes(need)} to {self.out / 'timeseries.csv'} "
+                            f"({self.frames_total} frames of {per_row:.0f} B) and {format_bytes(free)} is free there: "
+                            f"raise solver.output_every (e.g. --set solver.output_every={every}), shorten "
+                            "solver.t_end, choose another --out, or run anyway with --force")
+
+    def result(self):
+        if self.last is None:
+            return None
+        import dataclasses
+
+        return dataclasses.replace(self.last, stats=self.stats, envelope=self.envelope)
+
+    def close(self, res) -> list[Path]:
+        """timeseries.csv and summary.json of the run (partial or not)."""
+        if res is None:
+            if self.writer is not None:
+                self.writer.abandon()
+            return []
+        csv = self.writer.finish(res)
+        res.extra["files"] = ["timeseries.csv", "summary.json"]
+        self.paths = [csv, res.write_summary(self.out)]
+        return self.paths
+
+    @property
+    def bytes_written(self) -> int:
+        return 0 if self.writer is None else self.writer.bytes
+
+
+def _take(block, sink, validity, doubling) -> None:
+    sink.add(block)
+    validity.add(block)
+    if doubling is not None:
+        doubling.add(block)
+
+
+def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | None = None, diagnose: bool = True,
+            u0=None, v0=None, progress=None):
+    """Run one model of ``prep`` into ``sink``; returns the Result (see the module's docstring).
+    ``progress(done, total)``: called after every block with the work done and to do (steps of the
+    run and of its estimate)."""
+    t_start = time.perf_counter()
+    model = prep.case["solver"]["model"] if model is None else model
+    if model not in MODELS:
+        raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
+    if estimate is None:
+        estimate = prep.case["solver"].get("error_estimate", "time") != "none"
+    validity = guards.ValidityTracker()
+    doubling = guards.StepDoubling(prep, model, geometric) if estimate else None
+    total = prep.nsteps + (doubling.coarse_steps if doubling else 0)
+    stop = None
+    try:
+        for block in prep.blocks(model, geometric, u0=u0, v0=v0):
+            _take(block, sink, validity, doubling)
+            if progress is not None:
+                progress(_work_done(block, doubling), total)
+    except SolverError as exc:
+        if exc.partial is None:
+            raise
+        _take(exc.partial, sink, validity, None)
+        stop = exc
+    except MechanismError as exc:
+        stop = exc
+    except KeyboardInterrupt:
+        stop = "interrupted"
+    res = sink.result()
+    if res is None:               # nothing to keep: the stop happened before the first frame
+        sink.close(None)
+        if isinstance(stop, Exception):
+            stop.partial = None
+            raise stop
+        raise Interrupted("interrupted before the first frame")
+    return _finish(prep, model, geometric, res, sink, stop, validity, doubling, diagnose, t_start)
+
+
+def _work_done(block, doubling) -> int:
+    done = int(block.steps[-1]) if block.steps is not None and block.steps.size else 0
+    if doubling is not None and doubling.cmp is not None:
+        done += max(0, doubling.cmp.coarse_last // 2)
+    return done
+
+
+def _finish(prep, model, geometric, res, sink, stop, validity, doubling, diagnose, t_start):
+    """Guards, estimate and files of a run that ended (or stopped: raise after the files are written)."""
+    res.timing["total_s"] = prep.t_prepare + time.perf_counter() - t_start
+    validity.finish(res)
+    prep._report_mechanism(res)
+    if isinstance(stop, SolverError):
+        stop.partial = res
+        err = guards.failed(prep, model, geometric, stop, diagnose=diagnose)
+        sink.close(res)
+        raise err
+    if stop == "interrupted":
+        raise _interrupted(res, sink, "during the run")
+    try:
+        res.extra["error_estimate"] = doubling.finish(res) if doubling else {"method": "none"}
+    except KeyboardInterrupt:
+        res.extra["error_estimate"] = {"method": "none", "reason": "interrupted by the user"}
+        raise _interrupted(res, sink, "during the error estimate (the run itself completed)") from None
+    res.timing["total_s"] = prep.t_prepare + time.perf_counter() - t_start
+    if isinstance(stop, MechanismError):
+        err = guards.rigid_failure(res, stop)
+        sink.close(res)
+        raise err
+    sink.close(res)
+    return res
+
+
+def _interrupted(res, sink, when: str) -> Interrupted:
+    """Mark ``res`` as stopped by the user, write it, and return the exception to raise."""
+    t_last = res.all_stats().t_last
+    msg = f"interrupted by the user {when}; frames up to t = {t_last:.6g} s are kept"
+    res.failure = {"cause": "interrupted", "time_s": t_last, "message": msg}
+    res.extra.setdefault("error_estimate", {"method": "none", "reason": "the run was interrupted"})
+    sink.close(res)
+    return Interrupted(msg, partial=res)
