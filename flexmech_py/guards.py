@@ -91,11 +91,11 @@ def link_strains(res) -> np.ndarray:
         n = len(els)
         ea = ln["youngs_modulus"] * ln["area"]
         ax = np.abs(res.axial[els]) / ea if res.axial is not None else np.zeros((n, res.t.size))
-        for k in range(n + 1):
-            frac = k / n if fe.uniform[li] else fe.node_frac[li][k]
-            kap = np.abs(res.curvature(li, frac)) if res.curvature_of is not None else 0.0
-            eps_ax = np.max(ax[max(k - 1, 0):min(k + 1, n)], axis=0)
-            out[li] = np.maximum(out[li], ln["half_depth"] * kap + eps_ax)
+        kap = np.abs(res.node_curvatures(li)) if res.curvature_of is not None else np.zeros((n + 1, res.t.size))
+        eps_ax = np.empty((n + 1, res.t.size))              # the larger of the elements meeting at a node
+        eps_ax[0], eps_ax[n] = ax[0], ax[n - 1]
+        eps_ax[1:n] = np.maximum(ax[:n - 1], ax[1:])
+        out[li] = np.max(ln["half_depth"] * kap + eps_ax, axis=0)
     return out
 
 

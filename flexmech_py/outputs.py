@@ -61,6 +61,27 @@ def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float)
     return kap / len(parts)
 
 
+def link_node_curvatures(fe, u_all: np.ndarray, phi: np.ndarray, li: int) -> np.ndarray:
+    """(n+1, nf) curvature v'' [1/m] at every mesh node of link ``li`` (n elements) over the frames:
+    what :func:`link_curvature` gives node by node (the mean of the two elements at an interior
+    node), with one kernel call per distinct element length."""
+    els = fe.link_elements(li)
+    n, nf = els.size, u_all.shape[1]
+    d = u_all[fe.el_dof[:, els] - 1]                       # (6, n, nf)
+    ends = np.empty((2, n, nf))                            # curvature at xi = 0 and xi = 1 of each element
+    lengths = fe.el_prop[0, els]
+    for length in np.unique(lengths):
+        idx = np.flatnonzero(lengths == length)
+        sub = d[:, idx, :].reshape(6, idx.size * nf)
+        ph = np.tile(phi, idx.size)
+        for j, xi in enumerate((0.0, 1.0)):
+            ends[j, idx] = kernels.element_curvatures(sub, ph, float(length), xi).reshape(idx.size, nf)
+    out = np.empty((n + 1, nf))
+    out[0], out[n] = ends[0, 0], ends[1, n - 1]
+    out[1:n] = 0.5 * (ends[1, :n - 1] + ends[0, 1:])
+    return out
+
+
 def _element_at(fe, li: int, frac: float) -> list[tuple[int, float]]:
     """[(element index along link li, xi)] at fraction ``frac``: both elements at an interior node (xi 1 and
     0), else the element containing it."""

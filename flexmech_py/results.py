@@ -69,6 +69,7 @@ class Result:
     steps: np.ndarray | None = None             # (nf,) step number of each frame on the run's time grid
     state: np.ndarray | None = field(default=None, repr=False)   # (n, nf) the model's own coordinates (coupled: q)
     curvature_of: object = field(default=None, repr=False)       # f(result, link, fraction) -> (nf,) curvature [1/m]
+    node_curvatures_of: object = field(default=None, repr=False)  # f(result, link) -> (n+1, nf) at its nodes (optional)
     reactions: object = field(default=None, repr=False)          # superposition: joint -> (nf, 3) model reactions
     stats: object = field(default=None, repr=False)              # ColumnStats over every frame of the run
     envelope: object = field(default=None, repr=False)           # Envelope: the frames to draw of a streamed run
@@ -89,6 +90,14 @@ class Result:
     def curvature(self, li: int, frac: float) -> np.ndarray:
         """(nf,) curvature [1/m] of link ``li`` at ``frac`` of its length over the frames."""
         return self.curvature_of(self, li, frac)
+
+    def node_curvatures(self, li: int) -> np.ndarray:
+        """(n+1, nf) curvature [1/m] at the n+1 mesh nodes of link ``li`` over the frames (the mean of
+        the two elements at an interior node)."""
+        if self.node_curvatures_of is not None:
+            return self.node_curvatures_of(self, li)
+        f = self.fe.node_frac[li]
+        return np.array([self.curvature(li, float(x)) for x in f])
 
     def all_stats(self):
         """ColumnStats over every frame of the run (those of the frames held when not streamed)."""

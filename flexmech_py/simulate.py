@@ -17,7 +17,7 @@ from .coupled import CoupledModel
 from .mechanism import MotionSource, prepare_motion
 from .mechanism.motion import RigidMotion
 from .model import FEModel
-from .outputs import evaluate_outputs, link_curvature, output_unit
+from .outputs import evaluate_outputs, link_curvature, link_node_curvatures, output_unit
 from .reactions import ModelReactions
 from .frames import continue_angles, select_frames
 from .results import Result
@@ -412,7 +412,7 @@ class Prepared:
         rig_f = fe.rig_samples(rm, self.gravity, sel)
         u_all, v_all, a_all = fe.expand_state(uf, vf, af, rig_f)
         if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
-            nf = np.array([[fe.el_prop[3, e] / fe.el_prop[0, e]] for e in range(fe.nel)]) * _axial_stretch(fe, u_all, motion_f)
+            nf = (fe.el_prop[3] / fe.el_prop[0])[:, None] * _axial_stretch(fe, u_all, motion_f)
         reactions = ModelReactions(fe, model, rmf, rig_f, (u_all, v_all, a_all), sol, nf)
         columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rmf, axial=nf,
                                    rates=(v_all, a_all), reactions=reactions)
@@ -428,6 +428,7 @@ class Prepared:
                      q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_all, v=v_all, a=a_all, rig=rig_f, nsteps=self.nsteps,
                      dt=self.dt, timing=acc.timing(), extra=extra, axial=nf, motion=motion_f, rigid=rmf,
                      steps=i0 + oe * np.arange(uf.shape[1]), curvature_of=_superposition_curvature,
+                     node_curvatures_of=_superposition_node_curvatures,
                      reactions=reactions)
         return _after(res, prev)
 
@@ -556,6 +557,10 @@ def _superposition_curvature(res: Result, li: int, frac: float) -> np.ndarray:
     return link_curvature(res.fe, res.u, res.motion.phi[:, li], li, frac)
 
 
+def _superposition_node_curvatures(res: Result, li: int) -> np.ndarray:
+    return link_node_curvatures(res.fe, res.u, res.motion.phi[:, li], li)
+
+
 def _coupled_curvature(cm, res: Result, li: int, frac: float) -> np.ndarray:
     return cpl_out.curvature(cm, res.state, li, frac)
 
@@ -589,11 +594,11 @@ def integrator_summary(sol: dict) -> dict:
 def _axial_stretch(fe, u_all, motion) -> np.ndarray:
     """(nel, nf) elongation p2 - p1 [m] of every element in its link frame."""
     out = np.empty((fe.nel, u_all.shape[1]))
-    for e in range(fe.nel):
-        li = fe.el_link[e] - 1
+    for li in np.unique(fe.el_link) - 1:
+        els = fe.link_elements(li)
         c, s = np.cos(motion.phi[:, li]), np.sin(motion.phi[:, li])
-        d = u_all[fe.el_dof[:, e] - 1]
-        out[e] = (c * d[3] + s * d[4]) - (c * d[0] + s * d[1])
+        d = u_all[fe.el_dof[:, els] - 1]                   # (6, n, nf)
+        out[els] = (c * d[3] + s * d[4]) - (c * d[0] + s * d[1])
     return out
 
 
