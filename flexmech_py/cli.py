@@ -2,12 +2,14 @@
 
     flexmech run CASE.toml [--model M] [--dt S] [--elements-per-link N] [--integrator I] [--rho-inf X]
                  [--hht-alpha A] [--set KEY.PATH=VALUE ...] [--out DIR] [--overwrite] [--force]
-                 [--quiet | --progress] [--no-plots]
+                 [--quiet | --progress] [--no-plots] [--draw [N]]
     flexmech reproduce [--out DIR]
     flexmech compare RESULT_DIR --reference FILE.csv [--x t|crank_angle] [--columns C ...] [--out DIR]
     flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
     flexmech stability CASE.toml --speed START:STOP:N [--model M] [--geometric G] [--jobs N] [--out DIR]
     flexmech steady CASE.toml [--model M] [--geometric G] [--out DIR]
+    flexmech draw RESULT_DIR [--frames N] [--scale S] [--out PNG]
+    flexmech modes CASE.toml [--at T | --crank-angle A] [--count N] [--along-cycle K] [--model M] [--out DIR]
     flexmech sweep CASE.toml --param KEY.PATH=START:STOP:N [--param ...] [--model M] [--jobs N] [--out DIR]
     flexmech sweep CASE.toml --sample KEY.PATH=normal:MEAN:SD [--sample ...] --samples N [--seed S] [--method lhs]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
@@ -88,6 +90,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a case value, e.g. --set solver.t_end=0.1 --set links.coupler.area=5e-5")
     r.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>)")
     r.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+    r.add_argument("--draw", type=int, nargs="?", const=6, default=None, metavar="N",
+                   help="keep the mechanism's points at N frames spread over the run (default 6) in shape.csv "
+                        "and draw them, deflection magnified, in drawing.png")
     r.add_argument("--quiet", action="store_true", help="no cost estimate and no progress bar on stderr")
     r.add_argument("--progress", action="store_true",
                    help="draw the progress bar even when stderr is not a terminal (default: only on a terminal)")
@@ -147,6 +152,31 @@ def build_parser() -> argparse.ArgumentParser:
     sd.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
     sd.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>-steady)")
     sd.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+
+    dr = sub.add_parser("draw", help="draw the mechanism at frames of a run written with `flexmech run --draw`")
+    dr.add_argument("result", help="a folder written by `flexmech run --draw` (its shape.csv and summary.json)")
+    dr.add_argument("--frames", type=_positive_int, default=6, help="panels, spread over the frames kept (default 6)")
+    dr.add_argument("--scale", type=_positive_float, help="magnification of the elastic deflection "
+                                                          "(default: its largest drawn as 10 %% of the mechanism)")
+    dr.add_argument("--out", default=None, help="PNG to write (default: RESULT/drawing.png)")
+
+    md = sub.add_parser("modes", help="natural frequencies and mode shapes of the mechanism frozen at one "
+                                      "configuration, or along one cycle")
+    md.add_argument("case", help="TOML case file")
+    md.add_argument("--at", type=float, metavar="T", help="the instant [s] of the configuration (default 0)")
+    md.add_argument("--crank-angle", type=float, metavar="A",
+                    help="the configuration where the driven revolute joint first reaches A [deg] (mod 360)")
+    md.add_argument("--count", type=_positive_int, default=4, help="elastic modes to compute (default 4)")
+    md.add_argument("--along-cycle", type=int, metavar="K",
+                    help="also the frequencies at K positions over one cycle of the drive, with the crank "
+                         "speed harmonics (CSV, JSON, PNG)")
+    md.add_argument("--model", choices=MODELS, help="model (default: the case's solver.model)")
+    md.add_argument("--geometric", choices=("none", "quasi_static"),
+                    help="geometric stiffness of the superposition models (default: the case's)")
+    md.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (default: the case's mesh)")
+    md.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
+    md.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>-modes)")
+    md.add_argument("--no-plots", action="store_true", help="do not write PNG drawings")
 
     sw = sub.add_parser("sweep", help="run a case over a parameter grid or Monte-Carlo samples in parallel "
                                       "(resumable) and tabulate it")
@@ -289,6 +319,31 @@ def _cmd_steady(args) -> int:
           f"({'stable' if f['stable'] else 'UNSTABLE'}); cond(I - Phi) = {f['cond_I_minus_Phi']:.3g}; "
           f"periodicity residual {f['periodicity_residual']:.2g}")
     _warn(res.extra.get("warnings", []))
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _cmd_modes(args) -> int:
+    from .case import load_case
+    from .modes import frequencies_along, modes
+
+    case = load_case(args.case, overrides=args.set)
+    kw = {"count": args.count, "model": args.model, "geometric": args.geometric,
+          "elements_per_link": args.elements_per_link}
+    ms = modes(case, at=args.at, crank_angle=args.crank_angle, **kw)
+    al = frequencies_along(case, args.along_cycle, **kw) if args.along_cycle is not None else None
+    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{ms.model}-modes"
+    paths = ms.write(out) + (al.write(out) if al is not None else [])
+    if not args.no_plots:
+        from .drawing import draw_modes, plot_along
+
+        paths += [p for p in (draw_modes(out / "mode_shapes.png", ms),
+                              plot_along(out / "frequencies_along.png", al) if al is not None else None) if p]
+    print(ms.table())
+    if al is not None:
+        print(f"along {al.span}: " + "; ".join(f"mode {k + 1} {al.hz[:, k].min():.4g}..{al.hz[:, k].max():.4g} Hz"
+                                               for k in range(al.hz.shape[1]))
+              + f"; {len(al.crossings())} crossings with the crank speed harmonics (frequencies_along.json)")
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0
 
@@ -478,6 +533,7 @@ def _cmd_run(args) -> int:
     from .outdir import claim
     from .progress import RunProgress
     from .runner import FileSink, execute
+    from .shapes import ShapeCollector
     from .simulate import Prepared
 
     case = load_case(args.case, overrides=args.set + integrator_overrides(args))
@@ -487,8 +543,11 @@ def _cmd_run(args) -> int:
     sink = FileSink(out, frames_total=prep.frames, replace=claim(out, prep.case, args.overwrite), force=args.force)
     progress = RunProgress(lambda: _run_cost(prep, model, sink), bar=True if args.progress else None,
                            quiet=args.quiet)
+    if args.draw is not None and args.draw < 2:
+        raise FlexmechError(f"--draw: needs 2 frames or more, got {args.draw}")
+    shapes = ShapeCollector(prep, model, args.draw) if args.draw else None
     try:
-        res = execute(prep, model, sink, progress=progress)
+        res = execute(prep, model, sink, progress=progress, observers=[shapes] if shapes else [])
     except Interrupted as exc:
         progress.close()
         return _report_stopped(exc, sink, 130)
@@ -499,16 +558,66 @@ def _cmd_run(args) -> int:
         return _report_stopped(exc, sink, 3)
     progress.close(finished=True)
     paths = list(sink.paths)
+    if shapes is not None:
+        paths += _write_drawing(res, shapes.result(), out, plots=not args.no_plots)
     if not args.no_plots:
         from .plots import plot_result
 
         paths += plot_result(res.plot_view(), out)
+    if len(paths) > len(sink.paths):
         res.extra["files"] = [p.name for p in paths]
         res.write_summary(out)
     print(res.table())
     print("wrote " + ", ".join(str(p) for p in paths))
     for w in res.extra.get("warnings", []):
         print(f"flexmech: warning: {w}", file=sys.stderr)
+    return 0
+
+
+def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
+    """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
+    import numpy as np
+
+    from .shapes import write_shape_csv
+
+    head = [f"flexmech run --draw; case {res.case['case']['title']!r}; model {res.model}",
+            "per frame (index, t [s]) every drawn point: x, y its rigid position [m]; dx, dy its elastic "
+            "displacement [m]; rot the elastic rotation of its body there [rad]"]
+    paths = [write_shape_csv(out / "shape.csv", sf, head, key="t")]
+    if plots:
+        from .drawing import draw_frames
+
+        p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, np.arange(sf.key.size),
+                           title=f"{res.case['case']['title']} - model {res.model}")
+        paths += [p] if p else []
+    return paths
+
+
+def _cmd_draw(args) -> int:
+    import json
+
+    import numpy as np
+
+    from .case import Case
+    from .drawing import draw_frames
+    from .shapes import read_shape_csv
+
+    folder = Path(args.result)
+    if not (folder / "shape.csv").exists():
+        raise FlexmechError(f"{folder}: no shape.csv there; write one with `flexmech run CASE --draw --out {folder}`")
+    sf, key, _ = read_shape_csv(folder / "shape.csv")
+    try:
+        summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+        case = Case(summary["input"])
+    except (OSError, ValueError, KeyError) as exc:
+        raise FlexmechError(f"{folder}/summary.json: cannot be read as a flexmech run's summary ({exc})") from None
+    idx = np.unique(np.linspace(0, sf.key.size - 1, min(args.frames, sf.key.size)).round().astype(int))
+    path = Path(args.out) if args.out else folder / "drawing.png"
+    p, scale = draw_frames(path, sf, case.mechanism, idx, scale=args.scale,
+                           title=f"{case['case']['title']} - model {summary.get('model', '')}")
+    if p is None:
+        raise FlexmechError("draw: needs matplotlib (pip install matplotlib)")
+    print(f"wrote {p} ({idx.size} frames, deflection x {scale:g})")
     return 0
 
 
@@ -548,7 +657,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
-                "steady": _cmd_steady, "sweep": _cmd_sweep, "bench": _cmd_bench,
+                "steady": _cmd_steady, "modes": _cmd_modes, "draw": _cmd_draw, "sweep": _cmd_sweep, "bench": _cmd_bench,
                 "accuracy": _cmd_accuracy}[args.command](args)
     except FlexmechError as exc:
         print(f"flexmech: error: {exc}", file=sys.stderr)

@@ -80,24 +80,31 @@ class CoupledModel:
     def initial_state(self, rm0) -> tuple[np.ndarray, np.ndarray]:
         """All-DOF (q, v) at rest elastically, on the configuration of the first sample of the rigid
         motion rm0 (nodes on the rigid links, rigid bodies at their coordinates)."""
-        km = rm0.motion
-        q, v = self.q_fixed.copy(), np.zeros(self.ndof)
+        return self.rigid_state(rm0)[:2]
+
+    def rigid_state(self, rm, i: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All-DOF (q, v, a) of the rigid motion's sample i, undeformed (elastic DOFs and their rates
+        zero): segment ends on the rigid links with their rigid velocities and accelerations, rigid
+        bodies at their coordinates."""
+        km = rm.motion
+        q, v, a = self.q_fixed.copy(), np.zeros(self.ndof), np.zeros(self.ndof)
         for si, (li, k0, k1) in enumerate(self.segments):
             L = self.case["links"][li]["length"]
-            c, s = np.cos(km.phi[0, li]), np.sin(km.phi[0, li])
-            w = km.omega[0, li]
+            c, s = np.cos(km.phi[i, li]), np.sin(km.phi[i, li])
+            w, al = km.omega[i, li], km.alpha[i, li]
             dofs = self.seg_slice(si)
-            pos, vel = [], []
+            pos, vel, acc = [], [], []
             for k in (k0, k1):
                 x = self.fracs[li][k] * L
-                pos += [km.ox[0, li] + x * c, km.oy[0, li] + x * s]
-                vel += [km.vx[0, li] - w * x * s, km.vy[0, li] + w * x * c]
+                pos += [km.ox[i, li] + x * c, km.oy[i, li] + x * s]
+                vel += [km.vx[i, li] - w * x * s, km.vy[i, li] + w * x * c]
+                acc += [km.ax[i, li] - al * x * s - w * w * x * c, km.ay[i, li] + al * x * c - w * w * x * s]
             for k in range(4):
                 if self.free_of[dofs[k]] > 0:
-                    q[dofs[k]], v[dofs[k]] = pos[k], vel[k]
+                    q[dofs[k]], v[dofs[k]], a[dofs[k]] = pos[k], vel[k], acc[k]
         for bi, dofs, *_ in self.bodies:
-            q[dofs], v[dofs] = rm0.z[0, 3 * bi:3 * bi + 3], rm0.zd[0, 3 * bi:3 * bi + 3]
-        return q, v
+            q[dofs], v[dofs], a[dofs] = (x[i, 3 * bi:3 * bi + 3] for x in (rm.z, rm.zd, rm.zdd))
+        return q, v, a
 
     def constraint_values(self, rm, start=None) -> np.ndarray:
         """(3, max(1, nc), nt) [value, rate, acceleration] of the rows on the rigid motion's grid: the
@@ -173,6 +180,26 @@ class CoupledModel:
             self.nfree, ispec, rspec, np.asarray(q, float), np.asarray(v, float), np.asarray(a, float), float(t))
         kernels.check_status(status, "cpl_dense")
         return res, mm, cm, km, energy
+
+    def residuals(self, qs, v, a, t=0.0, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)) -> np.ndarray:
+        """(ndof, ns) residuals (as :meth:`dense`) at the configurations qs (ndof, ns), every one with
+        the velocities v and accelerations a (ndof), at time t [s]."""
+        ispec, rspec = self._spec(gravity, rayleigh)
+        res, status = kernels.cpl.cpl_residuals(ispec, rspec, np.asfortranarray(qs, float), np.asarray(v, float),
+                                                np.asarray(a, float), float(t))
+        kernels.check_status(status, "cpl_residuals")
+        return res
+
+    def row_values(self, qs, v=None) -> tuple[np.ndarray, np.ndarray]:
+        """Values (nc, ns) of the constraint rows (angles not wrapped) and their gradients (nc, ndof, ns)
+        over all DOFs at the configurations qs (ndof, ns)."""
+        ispec, rspec = self._spec((0.0, 0.0), (0.0, 0.0))
+        qs = np.asfortranarray(qs, float)
+        nc = len(self.rows)
+        g, gq, status = kernels.cpl.cpl_rows(max(1, nc), ispec, rspec, qs,
+                                             np.zeros(self.ndof) if v is None else np.asarray(v, float))
+        kernels.check_status(status, "cpl_rows")
+        return g[:nc], gq[:nc]
 
     def post(self, qf, vf, af, lf, tf, measures, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)) -> dict:
         """Frames evaluated on the model (flexmech_coupled: coupled_post): ``markers`` (9, nmk, nf)

@@ -94,13 +94,12 @@ def sawtooth(y: np.ndarray, start: float = 0.5) -> float:
 
 def lowest_frequencies(prep: Prepared, nmodes: int = 2, samples: int = 72, model: str = "hac") -> np.ndarray:
     """(samples, nmodes) lowest natural frequencies [rad/s] of (K + K_c, M) along the run (frozen
-    coefficients; negative values: sign(lambda) sqrt|lambda|, an unstable frozen system)."""
+    coefficients; negative values: sign(lambda) sqrt|lambda|, an unstable frozen system;
+    flexmech_py.modal.superposition_frequencies)."""
+    from .modal import superposition_frequencies
+
     idx = np.linspace(0, prep.nsteps, samples).round().astype(int)
-    out = []
-    for k in idx:
-        lam = prep.fe.squared_frequencies(prep.rig[:, :, k], model)[:nmodes]
-        out.append(np.sign(lam) * np.sqrt(np.abs(lam)))
-    return np.array(out)
+    return superposition_frequencies(prep.fe, prep.rig[:, :, idx], model, nmodes)
 
 
 def _warnings(res) -> list[str]:

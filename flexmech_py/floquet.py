@@ -234,17 +234,14 @@ def frozen_frequencies(pc: PeriodicCase, fr: FloquetResult, nmodes: int = 4, sam
     """(samples, nmodes) natural frequencies [rad/s] of the frozen configuration at ``samples`` crank
     positions over the cycle: sqrt of the eigenvalues of (K + Kc [+ Kg], M) at that instant (the
     stiffness the model uses there, centrifugal and geometric terms included; gyroscopic and damping
-    terms left out), lowest first."""
-    fe, prep = pc.fe, pc.prep
+    terms left out), lowest first (flexmech_py.modal.superposition_frequencies)."""
+    from .modal import superposition_frequencies
+
     nfr = fr.nf_rest.shape[1]                    # frames of the run from rest over one period
     frames = np.unique(np.linspace(0, nfr - 1, samples, endpoint=False).round().astype(int))
     steps = frames * (pc.nsteps // (nfr - 1))
-    out = np.empty((frames.size, min(nmodes, fe.nfree)))
-    for r, (fi, si) in enumerate(zip(frames, steps)):
-        rig = prep.rig[:, :, si]
-        lam = fe.squared_frequencies(rig, pc.model, fr.nf_rest[:, fi] if pc.geometric == "quasi_static" else None)
-        out[r] = np.sqrt(np.maximum(lam[: out.shape[1]], 0.0)) * np.sign(lam[: out.shape[1]])
-    return out
+    nax = fr.nf_rest[:, frames] if pc.geometric == "quasi_static" else None
+    return superposition_frequencies(pc.fe, pc.prep.rig[:, :, steps], pc.model, nmodes, nax)
 
 
 def stability_point(task: dict) -> dict:

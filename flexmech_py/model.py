@@ -112,13 +112,17 @@ def link_mesh(link, n: int, extra=()) -> np.ndarray:
     return np.array(fr)
 
 
-def squared_frequencies(m: np.ndarray, k: np.ndarray) -> np.ndarray:
+def squared_frequencies(m: np.ndarray, k: np.ndarray, vectors: bool = False):
     """Ascending eigenvalues w^2 [rad^2/s^2] of K x = w^2 M x (K and M symmetrized), via the Cholesky
-    factor of M (NumPy only).  Negative values: the frozen system is unstable in that mode.  Raises
+    factor of M (NumPy only).  Negative values: the frozen system is unstable in that mode.  With
+    ``vectors``: (w^2, X), the columns of X mass-normalized (X^T M X = I).  Raises
     numpy.linalg.LinAlgError when M is not positive definite."""
     lc = np.linalg.cholesky(0.5 * (m + m.T))
     a = np.linalg.solve(lc, np.linalg.solve(lc, 0.5 * (k + k.T)).T)
-    return np.linalg.eigvalsh(0.5 * (a + a.T))
+    if not vectors:
+        return np.linalg.eigvalsh(0.5 * (a + a.T))
+    lam, y = np.linalg.eigh(0.5 * (a + a.T))
+    return lam, np.linalg.solve(lc.T, y)
 
 
 def reverse_cuthill_mckee(neighbours: list) -> np.ndarray:
@@ -542,14 +546,15 @@ class FEModel:
         kernels.check_status(status, "ked_matrices")
         return mm, cm, km, f
 
-    def squared_frequencies(self, rig: np.ndarray, model: str = "hac", nax=None) -> np.ndarray:
+    def squared_frequencies(self, rig: np.ndarray, model: str = "hac", nax=None, vectors: bool = False):
         """Ascending w^2 of the frozen configuration at one rigid sample: (K [+ K_sigma(nax)], M) over
         the free DOFs, K the stiffness the model uses there (elastic, centrifugal and angular-
-        acceleration terms; gyroscopic and damping terms left out).  See :func:`squared_frequencies`."""
+        acceleration terms; gyroscopic and damping terms left out).  See :func:`squared_frequencies`
+        (``vectors``: also the mass-normalized mode vectors over the free DOFs)."""
         m, _, k, _ = self.matrices(rig, model)
         if nax is not None:
             k = k + self.geometric_matrix(rig, nax)
-        return squared_frequencies(m, k)
+        return squared_frequencies(m, k, vectors)
 
     def geometric_matrix(self, rig: np.ndarray, nax: np.ndarray) -> np.ndarray:
         """Dense geometric stiffness over the free DOFs at one rigid sample for element axial forces

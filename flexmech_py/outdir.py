@@ -18,7 +18,7 @@ __all__ = ["claim", "RUN_FILES"]
 
 #: the names a run writes (the plots are listed by the run itself)
 RUN_FILES = ("timeseries.csv", "timeseries.csv.part", "summary.json", "timeseries.png",
-             "strain_vs_crank_angle.png", "drawing.png")
+             "strain_vs_crank_angle.png", "shape.csv", "drawing.png")
 
 
 def _identity(case) -> str:

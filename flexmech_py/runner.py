@@ -168,18 +168,21 @@ class FileSink:
         return 0 if self.writer is None else self.writer.bytes
 
 
-def _take(block, sink, validity, doubling) -> None:
+def _take(block, sink, validity, doubling, observers=()) -> None:
     sink.add(block)
     validity.add(block)
     if doubling is not None:
         doubling.add(block)
+    for obs in observers:
+        obs.add(block)
 
 
 def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | None = None, diagnose: bool = True,
-            u0=None, v0=None, progress=None):
+            u0=None, v0=None, progress=None, observers=()):
     """Run one model of ``prep`` into ``sink``; returns the Result (see the module's docstring).
     ``progress(done, total)``: called after every block with the work done and to do (steps of the
-    run and of its estimate)."""
+    run and of its estimate); ``observers``: objects whose ``add(block)`` sees every block (e.g.
+    :class:`flexmech_py.shapes.ShapeCollector`)."""
     t_start = time.perf_counter()
     model = prep.case["solver"]["model"] if model is None else model
     if model not in MODELS:
@@ -192,13 +195,13 @@ def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | N
     stop = None
     try:
         for block in prep.blocks(model, geometric, u0=u0, v0=v0):
-            _take(block, sink, validity, doubling)
+            _take(block, sink, validity, doubling, observers)
             if progress is not None:
                 progress(_work_done(block, doubling), total)
     except SolverError as exc:
         if exc.partial is None:
             raise
-        _take(exc.partial, sink, validity, None)
+        _take(exc.partial, sink, validity, None, observers)
         stop = exc
     except MechanismError as exc:
         stop = exc

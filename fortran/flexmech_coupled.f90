@@ -41,6 +41,7 @@ module flexmech_coupled
   implicit none
   private
   public :: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, coupled_elastic_measure
+  public :: coupled_residual, coupled_rows
   public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED, STATUS_NEWTON, COUPLED_NSPEC_HEADER
   public :: MK_GROUND, MK_NODE, MK_BODY
 
@@ -624,6 +625,42 @@ contains
     call lm_to_band(sys, lm, ab)
     km = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
   end subroutine coupled_dense
+
+  !> Residual res (all DOFs: inertia, elastic, damping, gravity and force drives, no constraint forces)
+  !> at each of ns states (q(:, s), v, a) at time t [s] (modal analysis: its derivatives by differences).
+  subroutine coupled_residual(sys, q, v, a, t, res)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:, :), v(:), a(:), t
+    real(dp), intent(out) :: res(:, :)
+    type(link_mats) :: lm
+    real(dp) :: energy(2)
+    integer :: s
+    call lm_setup(sys, 1, lm)
+    do s = 1, size(q, 2)
+      call assemble(sys, q(:, s), v, a, t, .false., 0.0_dp, 0.0_dp, res(:, s), lm, energy)
+    end do
+  end subroutine coupled_residual
+
+  !> Values g (nc, ns) of the constraint rows (not wrapped) and their gradients gq (nc, ndof, ns) over
+  !> all DOFs at each of ns configurations q(:, s) (velocities v enter the rates only, not returned).
+  subroutine coupled_rows(sys, q, v, g, gq)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:, :), v(:)
+    real(dp), intent(out) :: g(:, :), gq(:, :, :)
+    integer :: s, ic, j, ncl, cols(2*MAXCOL)
+    real(dp) :: gd, acc0, grad(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    gq = 0.0_dp
+    do s = 1, size(q, 2)
+      do ic = 1, sys%nc
+        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
+                      q(:, s), v, g(ic, s), gd, acc0, ncl, cols, grad, ma, mb)
+        do j = 1, ncl
+          gq(ic, cols(j), s) = gq(ic, cols(j), s) + grad(j)
+        end do
+      end do
+    end do
+  end subroutine coupled_rows
 
   !> Select the linear solver of coupled_run (SOLVER_AUTO, SOLVER_BAND or SOLVER_CONDENSED;
   !> module-wide, for tests and benchmarks).  status = STATUS_BAD_INPUT for another value.

@@ -7,10 +7,10 @@ module flexmech_coupled_api
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
   use flexmech_coupled, only: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, &
-                              coupled_set_solver
+                              coupled_set_solver, coupled_residual, coupled_rows
   implicit none
   private
-  public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver
+  public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_residuals, cpl_rows
 
 contains
 
@@ -85,6 +85,36 @@ contains
     end if
     call coupled_dense(sys, q, v, a, t, res, mm, cm, km, energy)
   end subroutine cpl_dense
+
+  !> Residuals res(:, s) (all DOFs, no constraint forces; as cpl_dense) at ns configurations q(:, s)
+  !> with the velocities v and accelerations a of all of them, at time t [s].
+  subroutine cpl_residuals(ni, nr, ndof, ns, ispec, rspec, q, v, a, t, res, status)
+    integer, intent(in) :: ni, nr, ndof, ns
+    integer, intent(in) :: ispec(ni)
+    real(dp), intent(in) :: rspec(nr), q(ndof, ns), v(ndof), a(ndof), t
+    real(dp), intent(out) :: res(ndof, ns)
+    integer, intent(out) :: status
+    type(coupled_system) :: sys
+    res = 0.0_dp
+    call build_checked(ispec, rspec, ndof, huge(1), sys, status)
+    if (status /= STATUS_OK) return
+    call coupled_residual(sys, q, v, a, t, res)
+  end subroutine cpl_residuals
+
+  !> Constraint rows at ns configurations q(:, s) (velocities v): values g (nc1, ns) (angles not
+  !> wrapped) and gradients gq (nc1, ndof, ns) over all DOFs; rows past the model's nc are zero.
+  subroutine cpl_rows(ni, nr, ndof, nc1, ns, ispec, rspec, q, v, g, gq, status)
+    integer, intent(in) :: ni, nr, ndof, nc1, ns
+    integer, intent(in) :: ispec(ni)
+    real(dp), intent(in) :: rspec(nr), q(ndof, ns), v(ndof)
+    real(dp), intent(out) :: g(nc1, ns), gq(nc1, ndof, ns)
+    integer, intent(out) :: status
+    type(coupled_system) :: sys
+    g = 0.0_dp; gq = 0.0_dp
+    call build_checked(ispec, rspec, ndof, nc1, sys, status)
+    if (status /= STATUS_OK) return
+    if (sys%nc > 0) call coupled_rows(sys, q, v, g(1:sys%nc, :), gq(1:sys%nc, :, :))
+  end subroutine cpl_rows
 
   !> Frames (qf, vf, af (ndof, nf), multipliers lf (nc1, nf), times tf (nf)) evaluated on the model
   !> (flexmech_coupled: coupled_post): marker states mks (9, nmk, nf), measure rows meas (4, nm) with

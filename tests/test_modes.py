@@ -1,0 +1,151 @@
+"""Natural frequencies and mode shapes of the frozen mechanism (flexmech_py.modal, flexmech_py.modes,
+`flexmech modes`; docs/theory.md section 20) against closed forms and the frequencies the other
+analyses use."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import beam_case
+
+import flexmech_py as fm
+from flexmech_py.cli import main
+from flexmech_py.modes import frequencies_along, modes
+
+E, I, A, RHO, L = 2e11, 1e-9, 1e-4, 7800.0, 1.0
+#: roots beta_n L of 1 + cos(bL) cosh(bL) = 0 (clamped-free Euler-Bernoulli beam)
+CLAMPED_FREE = np.array([1.875104069, 4.694091133, 7.854757438])
+
+
+def _exact(beta_l):
+    return (beta_l / L) ** 2 * np.sqrt(E * I / (RHO * A))
+
+
+def test_clamped_free_beam_converges_with_order_four():
+    errs = []
+    for n in (2, 4, 8):
+        ms = modes(beam_case(n_el=n), count=3, model="classic")
+        assert not ms.rigid.any()
+        errs.append(np.abs(ms.omega / _exact(CLAMPED_FREE) - 1))
+    errs = np.array(errs)
+    order = np.log2(errs[1, :2] / errs[2, :2])
+    print(f"\nclamped-free errors at 8 el: {errs[-1]}, observed orders {order}")
+    assert errs[-1, 0] < 3e-6 and errs[-1, 1] < 1e-4
+    assert np.all(order > 3.8)                       # cubic Hermite elements: frequencies O(h^4)
+
+
+@pytest.mark.parametrize("model", ["hac", "coupled", "nonlinear"])
+def test_every_model_gives_the_beam_frequencies_at_rest(model):
+    ms = modes(beam_case(n_el=8), count=2, model=model)
+    err = np.abs(ms.omega / _exact(CLAMPED_FREE[:2]) - 1)
+    assert err[0] < 5e-6 and err[1] < 2e-4, err
+
+
+def test_spinning_cantilever_stiffens_by_the_southwell_coefficient():
+    """Superposition model with the quasi-static axial forces (K_sigma) frozen on a cantilever spinning
+    at Omega about its clamped end: w^2 = w0^2 + S Omega^2, S = 1.1933 for the first mode (Southwell;
+    the frozen analysis holds the rigid motion, so the transverse centrifugal (-Omega^2 M) and
+    Coriolis terms are not in it)."""
+    omega_spin = 20.0
+    spin = {"type": "kinematic", "law": "constant_speed", "speed": omega_spin}
+    w0 = modes(beam_case(n_el=8), count=1, model="classic").omega[0]
+    w = modes(beam_case(n_el=8, drive=spin), count=1, model="classic", geometric="quasi_static").omega[0]
+    w_none = modes(beam_case(n_el=8, drive=spin), count=1, model="classic", geometric="none").omega[0]
+    s = (w ** 2 - w0 ** 2) / omega_spin ** 2
+    print(f"\nSouthwell coefficient {s:.5f} (1.1933), without K_sigma {(w_none ** 2 - w0 ** 2) / omega_spin ** 2:.2e}")
+    assert s == pytest.approx(1.1933, rel=3e-3)
+    assert abs(w_none ** 2 - w0 ** 2) < 1e-3 * omega_spin ** 2      # no stiffening without K_sigma
+
+
+def test_frequencies_are_those_the_stability_guards_use(cases_dir):
+    """modes() at the samples of extreme.lowest_frequencies gives the same frequencies."""
+    from flexmech_py.extreme import lowest_frequencies
+    from flexmech_py.simulate import Prepared
+
+    case = fm.load_case(cases_dir / "fourbar_constant_speed.toml", overrides=["solver.t_end=0.02"])
+    prep = Prepared(case)
+    low = lowest_frequencies(prep, nmodes=2, samples=3)
+    for k, i in enumerate(np.linspace(0, prep.nsteps, 3).round().astype(int)):
+        ms = modes(case, at=float(prep.t[i]), count=2, model="hac")
+        np.testing.assert_allclose(ms.omega, low[k], rtol=1e-9)
+
+
+def test_along_the_cycle_is_periodic_and_finds_harmonic_crossings(cases_dir):
+    case = fm.load_case(cases_dir / "fourbar_constant_speed.toml")
+    al = frequencies_along(case, 24, count=3)
+    assert al.xlabel == "crank angle [deg]" and al.hz.shape == (24, 3)
+    assert np.all(np.diff(al.hz, axis=1) >= 0)                       # k-th lowest at each position
+    first = modes(case, at=float(al.t[0]), count=3)
+    np.testing.assert_allclose(al.omega[0], first.omega, rtol=1e-10)
+    for c in al.crossings():                                          # f_i = k Omega / 2 pi there
+        assert c["f_hz"] == pytest.approx(c["harmonic"] * 120.0 / (2 * np.pi), rel=1e-9)
+    assert al.crossings()
+
+
+def test_cli_modes_writes_its_files_and_refuses_bad_input(cases_dir, tmp_path, capsys):
+    out = tmp_path / "m"
+    assert main(["modes", str(cases_dir / "fourbar_constant_speed.toml"), "--crank-angle", "90",
+                 "--along-cycle", "12", "--count", "3", "--out", str(out)]) == 0
+    names = {p.name for p in out.iterdir()}
+    assert {"modes.csv", "modes.json", "mode_shapes.csv", "frequencies_along.csv", "frequencies_along.json"} <= names
+    js = json.loads((out / "modes.json").read_text())
+    assert len(js["modes"]) == 3 and js["crank_angle_deg"] == pytest.approx(90.0, abs=1e-6)
+    capsys.readouterr()
+    bad = tmp_path / "bad"
+    assert main(["modes", str(cases_dir / "fourbar_constant_speed.toml"), "--at", "5", "--out", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--at" in err and not bad.exists()
+    assert main(["modes", str(cases_dir / "fourbar_constant_speed.toml"), "--at", "0", "--crank-angle", "10"]) == 2
+
+
+def test_mode_shapes_file_reads_back(cases_dir, tmp_path):
+    from flexmech_py.shapes import read_shape_csv
+
+    ms = modes(fm.load_case(cases_dir / "sixbar_plate.toml"), count=3, elements_per_link=4)
+    ms.write(tmp_path)
+    sf, key, _ = read_shape_csv(tmp_path / "mode_shapes.csv")
+    assert key == "f_hz"
+    np.testing.assert_allclose(sf.key, ms.hz, rtol=1e-9)
+    np.testing.assert_allclose(sf.d, ms.shapes.d, rtol=1e-6, atol=1e-9 * np.max(np.abs(ms.shapes.d)))  # 7 digits
+    np.testing.assert_allclose(sf.x, ms.shapes.x, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", fm.case_names())
+def test_every_case_file_has_modes_in_every_model(name):
+    """Every bundled mechanism, every model family, at t = 0: finite frequencies, elastic ones
+    positive unless the case is built past buckling (extreme/flexible_fourbar: the superposition
+    models report negative omega there, the linearized models find no equilibrium and say so)."""
+    case = fm.load_case(name)
+    for model in ("classic", "coupled", "nonlinear"):
+        if name == "extreme/flexible_fourbar" and model != "classic":
+            with pytest.raises(fm.SolverError, match="past buckling"):
+                modes(case, count=2, model=model)
+            continue
+        ms = modes(case, count=2, model=model)
+        elastic = ms.omega[~ms.rigid]
+        assert elastic.size == 2 and np.all(np.isfinite(ms.omega))
+        assert np.all(elastic > 0) or name == "extreme/flexible_fourbar"
+
+
+def test_run_draw_keeps_frames_and_draw_redraws_them(cases_dir, tmp_path, capsys):
+    """`run --draw N` keeps the points of N frames spread over the run, streamed block by block; their
+    displacements are the run's own (the coupler's midpoint against the displacement output)."""
+    from flexmech_py.shapes import read_shape_csv
+
+    out = tmp_path / "r"
+    assert main(["run", str(cases_dir / "fourbar_hac.toml"), "--set", "solver.t_end=0.05", "--draw", "5",
+                 "--out", str(out), "--quiet"]) == 0
+    sf, key, _ = read_shape_csv(out / "shape.csv")
+    assert key == "t" and sf.key.size == 5
+    np.testing.assert_allclose(sf.key, np.linspace(0.0, 0.05, 5), atol=1e-12)
+    summary = json.loads((out / "summary.json").read_text())
+    assert "shape.csv" in summary["files"] and "drawing.png" in summary["files"]
+    res = fm.simulate(fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=0.05"]))
+    coupler = next(b for b in sf.bodies if b.name == "coupler")
+    mid = coupler.sl.start + coupler.labels.index("0.5")
+    ux = np.interp(sf.key, res.t, res.u[res.fe.trans_dof[res.fe.node_of[1][1]][0]])
+    np.testing.assert_allclose(sf.d[:, mid, 0], ux, rtol=1e-6, atol=1e-12)
+    capsys.readouterr()
+    assert main(["draw", str(out), "--frames", "3", "--out", str(tmp_path / "three.png")]) == 0
+    assert (tmp_path / "three.png").stat().st_size > 10_000
+    assert main(["draw", str(tmp_path)]) == 2 and "no shape.csv" in capsys.readouterr().err
