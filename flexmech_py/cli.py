@@ -8,7 +8,7 @@
     flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
     flexmech stability CASE.toml --speed START:STOP:N [--model M] [--geometric G] [--jobs N] [--out DIR]
     flexmech steady CASE.toml [--model M] [--geometric G] [--out DIR]
-    flexmech draw RESULT_DIR [--frames N] [--scale S] [--out PNG]
+    flexmech draw RESULT_DIR [--frames N] [--scale S] [--gif] [--out FILE]
     flexmech modes CASE.toml [--at T | --crank-angle A] [--count N] [--along-cycle K] [--model M] [--out DIR]
     flexmech sweep CASE.toml --param KEY.PATH=START:STOP:N [--param ...] [--model M] [--jobs N] [--out DIR]
     flexmech sweep CASE.toml --sample KEY.PATH=normal:MEAN:SD [--sample ...] --samples N [--seed S] [--method lhs]
@@ -92,7 +92,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     r.add_argument("--draw", type=int, nargs="?", const=6, default=None, metavar="N",
                    help="keep the mechanism's points at N frames spread over the run (default 6) in shape.csv "
-                        "and draw them, deflection magnified, in drawing.png")
+                        "and draw them, deflection magnified, in drawing.png (at most 12 panels; all frames: "
+                        "flexmech draw OUT --gif)")
     r.add_argument("--quiet", action="store_true", help="no cost estimate and no progress bar on stderr")
     r.add_argument("--progress", action="store_true",
                    help="draw the progress bar even when stderr is not a terminal (default: only on a terminal)")
@@ -155,10 +156,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     dr = sub.add_parser("draw", help="draw the mechanism at frames of a run written with `flexmech run --draw`")
     dr.add_argument("result", help="a folder written by `flexmech run --draw` (its shape.csv and summary.json)")
-    dr.add_argument("--frames", type=_positive_int, default=6, help="panels, spread over the frames kept (default 6)")
+    dr.add_argument("--frames", type=_positive_int, default=None,
+                    help="panels (GIF: frames), spread over the frames kept (default 6; GIF: every frame kept)")
     dr.add_argument("--scale", type=_positive_float, help="magnification of the elastic deflection "
                                                           "(default: its largest drawn as 10 %% of the mechanism)")
-    dr.add_argument("--out", default=None, help="PNG to write (default: RESULT/drawing.png)")
+    dr.add_argument("--gif", action="store_true",
+                    help="an animated GIF of the frames instead of a PNG of panels (default RESULT/drawing.gif)")
+    dr.add_argument("--out", default=None, help="file to write (default: RESULT/drawing.png, with --gif RESULT/drawing.gif)")
 
     md = sub.add_parser("modes", help="natural frequencies and mode shapes of the mechanism frozen at one "
                                       "configuration, or along one cycle")
@@ -574,6 +578,10 @@ def _cmd_run(args) -> int:
     return 0
 
 
+#: panels of the drawing.png of ``run --draw`` (more frames stay in shape.csv for ``flexmech draw --gif``)
+MAX_PANELS = 12
+
+
 def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
     """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
     import numpy as np
@@ -587,7 +595,8 @@ def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
     if plots:
         from .drawing import draw_frames
 
-        p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, np.arange(sf.key.size),
+        panels = np.unique(np.linspace(0, sf.key.size - 1, min(sf.key.size, MAX_PANELS)).round().astype(int))
+        p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, panels,
                            title=f"{res.case['case']['title']} - model {res.model}")
         paths += [p] if p else []
     return paths
@@ -599,7 +608,7 @@ def _cmd_draw(args) -> int:
     import numpy as np
 
     from .case import Case
-    from .drawing import draw_frames
+    from .drawing import animate_frames, draw_frames
     from .shapes import read_shape_csv
 
     folder = Path(args.result)
@@ -611,12 +620,16 @@ def _cmd_draw(args) -> int:
         case = Case(summary["input"])
     except (OSError, ValueError, KeyError) as exc:
         raise FlexmechError(f"{folder}/summary.json: cannot be read as a flexmech run's summary ({exc})") from None
-    idx = np.unique(np.linspace(0, sf.key.size - 1, min(args.frames, sf.key.size)).round().astype(int))
-    path = Path(args.out) if args.out else folder / "drawing.png"
-    p, scale = draw_frames(path, sf, case.mechanism, idx, scale=args.scale,
-                           title=f"{case['case']['title']} - model {summary.get('model', '')}")
+    frames = args.frames or (sf.key.size if args.gif else 6)
+    idx = np.unique(np.linspace(0, sf.key.size - 1, min(frames, sf.key.size)).round().astype(int))
+    path = Path(args.out) if args.out else folder / ("drawing.gif" if args.gif else "drawing.png")
+    title = f"{case['case']['title']} - model {summary.get('model', '')}"
+    if args.gif:
+        p, scale = animate_frames(path, sf, case.mechanism, idx, scale=args.scale, title=title)
+    else:
+        p, scale = draw_frames(path, sf, case.mechanism, idx, scale=args.scale, title=title)
     if p is None:
-        raise FlexmechError("draw: needs matplotlib (pip install matplotlib)")
+        raise FlexmechError("draw: needs matplotlib and Pillow (pip install matplotlib)")
     print(f"wrote {p} ({idx.size} frames, deflection x {scale:g})")
     return 0
 

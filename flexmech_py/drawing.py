@@ -17,7 +17,8 @@ import numpy as np
 
 from .plots import _PNG, have_matplotlib
 
-__all__ = ["magnification", "deformed_lines", "draw_frames", "draw_modes", "plot_along", "TARGET_FRACTION"]
+__all__ = ["magnification", "deformed_lines", "draw_frames", "animate_frames", "draw_modes", "plot_along",
+           "TARGET_FRACTION"]
 
 #: the largest magnified displacement as a fraction of the mechanism's size
 TARGET_FRACTION = 0.1
@@ -204,6 +205,44 @@ def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str =
     return Path(path), scale
 
 
+def animate_frames(path, sf, mech, idx, *, scale: float | None = None, title: str = "", fps: float = 12.0):
+    """Animated GIF (matplotlib's Pillow writer) of the mechanism at the instants idx of sf, one
+    frame each, on fixed axes and one magnification for all (default as :func:`draw_frames`); the
+    time and the magnification written on every frame.  Returns (path, scale) or (None, scale)
+    without matplotlib or Pillow."""
+    idx = np.atleast_1d(np.asarray(idx, int))
+    dmax = max((largest_drawn(sf, int(i)) for i in idx), default=0.0)
+    scale = magnification(mechanism_size(sf), dmax) if scale is None else float(scale)
+    if not have_matplotlib():
+        return None, scale
+    try:
+        from matplotlib.animation import PillowWriter
+    except ImportError:
+        return None, scale
+    lo, hi = _limits(sf, idx, scale)
+    _, _, width, height = _panel_grid(1, hi - lo)
+    fig = _figure(width * 1.35, height * 1.35)
+    ax = fig.subplots()
+    marks = _joint_marks(mech, sf)
+    colours = [BODY_COLOURS[k % len(BODY_COLOURS)] for k in range(len(sf.bodies))]
+    writer = PillowWriter(fps=fps)
+    with writer.saving(fig, str(path), dpi=80):
+        for i in idx:
+            ax.clear()
+            _draw_instant(ax, sf, int(i), scale, marks, colours)
+            ax.set_xlim(lo[0], hi[0])
+            ax.set_ylim(lo[1], hi[1])
+            ax.set_aspect("equal", adjustable="box")
+            ax.set_xlabel("X [m]", fontsize=8)
+            ax.set_ylabel("Y [m]", fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.grid(True, alpha=0.25)
+            ax.set_title(f"{title}\nt = {sf.key[i]:.4f} s, elastic deflection {factor_text(scale)}", fontsize=8.5)
+            fig.tight_layout()
+            writer.grab_frame()
+    return Path(path), scale
+
+
 def draw_modes(path, ms, *, title: str | None = None):
     """PNG of the mode shapes of a :class:`flexmech_py.modes.ModeSet`, one panel each, every shape
     scaled so that its largest displacement is TARGET_FRACTION of the mechanism's size."""
@@ -258,7 +297,8 @@ def plot_along(path, al, *, title: str | None = None):
     ax.grid(True, alpha=0.25)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     note = (f"grey: crank speed harmonics kΩ/2π, k = 1..{ks[-1]}" + (" (more above the frame)" if len(ks) == 20 else "")
-            if ks else "no crank speed (no revolute drive)")
+            if ks else ("no crank speed (no revolute drive)" if al.speed is None
+                        else f"{al.joint} turns less than a revolution: no speed harmonics drawn"))
     ax.set_title(f"{al.t.size} positions over {al.span}; {note}", fontsize=8, loc="left")
     fig.suptitle(title or f"{al.case['case']['title']}\nfrozen natural frequencies along the motion, model {al.model}"
                  + (", geometric stiffness" if al.geometric else ""), fontsize=9.5)

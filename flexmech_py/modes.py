@@ -336,12 +336,17 @@ class Along:
 
     def harmonics(self) -> list[int]:
         """The harmonics k = 1, 2, ... whose k Omega / 2 pi reaches into the frequency range drawn
-        (at most MAX_HARMONICS of them)."""
-        if self.speed is None or not np.any(self.speed > 0):
+        (at most MAX_HARMONICS of them); none when the drive joint turns less than one revolution over
+        a span that is not a cycle (a swinging arm: its speed's harmonics force nothing periodic)."""
+        if self.speed is None or not np.any(self.speed > 0) or not self.turns():
             return []
         top = 1.05 * float(np.max(self.hz))
         kmax = int(top / (float(np.max(self.speed)) / (2 * np.pi)))
         return list(range(1, min(max(kmax, 1), MAX_HARMONICS) + 1))
+
+    def turns(self) -> bool:
+        """The drive joint turns: the span is one cycle, or the joint's angle covers a revolution."""
+        return self.span.startswith("one") or (self.angle is not None and float(np.ptp(self.angle)) >= 360.0)
 
     def harmonics_hz(self, k: int) -> np.ndarray:
         """k Omega(t) / 2 pi [Hz] at the positions."""

@@ -19,6 +19,7 @@ from .bundled import cases_dir as cases_dir_bundled
 from .case import MODELS, SUPERPOSITION_MODELS, load_case
 from .errors import CaseError
 from .plots import line_figure, mechanism_sketch
+from .reproduce_modes import modes_section
 from .simulate import simulate_models
 
 __all__ = ["reproduce", "seed_case_path", "model_differences"]
@@ -115,6 +116,7 @@ def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS,
     figs = {**_fourbar_figures(out, runs["fourbar_hac"], sup, dvec), **_manipulator_figures(out, runs),
             **_coupled_figures(out, runs)}
     gap_lines = _gap_section(cases_dir, t_end, say) if gap else []
+    gap_lines += modes_section(out, lambda n: seed_case_path(n, cases_dir), SEED_CASES, t_end, say)
     report = out / "report.md"
     report.write_text(report_text(runs, figs, dvec, timings, models) + "\n".join(gap_lines) + "\n", encoding="utf-8")
     return report

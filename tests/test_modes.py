@@ -41,6 +41,89 @@ def test_every_model_gives_the_beam_frequencies_at_rest(model):
     assert err[0] < 5e-6 and err[1] < 2e-4, err
 
 
+def _pinned_roller_beam(n_el):
+    """The beam pinned at (0, 0) and on a roller at (L, 0): a massless-like slider body on a horizontal
+    guide, pinned to the beam's end (the beam's end is free to slide axially and to turn)."""
+    return fm.validate_case({
+        "mechanism": {"ground": {"O": [0.0, 0.0]}},
+        "links": [{"name": "beam", "start": "ground.O", "end": [L, 0.0], "area": A, "second_moment": I,
+                   "youngs_modulus": E, "density": RHO, "elements": n_el}],
+        "bodies": [{"name": "roller", "mass": 1e-6, "inertia": 0.0, "centre": [L, 0.0], "points": {"pin": [L, 0.0]}}],
+        "joints": [{"name": "pivot", "type": "revolute", "connects": ["ground.O", "beam.start"]},
+                   {"name": "pin", "type": "revolute", "connects": ["beam.end", "roller.pin"]},
+                   {"name": "slot", "type": "prismatic", "connects": ["ground", "roller.pin"], "axis": [1.0, 0.0]}],
+        "solver": {"t_end": 0.01, "dt": 1e-4},
+        "outputs": {"mid": {"kind": "strain", "link": "beam", "at": 0.5}}})
+
+
+@pytest.mark.parametrize("model", ["classic", "coupled", "nonlinear"])
+def test_pinned_pinned_beam_converges_with_order_four(model):
+    """omega_n = (n pi / L)^2 sqrt(EI / rho A): a zero-DOF mechanism (pivot, roller) in every model."""
+    exact = (np.arange(1, 4) * np.pi / L) ** 2 * np.sqrt(E * I / (RHO * A))
+    errs = np.array([np.abs(modes(_pinned_roller_beam(n), count=3, model=model).omega / exact - 1) for n in (2, 4, 8)])
+    order = np.log2(errs[:-1, :2] / errs[1:, :2])
+    print(f"\npinned-pinned ({model}) errors at 8 el: {errs[-1]}, observed orders {order.ravel()}")
+    assert errs[-1, 0] < 2e-5 and errs[-1, 2] < 2e-3
+    assert np.all(order > 3.8)
+
+
+def _tip_mass_roots(mu, count=3):
+    """Roots beta L of 1 + cos cosh + mu beta L (cos sinh - sin cosh) = 0: a clamped-free beam with a
+    tip mass mu rho A L (no rotary inertia; e.g. Blevins, Formulas for natural frequency and mode
+    shape, table 8-8: beta_1 L = 1.2479 at mu = 1)."""
+    from scipy.optimize import brentq
+
+    def f(b):
+        return 1 + np.cos(b) * np.cosh(b) + mu * b * (np.cos(b) * np.sinh(b) - np.sin(b) * np.cosh(b))
+
+    grid = np.linspace(0.1, 15.0, 3000)
+    v = f(grid)
+    return np.array([brentq(f, grid[i], grid[i + 1]) for i in np.flatnonzero(v[:-1] * v[1:] < 0)][:count])
+
+
+@pytest.mark.parametrize("model", ["classic", "coupled", "nonlinear"])
+def test_cantilever_with_a_tip_mass(model):
+    mu = 1.0
+    roots = _tip_mass_roots(mu)
+    assert roots[0] == pytest.approx(1.2479, abs=1e-4)
+    exact = (roots / L) ** 2 * np.sqrt(E * I / (RHO * A))
+    case = fm.validate_case({
+        "mechanism": {"type": "serial"},
+        "links": [{"name": "beam", "length": L, "area": A, "second_moment": I, "youngs_modulus": E,
+                   "density": RHO, "elements": 8}],
+        "drive": {"type": "kinematic", "law": "constant_speed", "speed": 0.0},
+        "point_masses": [{"at": "beam.end", "mass": mu * RHO * A * L}],
+        "solver": {"t_end": 0.01, "dt": 1e-4},
+        "outputs": {"tip": {"kind": "displacement", "at": "beam.end", "component": "transverse"}}})
+    err = np.abs(modes(case, count=3, model=model).omega / exact - 1)
+    print(f"\ntip mass ({model}) errors at 8 el: {err}")
+    assert err[0] < 1e-6 and err[1] < 1e-4 and err[2] < 1e-3
+
+
+@pytest.mark.parametrize("model", ["classic", "coupled", "nonlinear"])
+def test_four_bar_rings_at_its_natural_frequencies(model):
+    """The seed four-bar held at rest (crank speed 0) under gravity applied at t = 0 rings about its
+    static deflection: the peaks of the spectrum of the coupler and follower midspan strains sit on
+    frequencies of modes() (within the period elongation of the average-acceleration rule,
+    (omega dt)^2 / 12 <= 5e-4 here)."""
+    case = fm.load_case("fourbar_constant_speed", overrides=[
+        "drive.speed=0.0", "loads.gravity=[0.0,-9.81]", "solver.t_end=1.0", "solver.dt=2e-4", "solver.output_every=1"])
+    res = fm.simulate(case, model=model)
+    hz = modes(case, count=4, model=model).hz
+    found = set()
+    for key in ("strain_coupler_mid", "strain_follower_mid"):
+        y = res[key] - res[key].mean()
+        pad = 64 * y.size
+        spec = np.abs(np.fft.rfft(y * np.hanning(y.size), pad))
+        f = np.fft.rfftfreq(pad, res.t[1] - res.t[0])
+        peak = f[1 + np.argmax(spec[1:])]
+        nearest = int(np.argmin(np.abs(hz - peak)))
+        print(f"\n{model} {key}: spectrum peak {peak:.3f} Hz, mode {nearest + 1} at {hz[nearest]:.3f} Hz")
+        assert peak == pytest.approx(hz[nearest], rel=1e-3)
+        found.add(nearest)
+    assert found <= {0, 1, 2}
+
+
 def test_spinning_cantilever_stiffens_by_the_southwell_coefficient():
     """Superposition model with the quasi-static axial forces (K_sigma) frozen on a cantilever spinning
     at Omega about its clamped end: w^2 = w0^2 + S Omega^2, S = 1.1933 for the first mode (Southwell;
@@ -148,4 +231,9 @@ def test_run_draw_keeps_frames_and_draw_redraws_them(cases_dir, tmp_path, capsys
     capsys.readouterr()
     assert main(["draw", str(out), "--frames", "3", "--out", str(tmp_path / "three.png")]) == 0
     assert (tmp_path / "three.png").stat().st_size > 10_000
+    assert main(["draw", str(out), "--gif"]) == 0
+    from PIL import Image
+
+    with Image.open(out / "drawing.gif") as gif:            # every kept frame, one GIF frame each
+        assert gif.n_frames == 5 and gif.size[0] > 300
     assert main(["draw", str(tmp_path)]) == 2 and "no shape.csv" in capsys.readouterr().err

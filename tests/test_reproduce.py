@@ -45,6 +45,28 @@ def test_report_has_the_reader_sections(reduced):
         assert "fig2_fourbar.png" in text and "fig9_manipulator.png" in text
 
 
+def test_report_has_frequencies_along_the_motion_and_drawings(reduced):
+    """The four-bar's and the manipulator's frozen frequencies along the motion (their bands in the
+    report are those of the CSV) and one drawing per seed case."""
+    import csv
+
+    import numpy as np
+
+    out, text, _ = reduced
+    assert "## Natural frequencies along the motion, and the mechanisms drawn" in text
+    for name in ("fourbar_constant_speed", "manipulator_bricout"):
+        with open(out / "modes" / name / "frequencies_along.csv", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(line for line in fh if not line.startswith("#")))
+        f1 = np.array([float(r["f1_hz"]) for r in rows])
+        assert f1.size in (72, 48) and np.all(f1 > 0)
+        assert f"| 1 | {f1.min():.4g} | {f1.max():.4g} |" in text
+    assert "k = 4" in text                     # the four-bar's third mode meets 4 Omega (docs/cli.md)
+    if have_matplotlib():
+        for name in rp.SEED_CASES:
+            assert f"({name}_drawing.png)" in text and (out / f"{name}_drawing.png").is_file()
+        assert (out / "fourbar_constant_speed_frequencies_along.png").is_file()
+
+
 def test_report_states_no_infinite_times_and_no_false_limits(reduced):
     _, text, _ = reduced
     assert "inf s" not in text and "t = inf" not in text and "| inf |" not in text

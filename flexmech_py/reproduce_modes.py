@@ -1,0 +1,77 @@
+"""The part of ``flexmech reproduce`` that looks at the seed mechanisms rather than at their curves:
+the frozen natural frequencies along the motion (the four-bar over one crank cycle at constant
+speed, the manipulator over its run) with the drive speed harmonics, and one drawing per seed case
+(the deformed mechanism at six instants of its ``hac`` run, deflection magnified)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .case import load_case
+
+__all__ = ["modes_section"]
+
+#: (seed case, positions along the motion)
+ALONG = (("fourbar_constant_speed", 72), ("manipulator_bricout", 48))
+#: panels of each seed case's drawing, and the model drawn (the seed's case I)
+PANELS, DRAWN_MODEL = 6, "hac"
+
+
+def modes_section(out: Path, case_path, seed_cases, t_end, say) -> list[str]:
+    """Write frequencies_along CSV/JSON/PNG and one drawing per seed case under ``out``; returns the
+    report's lines.  ``case_path(name)`` locates a seed case; ``t_end`` shortens the drawn runs."""
+    lines = ["", "## Natural frequencies along the motion, and the mechanisms drawn", "",
+             "The lowest elastic natural frequencies of the mechanism frozen at positions of its rigid motion "
+             "(`flexmech modes --along-cycle`, docs/theory.md §20), each mode's band and where a frequency meets a "
+             "harmonic kΩ/2π of the drive speed (a resonance crossing); then each seed case drawn at "
+             f"{PANELS} instants of its `{DRAWN_MODEL}` run, the elastic deflection magnified by the factor printed "
+             "under it (`flexmech run CASE --draw`).  Regenerate: `flexmech reproduce`.", ""]
+    for name, positions in ALONG:
+        lines += _frequencies(out, load_case(case_path(name)), name, positions, say)
+    for name in seed_cases:
+        overrides = [f"solver.t_end={t_end}"] if t_end else None
+        lines += _drawing(out, load_case(case_path(name), overrides=overrides), name, say)
+    return lines
+
+
+def _frequencies(out: Path, case, name: str, positions: int, say) -> list[str]:
+    from .drawing import plot_along
+    from .modes import frequencies_along
+
+    t0 = time.perf_counter()
+    al = frequencies_along(case, positions, count=3)
+    al.write(out / "modes" / name)
+    png = plot_along(out / f"{name}_frequencies_along.png", al)
+    say(f"{name}: frequencies at {positions} positions in {time.perf_counter() - t0:.2f} s")
+    cross = al.crossings()
+    rows = ["| mode | min [Hz] | max [Hz] | crossings with kΩ/2π |", "|---|---|---|---|"]
+    for k in range(al.hz.shape[1]):
+        ks = sorted({c["harmonic"] for c in cross if c["mode"] == k + 1})
+        rows.append(f"| {k + 1} | {np.min(al.hz[:, k]):.4g} | {np.max(al.hz[:, k]):.4g} | "
+                    + (", ".join(f"k = {h}" for h in ks) if ks else "none") + " |")
+    img = [f"![{name} frequencies along the motion]({png.name})", ""] if png else []
+    return [f"### {case['case']['title']} (model {al.model}, {positions} positions over {al.span})", "", *rows, "",
+            *img, f"Files: `modes/{name}/frequencies_along.csv`, `.json`.", ""]
+
+
+def _drawing(out: Path, case, name: str, say) -> list[str]:
+    from .drawing import draw_frames
+    from .runner import MemorySink, execute
+    from .shapes import ShapeCollector
+    from .simulate import Prepared
+
+    t0 = time.perf_counter()
+    prep = Prepared(case)
+    shapes = ShapeCollector(prep, DRAWN_MODEL, PANELS)
+    execute(prep, DRAWN_MODEL, MemorySink(prep.frames), estimate=False, diagnose=False, observers=[shapes])
+    sf = shapes.result()
+    png, scale = draw_frames(out / f"{name}_drawing.png", sf, case.mechanism, np.arange(sf.key.size),
+                             title=f"{case['case']['title']} - model {DRAWN_MODEL}")
+    say(f"{name}: drawn at {sf.key.size} instants in {time.perf_counter() - t0:.2f} s")
+    if png is None:
+        return []
+    return [f"### {case['case']['title']}: the deformed mechanism, deflection × {scale:g}", "",
+            f"![{name} drawn]({png.name})", ""]
