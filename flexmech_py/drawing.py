@@ -95,8 +95,9 @@ def _outline(body, pts: np.ndarray) -> np.ndarray:
 
 
 def _joint_marks(mech, sf) -> list:
-    """[(name, point index or None, ground position or None, joint kind, driven)] of every joint: the
-    point of its non-ground side b (a if b is the ground) in sf's layout."""
+    """[(name, point index or None, ground, joint kind, driven)] of every joint: the point of its
+    non-ground side b (a if b is the ground) in sf's layout; ground: None, the ground point's
+    position, or (a point, the direction) of a prismatic joint's guide on the ground."""
     driven = {d.joint for d in mech.drives}
     out = []
     for j in mech.joints:
@@ -106,6 +107,8 @@ def _joint_marks(mech, sf) -> list:
         label = side.point
         if side.body.kind == "link" and not side.body.rigid:
             label = f"{side.body.fraction(side.point):.12g}"
+        if ground is not None and j.kind == "prismatic":
+            ground = (ground, np.asarray(j.unit_axis(), float))
         out.append((j.name, sf.point(side.body.name, label), ground, j.kind, j.name in driven))
     return out
 
@@ -128,12 +131,27 @@ def _draw_instant(ax, sf, i: int, scale: float, marks, colours) -> None:
         if p is None:
             continue
         pos = sf.x[i, p] + scale * sf.d[i, p]
-        if ground is not None:
+        if ground is not None and kind == "prismatic":   # a guide on the ground: its line, not a pivot
+            ax.axline(ground[0], xy2=ground[0] + ground[1], color="0.35", lw=1.0, zorder=0)
+        elif ground is not None:
             ax.plot(*ground, marker="^", ms=11, mfc="0.85", mec="k", zorder=0)
         if kind == "prismatic":
             ax.plot(*pos, marker="s", ms=7, mfc="white", mec="k", zorder=4)
         else:
             ax.plot(*pos, marker="o", ms=5.5, mfc="white" if not driven else "k", mec="k", zorder=4)
+
+
+def _symbols(marks) -> str:
+    """The legend of the joint marks drawn (only those present)."""
+    kinds = {(kind, ground is not None, driven) for _, _, ground, kind, driven in marks}
+    words = ["o joint"]
+    if any(d for _, _, d in kinds):
+        words.append("● driven joint")
+    if any(g and k != "prismatic" for k, g, _ in kinds):
+        words.append("▲ ground pivot")
+    if any(k == "prismatic" for k, _, _ in kinds):
+        words.append("■ slider" + (" (grey line: its guide on the ground)" if any(g and k == "prismatic" for k, g, _ in kinds) else ""))
+    return ", ".join(words)
 
 
 def _limits(sf, idx, scale: float):
@@ -199,7 +217,7 @@ def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str =
             ax.set_xlabel("X [m]", fontsize=8)
     fig.suptitle(title, fontsize=9.5)
     _legend_line(fig, (legend or f"elastic deflection {factor_text(scale)} (magnified)")
-                 + ", rigid configuration dashed; o joint, ● driven joint, ▲ ground, ■ slider")
+                 + ", rigid configuration dashed; " + _symbols(marks))
     fig.tight_layout(rect=(0, 0.035, 1, 1))
     fig.savefig(path, dpi=100, pil_kwargs=_PNG)
     return Path(path), scale
