@@ -46,12 +46,14 @@ def _frequencies(out: Path, case, name: str, positions: int, say) -> list[str]:
     al.write(out / "modes" / name)
     png = plot_along(out / f"{name}_frequencies_along.png", al)
     say(f"{name}: frequencies at {positions} positions in {time.perf_counter() - t0:.2f} s")
-    cross = al.crossings()
+    cross, turns = al.crossings(), bool(al.harmonics())
     rows = ["| mode | min [Hz] | max [Hz] | crossings with kΩ/2π |", "|---|---|---|---|"]
     for k in range(al.hz.shape[1]):
         ks = sorted({c["harmonic"] for c in cross if c["mode"] == k + 1})
-        rows.append(f"| {k + 1} | {np.min(al.hz[:, k]):.4g} | {np.max(al.hz[:, k]):.4g} | "
-                    + (", ".join(f"k = {h}" for h in ks) if ks else "none") + " |")
+        met = ", ".join(f"k = {h}" for h in ks) if ks else ("none" if turns else "–")
+        rows.append(f"| {k + 1} | {np.min(al.hz[:, k]):.4g} | {np.max(al.hz[:, k]):.4g} | {met} |")
+    if not turns:   # a swinging joint: its speed's harmonics force nothing periodic (Along.harmonics)
+        rows += ["", f"No speed harmonics: {al.joint or 'the drive joint'} turns less than a revolution over the run."]
     img = [f"![{name} frequencies along the motion]({png.name})", ""] if png else []
     return [f"### {case['case']['title']} (model {al.model}, {positions} positions over {al.span})", "", *rows, "",
             *img, f"Files: `modes/{name}/frequencies_along.csv`, `.json`.", ""]

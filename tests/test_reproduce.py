@@ -61,6 +61,7 @@ def test_report_has_frequencies_along_the_motion_and_drawings(reduced):
         assert f1.size in (72, 48) and np.all(f1 > 0)
         assert f"| 1 | {f1.min():.4g} | {f1.max():.4g} |" in text
     assert "k = 4" in text                     # the four-bar's third mode meets 4 Omega (docs/cli.md)
+    assert "No speed harmonics: base turns less than a revolution over the run." in text   # the manipulator
     if have_matplotlib():
         for name in rp.SEED_CASES:
             assert f"({name}_drawing.png)" in text and (out / f"{name}_drawing.png").is_file()
