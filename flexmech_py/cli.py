@@ -549,7 +549,7 @@ def _cmd_run(args) -> int:
                            quiet=args.quiet)
     if args.draw is not None and args.draw < 2:
         raise FlexmechError(f"--draw: needs 2 frames or more, got {args.draw}")
-    shapes = ShapeCollector(prep, model, args.draw) if args.draw else None
+    shapes = ShapeCollector(prep.case.mechanism, prep.frames, model, args.draw, prep.coupled) if args.draw else None
     try:
         res = execute(prep, model, sink, progress=progress, observers=[shapes] if shapes else [])
     except Interrupted as exc:
@@ -584,9 +584,7 @@ MAX_PANELS = 12
 
 def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
     """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
-    import numpy as np
-
-    from .shapes import write_shape_csv
+    from .shapes import spread, write_shape_csv
 
     head = [f"flexmech run --draw; case {res.case['case']['title']!r}; model {res.model}",
             "per frame (index, t [s]) every drawn point: x, y its rigid position [m]; dx, dy its elastic "
@@ -595,8 +593,7 @@ def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
     if plots:
         from .drawing import draw_frames
 
-        panels = np.unique(np.linspace(0, sf.key.size - 1, min(sf.key.size, MAX_PANELS)).round().astype(int))
-        p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, panels,
+        p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, spread(sf.key.size, MAX_PANELS),
                            title=f"{res.case['case']['title']} - model {res.model}")
         paths += [p] if p else []
     return paths
@@ -605,11 +602,9 @@ def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
 def _cmd_draw(args) -> int:
     import json
 
-    import numpy as np
-
     from .case import Case
     from .drawing import animate_frames, draw_frames
-    from .shapes import read_shape_csv
+    from .shapes import read_shape_csv, spread
 
     folder = Path(args.result)
     if not (folder / "shape.csv").exists():
@@ -621,7 +616,7 @@ def _cmd_draw(args) -> int:
     except (OSError, ValueError, KeyError) as exc:
         raise FlexmechError(f"{folder}/summary.json: cannot be read as a flexmech run's summary ({exc})") from None
     frames = args.frames or (sf.key.size if args.gif else 6)
-    idx = np.unique(np.linspace(0, sf.key.size - 1, min(frames, sf.key.size)).round().astype(int))
+    idx = spread(sf.key.size, frames)
     path = Path(args.out) if args.out else folder / ("drawing.gif" if args.gif else "drawing.png")
     title = f"{case['case']['title']} - model {summary.get('model', '')}"
     if args.gif:

@@ -154,6 +154,29 @@ def _symbols(marks) -> str:
     return ", ".join(words)
 
 
+def _instants(sf, idx, scale: float | None):
+    """(idx as an int array, the magnification: ``scale``, or :func:`magnification` of the largest
+    displacement drawn over those instants)."""
+    idx = np.atleast_1d(np.asarray(idx, int))
+    if scale is not None:
+        return idx, float(scale)
+    dmax = max((largest_drawn(sf, int(i)) for i in idx), default=0.0)
+    return idx, magnification(mechanism_size(sf), dmax)
+
+
+def _colours(sf) -> list:
+    return [BODY_COLOURS[k % len(BODY_COLOURS)] for k in range(len(sf.bodies))]
+
+
+def _frame_axes(ax, lo, hi) -> None:
+    """One panel's frame: the common limits, equal aspect, small ticks, a light grid."""
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal", adjustable="box")
+    ax.tick_params(labelsize=7)
+    ax.grid(True, alpha=0.25)
+
+
 def _limits(sf, idx, scale: float):
     pts = [sf.x[idx].reshape(-1, 2), (sf.x[idx] + scale * sf.d[idx]).reshape(-1, 2)]
     pts = np.concatenate(pts)
@@ -189,28 +212,21 @@ def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str =
     deflection magnified by ``scale`` (default :func:`magnification` of the largest displacement over
     those instants), rigid configuration dashed; panel titles ``labels`` (default t = ...).  Returns
     (path, scale) or (None, scale) without matplotlib."""
-    idx = np.atleast_1d(np.asarray(idx, int))
-    dmax = max((largest_drawn(sf, int(i)) for i in idx), default=0.0)
-    scale = magnification(mechanism_size(sf), dmax) if scale is None else float(scale)
+    idx, scale = _instants(sf, idx, scale)
     if not have_matplotlib():
         return None, scale
     lo, hi = _limits(sf, idx, scale)
     rows, cols, width, height = _panel_grid(idx.size, hi - lo)
     fig = _figure(width, height)
     axes = fig.subplots(rows, cols, squeeze=False)
-    marks = _joint_marks(mech, sf)
-    colours = [BODY_COLOURS[k % len(BODY_COLOURS)] for k in range(len(sf.bodies))]
+    marks, colours = _joint_marks(mech, sf), _colours(sf)
     for n, ax in enumerate(axes.ravel()):
         if n >= idx.size:
             ax.set_visible(False)
             continue
         _draw_instant(ax, sf, int(idx[n]), scale, marks, colours)
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
-        ax.set_aspect("equal", adjustable="box")
+        _frame_axes(ax, lo, hi)
         ax.set_title(labels[n] if labels is not None else f"t = {sf.key[idx[n]]:.4g} s", fontsize=9)
-        ax.tick_params(labelsize=7)
-        ax.grid(True, alpha=0.25)
         if n % cols == 0:
             ax.set_ylabel("Y [m]", fontsize=8)
         if n // cols == rows - 1 or n + cols >= idx.size:
@@ -228,9 +244,7 @@ def animate_frames(path, sf, mech, idx, *, scale: float | None = None, title: st
     frame each, on fixed axes and one magnification for all (default as :func:`draw_frames`); the
     time and the magnification written on every frame.  Returns (path, scale) or (None, scale)
     without matplotlib or Pillow."""
-    idx = np.atleast_1d(np.asarray(idx, int))
-    dmax = max((largest_drawn(sf, int(i)) for i in idx), default=0.0)
-    scale = magnification(mechanism_size(sf), dmax) if scale is None else float(scale)
+    idx, scale = _instants(sf, idx, scale)
     if not have_matplotlib():
         return None, scale
     try:
@@ -241,20 +255,15 @@ def animate_frames(path, sf, mech, idx, *, scale: float | None = None, title: st
     _, _, width, height = _panel_grid(1, hi - lo)
     fig = _figure(width * 1.35, height * 1.35)
     ax = fig.subplots()
-    marks = _joint_marks(mech, sf)
-    colours = [BODY_COLOURS[k % len(BODY_COLOURS)] for k in range(len(sf.bodies))]
+    marks, colours = _joint_marks(mech, sf), _colours(sf)
     writer = PillowWriter(fps=fps)
     with writer.saving(fig, str(path), dpi=80):
         for i in idx:
             ax.clear()
             _draw_instant(ax, sf, int(i), scale, marks, colours)
-            ax.set_xlim(lo[0], hi[0])
-            ax.set_ylim(lo[1], hi[1])
-            ax.set_aspect("equal", adjustable="box")
+            _frame_axes(ax, lo, hi)
             ax.set_xlabel("X [m]", fontsize=8)
             ax.set_ylabel("Y [m]", fontsize=8)
-            ax.tick_params(labelsize=7)
-            ax.grid(True, alpha=0.25)
             ax.set_title(f"{title}\nt = {sf.key[i]:.4f} s, elastic deflection {factor_text(scale)}", fontsize=8.5)
             fig.tight_layout()
             writer.grab_frame()

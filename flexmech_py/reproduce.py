@@ -116,7 +116,7 @@ def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS,
     figs = {**_fourbar_figures(out, runs["fourbar_hac"], sup, dvec), **_manipulator_figures(out, runs),
             **_coupled_figures(out, runs)}
     gap_lines = _gap_section(cases_dir, t_end, say) if gap else []
-    gap_lines += modes_section(out, lambda n: seed_case_path(n, cases_dir), SEED_CASES, t_end, say)
+    gap_lines += modes_section(out, lambda n: seed_case_path(n, cases_dir), runs, say)
     report = out / "report.md"
     report.write_text(report_text(runs, figs, dvec, timings, models) + "\n".join(gap_lines) + "\n", encoding="utf-8")
     return report

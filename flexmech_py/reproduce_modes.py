@@ -1,7 +1,7 @@
 """The part of ``flexmech reproduce`` that looks at the seed mechanisms rather than at their curves:
 the frozen natural frequencies along the motion (the four-bar over one crank cycle at constant
 speed, the manipulator over its run) with the drive speed harmonics, and one drawing per seed case
-(the deformed mechanism at six instants of its ``hac`` run, deflection magnified)."""
+(the deformed mechanism at six instants of the ``hac`` run reproduce made, deflection magnified)."""
 
 from __future__ import annotations
 
@@ -20,9 +20,10 @@ ALONG = (("fourbar_constant_speed", 72), ("manipulator_bricout", 48))
 PANELS, DRAWN_MODEL = 6, "hac"
 
 
-def modes_section(out: Path, case_path, seed_cases, t_end, say) -> list[str]:
+def modes_section(out: Path, case_path, runs: dict, say) -> list[str]:
     """Write frequencies_along CSV/JSON/PNG and one drawing per seed case under ``out``; returns the
-    report's lines.  ``case_path(name)`` locates a seed case; ``t_end`` shortens the drawn runs."""
+    report's lines.  ``case_path(name)`` locates a seed case; ``runs``: {seed case: {model: Result}},
+    the runs reproduce made (each drawing is from its ``hac`` run)."""
     lines = ["", "## Natural frequencies along the motion, and the mechanisms drawn", "",
              "The lowest elastic natural frequencies of the mechanism frozen at positions of its rigid motion "
              "(`flexmech modes --along-cycle`, docs/theory.md §20), each mode's band and where a frequency meets a "
@@ -31,9 +32,8 @@ def modes_section(out: Path, case_path, seed_cases, t_end, say) -> list[str]:
              "under it (`flexmech run CASE --draw`).  Regenerate: `flexmech reproduce`.", ""]
     for name, positions in ALONG:
         lines += _frequencies(out, load_case(case_path(name)), name, positions, say)
-    for name in seed_cases:
-        overrides = [f"solver.t_end={t_end}"] if t_end else None
-        lines += _drawing(out, load_case(case_path(name), overrides=overrides), name, say)
+    for name, by_model in runs.items():
+        lines += _drawing(out, by_model[DRAWN_MODEL], name, say)
     return lines
 
 
@@ -59,19 +59,18 @@ def _frequencies(out: Path, case, name: str, positions: int, say) -> list[str]:
             *img, f"Files: `modes/{name}/frequencies_along.csv`, `.json`.", ""]
 
 
-def _drawing(out: Path, case, name: str, say) -> list[str]:
+def _drawing(out: Path, res, name: str, say) -> list[str]:
+    """The drawing of a seed case from its run ``res`` (a Result kept in memory)."""
     from .drawing import draw_frames
-    from .runner import MemorySink, execute
     from .shapes import ShapeCollector
-    from .simulate import Prepared
 
     t0 = time.perf_counter()
-    prep = Prepared(case)
-    shapes = ShapeCollector(prep, DRAWN_MODEL, PANELS)
-    execute(prep, DRAWN_MODEL, MemorySink(prep.frames), estimate=False, diagnose=False, observers=[shapes])
+    case = res.case
+    shapes = ShapeCollector(case.mechanism, res.t.size, res.model, PANELS)
+    shapes.add(res)
     sf = shapes.result()
     png, scale = draw_frames(out / f"{name}_drawing.png", sf, case.mechanism, np.arange(sf.key.size),
-                             title=f"{case['case']['title']} - model {DRAWN_MODEL}")
+                             title=f"{case['case']['title']} - model {res.model}")
     say(f"{name}: drawn at {sf.key.size} instants in {time.perf_counter() - t0:.2f} s")
     if png is None:
         return []

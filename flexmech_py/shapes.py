@@ -20,7 +20,7 @@ import numpy as np
 from .errors import FlexmechError
 
 __all__ = ["Body", "ShapeFrames", "body_points", "rigid_positions", "superposition_displacements",
-           "coupled_displacements", "write_shape_csv", "read_shape_csv", "ShapeCollector"]
+           "coupled_displacements", "write_shape_csv", "read_shape_csv", "ShapeCollector", "spread"]
 
 KINDS = ("flexible", "rigid_link", "body")
 
@@ -239,15 +239,21 @@ def read_shape_csv(path) -> tuple[ShapeFrames, str, list[str]]:
     return ShapeFrames(out, vals[:, 0, 0], vals[:, :, 1:3], vals[:, :, 3:5], vals[:, :, 5]), key_name, head
 
 
+def spread(n: int, count: int) -> np.ndarray:
+    """Indices of ``count`` (at most n) of n frames spread evenly, the first and the last included."""
+    return np.unique(np.linspace(0, n - 1, min(int(count), n)).round().astype(int))
+
+
 class ShapeCollector:
     """The drawn points of a run at ``count`` frames spread evenly over it (the first and the last
     included), gathered block by block as the run goes (an observer of
-    :func:`flexmech_py.runner.execute`): what ``flexmech run --draw`` writes to shape.csv."""
+    :func:`flexmech_py.runner.execute`; a Result kept in memory is one block): what
+    ``flexmech run --draw`` writes to shape.csv.  ``frames``: the run's output frames; ``coupled``:
+    {model: its CoupledModel} as the run fills it (``Prepared.coupled``; superposition runs need none)."""
 
-    def __init__(self, prep, model: str, count: int):
-        self.prep, self.model = prep, model
-        self.mech = prep.case.mechanism
-        self.want = np.unique(np.linspace(0, prep.frames - 1, max(2, int(count))).round().astype(int))
+    def __init__(self, mech, frames: int, model: str, count: int, coupled=None):
+        self.mech, self.model, self.coupled = mech, model, {} if coupled is None else coupled
+        self.want = spread(frames, max(2, int(count)))
         self.seen = 0
         self.parts: list[ShapeFrames] = []
 
@@ -261,7 +267,7 @@ class ShapeCollector:
     def _points(self, block, idx: np.ndarray) -> ShapeFrames:
         rm = block.rigid.select(idx)
         if self.model in ("coupled", "nonlinear"):
-            cm = self.prep.coupled[self.model]
+            cm = self.coupled[self.model]
             bodies = body_points(self.mech, cm.mesh.node_frac)
             d, rot = coupled_displacements(cm, bodies, block.u[:, idx], block.state[:, idx], rm)
         else:
