@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
-from .coupled_layout import CON_ANGLE, CON_POINT, CON_PROJECTION, Layout, LinkMesh, Row, flat_description, \
-    marker_key, node_segment, start_value
+from .coupled_layout import CON_ANGLE, CON_POINT, CON_PROJECTION, Layout, LinkMesh, Row, SharedAngles, \
+    flat_description, marker_key, node_segment, start_value
 
 __all__ = ["CoupledModel", "LinkMesh", "validity", "CON_POINT", "CON_ANGLE", "CON_PROJECTION"]
 
@@ -37,6 +37,9 @@ class CoupledModel:
         self.joints, self.forces, self.node_ends = layout.joints, layout.forces, layout.node_ends
         self.last_run = None
         self._flat = None
+        self._kflat = None
+        #: the nonlinear model's kernel integrates shared node angles (coupled_layout.SharedAngles)
+        self.shared = SharedAngles.of(layout) if layout.split else None
 
     @classmethod
     def from_case(cls, case: dict, split: bool = False) -> "CoupledModel":
@@ -122,11 +125,17 @@ class CoupledModel:
         return np.asfortranarray(out)
 
     # ------------------------------------------------------------------ kernel calls
-    def _spec(self, gravity, rayleigh):
-        """The flat description with gravity [m/s^2] and Rayleigh damping [1/s, s]."""
-        if self._flat is None:
-            self._flat = flat_description(self.layout)
-        ispec, rspec = self._flat
+    def _spec(self, gravity, rayleigh, kernel=False):
+        """The flat description with gravity [m/s^2] and Rayleigh damping [1/s, s]; ``kernel``: the one
+        the time integration runs on (the nonlinear model's shared node angles)."""
+        if kernel and self.shared is not None:
+            if self._kflat is None:
+                self._kflat = flat_description(self.layout, shared=self.shared)
+            ispec, rspec = self._kflat
+        else:
+            if self._flat is None:
+                self._flat = flat_description(self.layout)
+            ispec, rspec = self._flat
         rspec = rspec.copy()
         rspec[-4:] = [gravity[0], gravity[1], rayleigh[0], rayleigh[1]]
         return ispec, rspec
@@ -149,7 +158,8 @@ class CoupledModel:
         nsteps = t.size - 1
         nframes = nsteps // out_every + 1
         nc = len(self.rows)
-        carry = np.zeros(max(1, nc) + 2)
+        keep = np.arange(nc) if self.shared is None else self.shared.keep
+        carry = np.zeros(max(1, keep.size) + 2)
         if state is not None:
             start = 2
             q, v, a, p, carry = (np.array(state[k], float) for k in ("q", "v", "a", "p", "carry"))
@@ -157,19 +167,32 @@ class CoupledModel:
             start = 1 if p0 is None else 0
             q, v, a = np.array(q0, float), np.array(v0, float), np.zeros(self.ndof)
             p = np.zeros(self.ndof) if p0 is None else np.array(p0, float)
+            if self.shared is not None:
+                q, v, p = self.shared.to_kernel(q, v, p)
+        kval = np.zeros((3, max(1, keep.size), cval.shape[2]), order="F")
+        kval[:, :keep.size] = np.asarray(cval)[:, keep]
         if div_limit is None:
             div_limit = DIVERGENCE_FACTOR * max(self.case["links"][li]["length"] for li, _, _ in self.segments)
         seg_link = np.array([li + 1 for li, _, _ in self.segments], np.int32)
-        ispec, rspec = self._spec(gravity, rayleigh)
-        qf, vf, af, lf, ef, status, fail, iters, nvalid = kernels.cpl.cpl_run(
-            nframes, ispec, rspec, np.asfortranarray(cval, float), t0, dt, alpha_m, alpha_f, beta, gamma,
+        ispec, rspec = self._spec(gravity, rayleigh, kernel=True)
+        qf, vf, af, lk, ef, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
+            nframes, ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
             out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry)
-        lf = lf[:nc]
+        lf = np.zeros((nc, nframes))      # the interior welds of shared node angles carry none
+        lf[keep] = lk[:keep.size]
+        if self.shared is not None:         # the valid frames (a failed run leaves zeros after them)
+            qf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid] = self.shared.from_kernel(
+                qf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid])
         self.last_run = {"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "frames_valid": int(nvalid),
-                         "q": q, "v": v, "a": a, "p": p, "carry": carry, "status": int(status), "fail_step": int(fail)}
-        kernels.check_status(status, "coupled time integration", time=t0 + fail * dt if fail else t0,
+                         "q": q, "v": v, "a": a, "p": p, "carry": carry, "status": int(status), "fail_step": int(fail),
+                         "factorizations": int(newton[3])}
+        detail = ""
+        if status == kernels.STATUS_NEWTON:
+            detail = (f" (last iteration: residual norm {newton[0]:.3g}, acceleration correction {newton[1]:.3g} "
+                      f"against accelerations of norm {newton[2]:.3g})")
+        kernels.check_status(status, "coupled time integration", time=t0 + fail * dt if fail else t0, detail=detail,
                              step=int(fail), data={"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "iters": iters,
-                                                   "q": q, "v": v, "a": a, "p": p})
+                                                   "q": q, "v": v, "a": a, "p": p, "newton": newton})
         return qf, vf, af, lf, ef, iters
 
     def dense(self, q, v, a, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), t=0.0):
@@ -206,7 +229,10 @@ class CoupledModel:
         [x, y, psi, rates, accelerations] of every marker, ``measures`` (3, nm, nf) [value, rate,
         acceleration] of the measure Rows, ``forces`` (nd, nf) the force drives' values, ``ends``
         (4, nseg, nf) the segment-end residuals (joint forces through shared DOFs)."""
-        ispec, rspec = self._spec(gravity, rayleigh)
+        ispec, rspec = self._spec(gravity, rayleigh, kernel=True)
+        if self.shared is not None:
+            qf, vf, af = self.shared.to_kernel(qf, vf, af)
+            lf = lf[self.shared.keep]
         meas = list(measures) or [Row(CON_POINT, 0, 0, 1)]
         mi = np.asfortranarray(np.array([[r.kind, r.a + 1, r.b + 1, r.aux] for r in meas], np.int32).T)
         md = np.asfortranarray(np.array([r.d for r in meas], float).T)

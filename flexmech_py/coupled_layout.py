@@ -25,7 +25,7 @@ import numpy as np
 from .errors import CaseError
 from .model import link_mesh, rcm_free_numbering, uniform_mesh
 
-__all__ = ["Layout", "Row", "JointModel", "LinkMesh", "JOINT_ROWS", "HOLDING", "CON_POINT", "CON_ANGLE",
+__all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "JOINT_ROWS", "HOLDING", "CON_POINT", "CON_ANGLE",
            "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",
            "start_value", "flat_description"]
 
@@ -375,9 +375,92 @@ class Layout:
         return kl
 
 
+# ----------------------------------------------------------------------------- shared node angles
+@dataclass
+class SharedAngles:
+    """The nonlinear model as its kernel integrates it (docs/theory.md section 12.1): the angle DOFs of
+    every element are the absolute angles psi of its end nodes, shared by the two elements that meet
+    at an interior node, instead of angles from each element's chord tied by a weld row per interior
+    node.  The layout (:class:`Layout`) keeps the chord-relative angles, which every output reads;
+    :meth:`to_kernel` and :meth:`from_kernel` carry states and frames between the two.
+
+    ``ld``, ``free_of``: the kernel's segment DOFs and free numbering (a later element's th_0 DOF is
+    unused, its start angle is the th_1 DOF of the element before); ``keep``: indices of the layout's
+    rows the kernel enforces (all but the interior welds); ``pos`` (nseg, 4) the 0-based DOFs of
+    xs, ys, xe, ye; ``rel`` and ``abs`` (nseg, 2): the DOFs of th_0, th_1 in the layout and of the node
+    angles in the kernel; ``unused`` the DOFs the kernel does not use."""
+
+    ld: np.ndarray
+    free_of: np.ndarray
+    keep: np.ndarray
+    pos: np.ndarray
+    rel: np.ndarray
+    abs: np.ndarray
+    unused: np.ndarray
+
+    @classmethod
+    def of(cls, lay: "Layout") -> "SharedAngles":
+        assert lay.split and np.all(lay.n_el == 1)
+        cols = np.array(lay.seg_cols())                  # (nseg, 6): xs ys xe ye th_0 th_1
+        rel = cols[:, 4:6].copy()
+        ab = rel.copy()
+        for si in range(1, len(lay.segments)):
+            if lay.segments[si][0] == lay.segments[si - 1][0]:
+                ab[si, 0] = ab[si - 1, 1]
+        unused = np.setdiff1d(rel.ravel(), ab.ravel())
+        kcols = np.concatenate([cols[:, :4], ab], axis=1)
+        mask = lay.free_of > 0
+        mask[unused] = False
+        free_of = rcm_free_numbering(list(kcols) + [b[1] for b in lay.bodies], mask)
+        ld = lay.ld.copy(order="F")
+        ld[4:6] = ab.T + 1
+        keep = np.array([i for i, r in enumerate(lay.rows) if r.role != "interior"], int)
+        return cls(ld, free_of, keep, cols[:, :4].copy(), rel, ab, unused)
+
+    def _chord(self, q, v, a):
+        """Chord angle, angular velocity and acceleration of every element (nseg, ...)."""
+        p = self.pos
+        cx, cy = q[p[:, 2]] - q[p[:, 0]], q[p[:, 3]] - q[p[:, 1]]
+        dx, dy = v[p[:, 2]] - v[p[:, 0]], v[p[:, 3]] - v[p[:, 1]]
+        l2 = cx * cx + cy * cy
+        gx, gy = -cy / l2, cx / l2
+        om = gx * dx + gy * dy
+        al = -2.0 * (cx * dx + cy * dy) * om / l2 + gx * (a[p[:, 2]] - a[p[:, 0]]) + gy * (a[p[:, 3]] - a[p[:, 1]])
+        return np.arctan2(cy, cx), om, al
+
+    def to_kernel(self, q, v, a):
+        """(q, v, a) of the layout (all DOFs, one state or frames as columns) in the kernel's DOFs."""
+        phi, om, al = self._chord(q, v, a)
+        out = []
+        for x, add in ((q, phi), (v, om), (a, al)):
+            y = np.array(x, float, copy=True)
+            for end in (0, 1):                 # a shared node takes the angle of the element before
+                y[self.abs[:, end]] = x[self.rel[:, end]] + add
+            y[self.unused] = 0.0
+            out.append(y)
+        return tuple(out)
+
+    def from_kernel(self, q, v, a):
+        """The kernel's (q, v, a) (all DOFs, one state or frames) in the layout's DOFs."""
+        phi, om, al = self._chord(q, v, a)
+        out = []
+        for x, sub, wrap in ((q, phi, True), (v, om, False), (a, al, False)):
+            y = np.array(x, float, copy=True)
+            for end in (0, 1):
+                d = x[self.abs[:, end]] - sub
+                y[self.rel[:, end]] = np.arctan2(np.sin(d), np.cos(d)) if wrap else d
+            out.append(y)
+        return tuple(out)
+
+
 # ----------------------------------------------------------------------------- the flat description
-def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """(ispec, rspec) of flexmech_coupled: coupled_build (layout documented there)."""
+def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0),
+                     shared: SharedAngles | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(ispec, rspec) of flexmech_coupled: coupled_build (layout documented there); with ``shared``
+    the nonlinear model's kernel description (shared node angles, no interior welds)."""
+    ld, free_of, rows = lay.ld, lay.free_of, lay.rows
+    if shared is not None:
+        ld, free_of, rows = shared.ld, shared.free_of, [lay.rows[i] for i in shared.keep]
     nseg, maxn = len(lay.segments), int(lay.n_el.max())
     links = lay.case["links"]
     laws = [d.packed(0.0) for _, d in lay.forces]
@@ -392,13 +475,14 @@ def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)) -> tu
             tab_c += list(k["table"][1].T)
         dv += [row.kind, row.a + 1, row.b + 1, first, knots]
     mk = lay.markers
-    ispec = [nseg, len(lay.bodies), len(lay.dof), maxn, len(lay.pm), len(lay.ri), len(mk), len(lay.rows),
+    ispec = [nseg, len(lay.bodies), len(lay.dof), maxn, len(lay.pm), len(lay.ri), len(mk), len(rows),
              len(lay.forces), nh, nth, len(tab_t)]
-    ispec += list(lay.n_el) + list(lay.ld.T.ravel()) + [d + 1 for body in lay.bodies for d in body[1]]
-    ispec += list(lay.free_of) + [p[0] + 1 for p in lay.pm] + [p[1] for p in lay.pm]
+    ispec += list(lay.n_el) + list(ld.T.ravel()) + [d + 1 for body in lay.bodies for d in body[1]]
+    ispec += list(free_of) + [p[0] + 1 for p in lay.pm] + [p[1] for p in lay.pm]
     ispec += [r[0] + 1 for r in lay.ri] + [r[1] for r in lay.ri]
     ispec += [m[0] for m in mk] + [0 if m[0] == MK_GROUND else m[1] + 1 for m in mk] + [m[2] for m in mk]
-    ispec += [i for r in lay.rows for i in (r.kind, r.a + 1, r.b + 1, r.aux)] + dv
+    ispec += [i for r in rows for i in (r.kind, r.a + 1, r.b + 1, r.aux)] + dv
+    ispec += [int(shared is not None)] * nseg
     wn = np.zeros((nseg, maxn + 1))
     prop = []
     for si, (li, k0, k1) in enumerate(lay.segments):
@@ -410,7 +494,7 @@ def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)) -> tu
                  ln["youngs_modulus"] * ln["second_moment"]]
     rspec = prop + list(wn.ravel()) + [x for _, _, m, jc, js in lay.bodies for x in (m, jc, js)]
     rspec += [x for p in lay.pm for x in (p[2], p[3])] + [r[2] for r in lay.ri] + [x for m in mk for x in m[3]]
-    rspec += [x for r in lay.rows for x in r.d] + [x for r, _ in lay.forces for x in r.d]
+    rspec += [x for r in rows for x in r.d] + [x for r, _ in lay.forces for x in r.d]
     rspec += [x for k in laws for x in k["par"]]
     for k in laws:
         rspec += list(k["sin"]) + [0.0] * (nh - len(k["sin"])) + list(k["cos"]) + [0.0] * (nh - len(k["cos"]))

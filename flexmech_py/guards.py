@@ -379,6 +379,10 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
         what = kernels.STATUS_WHAT_GEOMETRIC
     elif code == kernels.STATUS_NEWTON:
         what += f" = {prep.case['solver']['newton_maxit']} (tolerance {prep.case['solver']['newton_tol']:g})"
+        nw = (data or {}).get("newton")
+        if nw is not None:       # the coupled/nonlinear loop's last iteration
+            what += (f"; last iteration: residual norm {nw[0]:.3g}, acceleration correction {nw[1]:.3g} against "
+                     f"accelerations of norm {nw[2]:.3g}")
     qtext, quantity = _largest_displacement(res)
     comp = res.extra["validity_overall"]
     if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:

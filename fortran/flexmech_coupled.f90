@@ -42,6 +42,7 @@ module flexmech_coupled
   private
   public :: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, coupled_elastic_measure
   public :: coupled_residual, coupled_rows
+  public :: coupled_set_newton, NEWTON_MODIFIED, NEWTON_FULL, NEWTON_AUTO
   public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED, STATUS_NEWTON, COUPLED_NSPEC_HEADER
   public :: MK_GROUND, MK_NODE, MK_BODY
 
@@ -54,6 +55,13 @@ module flexmech_coupled
   !> (the nonlinear model) the whole band is narrow and its one LAPACK call beats one per segment.
   integer, parameter :: SOLVER_AUTO = -1, SOLVER_BAND = 0, SOLVER_CONDENSED = 1
   integer :: solver_mode = SOLVER_AUTO
+  !> When coupled_run rebuilds and factorizes the iteration matrix within a step (docs/theory.md
+  !> section 12.2): NEWTON_MODIFIED once per step (at the predictor), NEWTON_FULL at every iteration,
+  !> NEWTON_AUTO (default) once per step and again whenever an iteration contracts the correction by
+  !> less than NEWTON_RATE (the matrix of the predictor no longer describes the step).
+  integer, parameter :: NEWTON_MODIFIED = 0, NEWTON_FULL = 1, NEWTON_AUTO = 2
+  real(dp), parameter :: NEWTON_RATE = 0.1_dp
+  integer :: newton_mode = NEWTON_AUTO
   !> Marker kinds: a ground point, a node of a segment, a point of a rigid body.
   integer, parameter :: MK_GROUND = 0, MK_NODE = 1, MK_BODY = 2
   integer, parameter :: COUPLED_NSPEC_HEADER = 12   !< integers before the first block of ispec
@@ -70,6 +78,9 @@ module flexmech_coupled
     integer :: nseg = 0, nrb = 0, ndof = 0, nfree = 0, maxn = 0, maxld = 0, kl = 0, ku = 0
     integer :: npm = 0, nri = 0, nmk = 0, nc = 0, nd = 0, nh = 0, nth = 0
     integer, allocatable :: n_el(:), ld(:, :), free_of(:), el_off(:), rb_dof(:, :)
+    !> (nseg) 1: the segment's th DOFs are absolute node angles psi_k, shared with the neighbouring
+    !> segments of its link (the nonlinear model, docs/theory.md section 12.1), 0: angles from the chord
+    integer, allocatable :: absang(:)
     real(dp), allocatable :: prop(:, :)          !< (4, nseg) [L, rho*A, E*A, E*I]
     real(dp), allocatable :: wn(:, :)            !< (maxn+1, nseg) node fractions of each segment (0 .. 1)
     real(dp), allocatable :: me(:, :, :), ke(:, :, :)  !< (6, 6, elements) local element mass, stiffness
@@ -104,11 +115,22 @@ module flexmech_coupled
 
 contains
 
+  !> Matrix refresh policy of every later coupled_run (NEWTON_*); status STATUS_BAD_INPUT otherwise.
+  subroutine coupled_set_newton(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    status = STATUS_BAD_INPUT
+    if (mode < NEWTON_MODIFIED .or. mode > NEWTON_AUTO) return
+    newton_mode = mode
+    status = STATUS_OK
+  end subroutine coupled_set_newton
+
   !> Build the system from its flat description; status STATUS_BAD_INPUT on bad sizes or indices.
   !> ispec (integers, 1-based indices):
   !>   [nseg, nrb, ndof, maxn, npm, nri, nmk, nc, nd, nh, nth, ntab,
   !>    n_el(nseg), ld(3 maxn + 3, nseg), rb_dof(3, nrb), free_of(ndof), pm_seg(npm), pm_el(npm),
-  !>    ri_seg(nri), ri_node(nri), mk_kind(nmk), mk_idx(nmk), mk_node(nmk), con(4, nc), dv(5, nd)]
+  !>    ri_seg(nri), ri_node(nri), mk_kind(nmk), mk_idx(nmk), mk_node(nmk), con(4, nc), dv(5, nd),
+  !>    absang(nseg)]
   !> rspec (reals):
   !>   [prop(4, nseg), wn(maxn + 1, nseg), rb_m(3, nrb), pm_prop(2, npm), ri_j(nri), mk_pos(2, nmk),
   !>    con_dir(2, nc), dv_dir(2, nd), dv_par(4, nd), dv_harm(2 nh, nd), dv_th(3, nth, nd),
@@ -136,7 +158,7 @@ contains
     ns = sys%nseg; ml = 3*sys%maxn + 3; sys%maxld = ml
     if (ns < 1 .or. sys%maxn < 1 .or. sys%ndof < 1) return
     if (size(ispec) /= COUPLED_NSPEC_HEADER + ns*(1 + ml) + 3*sys%nrb + sys%ndof + 2*sys%npm + 2*sys%nri &
-        + 3*sys%nmk + 4*sys%nc + 5*sys%nd) return
+        + 3*sys%nmk + 4*sys%nc + 5*sys%nd + ns) return
     if (size(rspec) /= ns*(4 + sys%maxn + 1) + 3*sys%nrb + 2*sys%npm + sys%nri + 2*sys%nmk + 2*sys%nc &
         + (2 + NPAR + 2*sys%nh + 3*sys%nth)*sys%nd + 5*ntab + 4) return
     o = COUPLED_NSPEC_HEADER
@@ -152,7 +174,8 @@ contains
     sys%mk_idx = ispec(o + 1:o + sys%nmk); o = o + sys%nmk
     sys%mk_node = ispec(o + 1:o + sys%nmk); o = o + sys%nmk
     sys%con = reshape(ispec(o + 1:o + 4*sys%nc), [4, sys%nc]); o = o + 4*sys%nc
-    sys%dv = reshape(ispec(o + 1:o + 5*sys%nd), [5, sys%nd])
+    sys%dv = reshape(ispec(o + 1:o + 5*sys%nd), [5, sys%nd]); o = o + 5*sys%nd
+    sys%absang = ispec(o + 1:o + ns)
     o = 0
     sys%prop = reshape(rspec(o + 1:o + 4*ns), [4, ns]); o = o + 4*ns
     sys%wn = reshape(rspec(o + 1:o + (sys%maxn + 1)*ns), [sys%maxn + 1, ns]); o = o + (sys%maxn + 1)*ns
@@ -170,6 +193,7 @@ contains
     sys%grav = rspec(o + 1:o + 2); sys%ray = rspec(o + 3:o + 4)
     ! checks of indices and values
     if (any(sys%n_el < 1) .or. any(sys%n_el > sys%maxn) .or. any(sys%free_of < 0)) return
+    if (any(sys%absang < 0) .or. any(sys%absang > 1)) return
     sys%nfree = maxval([0, sys%free_of])
     if (sys%nfree < 1 .or. any(sys%prop <= 0.0_dp)) return
     do s = 1, ns
@@ -256,7 +280,8 @@ contains
     select case (sys%mk_kind(m))
     case (MK_NODE)
       s = sys%mk_idx(m); n = sys%n_el(s)
-      call segment_marker(q, v, sys%ld(1:3*n + 3, s), n, sys%mk_node(m), sys%wn(sys%mk_node(m) + 1, s), ms)
+      call segment_marker(q, v, sys%ld(1:3*n + 3, s), n, sys%mk_node(m), sys%wn(sys%mk_node(m) + 1, s), &
+                          sys%absang(s) /= 0, ms)
     case (MK_BODY)
       b = sys%mk_idx(m)
       call body_marker(q(sys%rb_dof(:, b)), v(sys%rb_dof(:, b)), sys%rb_dof(:, b), sys%mk_pos(:, m), ms)
@@ -355,15 +380,17 @@ contains
   !> Contribution of one mass point (weight dm at segment fraction w, element e of length le at xi) to the segment
   !> residual and iteration matrix.  Adds dm * J^T (r'' - grav) to r and, if want, to segment l's
   !> blocks of S (lm) dm J^T (J + cc dr''/dv + ck dr''/d(elastic q)) (the point's parts of M, C_v,
-  !> K_t); returns the kinetic energy 1/2 dm |r'|^2.
-  subroutine mass_point(sys, l, q, v, a, e, xi, w, le, dm, want, cc, ck, r, lm, ekin, epot)
+  !> K_t); returns the kinetic energy 1/2 dm |r'|^2.  If want, msum and csum (local DOFs) get the
+  !> point's part of the sums over the element's angle columns th of M and of C_v (link_eval).
+  subroutine mass_point(sys, l, q, v, a, e, xi, w, le, dm, want, cc, ck, r, lm, ekin, epot, msum, csum)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l, e
     real(dp), intent(in) :: q(:), v(:), a(:), xi, w, le, dm, cc, ck
     logical, intent(in) :: want
-    real(dp), intent(inout) :: r(:), ekin, epot
+    real(dp), intent(inout) :: r(:), ekin, epot, msum(:), csum(:)
     type(link_mats), intent(inout) :: lm
     integer :: n, idx(6), i, j, nl, ncl, cl(10)
+    real(dp) :: jth(2), bth(2)
     real(dp) :: cs, sn, ell, g(2), om, al0, al, nm(2, 6), de(6), dv(6), da(6)
     real(dp) :: ul(2), uld(2), uldd(2), rot(2, 2), ru(2), rou(2), roud(2), rd(2), rdd(2)
     real(dp) :: jac(2, 10), bv(2, 10), bq(2, 10), ac(2, 2), w0(2), cdot(2), c(2), rn(2), bc(2), blk(10, 10)
@@ -425,10 +452,28 @@ contains
       end do
     end do
     call lm_add_block(lm, l, ncl, cl, blk)
+    jth = 0.0_dp; bth = 0.0_dp          ! the element's angle columns: idx(3) and idx(6)
+    j = 4
+    do i = 1, 6
+      if (idx(i) == 0) cycle
+      j = j + 1
+      if (i == 3 .or. i == 6) then
+        jth = jth + jac(:, j); bth = bth + bv(:, j)
+      end if
+    end do
+    do i = 1, ncl
+      msum(cl(i)) = msum(cl(i)) + dm*dot_product(jac(:, i), jth)
+      csum(cl(i)) = csum(cl(i)) + dm*dot_product(jac(:, i), bth)
+    end do
   end subroutine mass_point
 
   !> Residual (local vector of length nld), energies and, if want, the blocks of segment l of the
   !> iteration matrix S = M + ccv C_v + ckt K_t (added to lm, which the caller has zeroed).
+  !> A segment with absolute node angles (sys%absang(l) = 1, the nonlinear model) is evaluated in the
+  !> chord-relative angles th_k = psi_k - phi, th_k' = psi_k' - omega, th_k'' = psi_k'' - alpha, and
+  !> its residual and matrix carried back by T = d th / d(xs, ys, xe, ye, psi) (docs/theory.md 12.1):
+  !>   R = T^T R_rel,   S = T^T S_rel T - ckt (sum_k R_rel,th_k) d2phi/d(rs, re)2,
+  !> the last term the geometric stiffness of the end moments turning with the chord.
   subroutine link_eval(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
@@ -436,18 +481,132 @@ contains
     logical, intent(in) :: want
     real(dp), intent(out) :: r(:), ekin, epot
     type(link_mats), intent(inout) :: lm
+    integer :: n, nl, k, it(sys%maxn + 1)
+    real(dp) :: qr(size(q)), vr(size(q)), ar(size(q)), msum(size(q)), csum(size(q))
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, c(2), l2, h(2, 2)
+    if (sys%absang(l) == 0) then
+      call link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+      return
+    end if
+    n = sys%n_el(l); nl = 3*n + 3
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    phi = atan2(sn, cs)
+    qr = q; vr = v; ar = a
+    do k = 0, n
+      it(k + 1) = th_index(n, k)
+      qr(it(k + 1)) = wrap(q(it(k + 1)) - phi)
+      vr(it(k + 1)) = v(it(k + 1)) - om
+      ar(it(k + 1)) = a(it(k + 1)) - al
+    end do
+    call link_eval_rel(sys, l, qr, vr, ar, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    sr = sum(r(it(1:n + 1)))
+    r(1:2) = r(1:2) + sr*g
+    r(3:4) = r(3:4) - sr*g
+    if (.not. want) return
+    c = q(3:4) - q(1:2)
+    l2 = c(1)**2 + c(2)**2
+    h(1, 1) = 2.0_dp*c(1)*c(2)/l2**2; h(1, 2) = (c(2)**2 - c(1)**2)/l2**2    ! d2 phi / dc2
+    h(2, 1) = h(1, 2); h(2, 2) = -h(1, 1)
+    call angle_rate_terms(lm, l, nl, c, v(3:4) - v(1:2), a(3:4) - a(1:2), g, om, h, ccv, ckt, msum, csum)
+    call lm_transform(lm, l, nl, it(1:n + 1), [g(1), g(2), -g(1), -g(2)])
+    h = ckt*sr*h
+    lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) - h; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) - h
+    lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) + h; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) + h
+  end subroutine link_eval
+
+  !> The parts of S from the chord terms of the relative angle rates th' = psi' - omega(c, c') and
+  !> th'' = psi'' - alpha(c, c', c''), as columns of the end positions (before lm_transform):
+  !> S(:, rs) += msum (ccv w0 + ckt da) + csum ckt H c', S(:, re) -= the same, with w0 = d alpha0/dc',
+  !> da = d alpha/dc = H c'' + d alpha0/dc, H = d2 phi/dc2 and msum, csum the sums of the angle columns
+  !> of M and C_v (alpha0 = -2 (c.c') omega / |c|^2, the velocity part of alpha).
+  pure subroutine angle_rate_terms(lm, l, nl, c, cd, cdd, g, om, h, ccv, ckt, msum, csum)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l, nl
+    real(dp), intent(in) :: c(2), cd(2), cdd(2), g(2), om, h(2, 2), ccv, ckt, msum(:), csum(:)
+    real(dp) :: l2, sc, hc(2), w0(2), da(2), col
+    integer :: i, j
+    l2 = c(1)**2 + c(2)**2
+    sc = c(1)*cd(1) + c(2)*cd(2)
+    hc = matmul(h, cd)
+    w0 = -(2.0_dp/l2)*(om*c + sc*g)
+    da = matmul(h, cdd) - 2.0_dp*(cd*om/l2 + sc*hc/l2 - 2.0_dp*sc*om*c/l2**2)
+    do j = 1, 2
+      do i = 1, nl
+        col = msum(i)*(ccv*w0(j) + ckt*da(j)) + csum(i)*ckt*hc(j)
+        call lm_add(lm, l, i, j, col)
+        call lm_add(lm, l, i, 2 + j, -col)
+      end do
+    end do
+  end subroutine angle_rate_terms
+
+  !> S <- (I + E)^T S (I + E) on segment l's blocks (nl local DOFs), E(th_k, 1:4) = e for the local
+  !> angle DOFs th(:): the change from chord-relative to absolute node angles (see link_eval).
+  pure subroutine lm_transform(lm, l, nl, th, e)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l, nl, th(:)
+    real(dp), intent(in) :: e(4)
+    real(dp) :: scol(nl), srow(nl), stt
+    integer :: i, j, k
+    scol = 0.0_dp; srow = 0.0_dp
+    do k = 1, size(th)
+      do i = 1, nl
+        scol(i) = scol(i) + lm_get(lm, l, i, th(k))
+        srow(i) = srow(i) + lm_get(lm, l, th(k), i)
+      end do
+    end do
+    stt = sum(scol(th))
+    do j = 1, 4
+      do i = 1, nl
+        call lm_add(lm, l, i, j, scol(i)*e(j))
+        call lm_add(lm, l, j, i, e(j)*srow(i))
+      end do
+      do i = 1, 4
+        call lm_add(lm, l, i, j, e(i)*e(j)*stt)
+      end do
+    end do
+  end subroutine lm_transform
+
+  !> S(i, j) for the local DOFs i, j of segment l (zero outside the block structure).
+  pure real(dp) function lm_get(lm, l, i, j)
+    type(link_mats), intent(in) :: lm
+    integer, intent(in) :: l, i, j
+    if (i <= 4) then
+      if (j <= 4) then
+        lm_get = lm%bb(i, j, l)
+      else
+        lm_get = lm%bi(i, lm%off(l) + j - 4)
+      end if
+    else if (j <= 4) then
+      lm_get = lm%ib(lm%off(l) + i - 4, j)
+    else if (abs(i - j) <= lm%kbi) then
+      lm_get = lm%ai(2*lm%kbi + 1 + i - j, lm%off(l) + j - 4)
+    else
+      lm_get = 0.0_dp
+    end if
+  end function lm_get
+
+  !> link_eval in chord-relative angles (the coupled model's segments).
+  subroutine link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(out) :: r(:), ekin, epot
+    real(dp), intent(out) :: msum(:), csum(:)   !< (nl) sums of the angle columns of M and C_v (if want)
+    type(link_mats), intent(inout) :: lm
     integer :: n, nl, e, k, i, j, idx(6), cl5(5)
     real(dp) :: len, le, dw, rho_a, ea, c(2), ell, f, cc(2, 2), de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
     real(dp) :: cs, sn, g(2), om, al0, al, dpsi(sys%maxld), w0(2), d5(5), blk(5, 5)
     n = sys%n_el(l); nl = 3*n + 3
     len = sys%prop(1, l); rho_a = sys%prop(2, l); ea = sys%prop(3, l)
     r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
+    msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
     do e = 1, n          ! distributed mass
       dw = sys%wn(e + 1, l) - sys%wn(e, l)
       le = len*dw
       do k = 1, 4
         call mass_point(sys, l, q, v, a, e, gx(k), sys%wn(e, l) + gx(k)*dw, le, gw(k)*rho_a*le, want, ccv, ckt, r, &
-                        lm, ekin, epot)
+                        lm, ekin, epot, msum, csum)
       end do
     end do
     do i = 1, sys%npm    ! point masses on this segment
@@ -456,7 +615,7 @@ contains
       xi = sys%pm_prop(1, i)
       dw = sys%wn(e + 1, l) - sys%wn(e, l)
       call mass_point(sys, l, q, v, a, e, xi, sys%wn(e, l) + xi*dw, len*dw, sys%pm_prop(2, i), want, &
-                      ccv, ckt, r, lm, ekin, epot)
+                      ccv, ckt, r, lm, ekin, epot, msum, csum)
     end do
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     do i = 1, sys%nri    ! rotary inertias turning with this link: psi = phi + th_k
@@ -481,6 +640,7 @@ contains
           blk(:, 2 + j) = blk(:, 2 + j) + ccv*sys%ri_j(i)*w0(j)*d5
         end do
         call lm_add_block(lm, l, 5, cl5, blk)
+        msum(cl5) = msum(cl5) + sys%ri_j(i)*d5
       end if
     end do
     ! chord stretch: U = 1/2 EA/L (|c| - L)^2
@@ -520,9 +680,12 @@ contains
             call lm_add(lm, l, idx(i), idx(j), ckt*sys%ke(i, j, sys%el_off(l) + e) + ccv*ce(i, j))
           end do
         end do
+        do i = 1, 6
+          if (idx(i) > 0) csum(idx(i)) = csum(idx(i)) + ce(i, 3) + ce(i, 6)
+        end do
       end if
     end do
-  end subroutine link_eval
+  end subroutine link_eval_rel
 
   !> Position of th_k (node k = 0..n) in the link vector.
   pure integer function th_index(n, k)
@@ -979,10 +1142,12 @@ contains
   !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the inputs (force drives and
   !> moving constraint rows), max Newton iterations since the last frame]; nvalid frames are valid.
   !> Divergence guard: coupled_elastic_measure > div_limit [m] after a step stops the run with
-  !> STATUS_DIVERGED (fail_step = that step).
+  !> STATUS_DIVERGED (fail_step = that step).  newton(4) on return: [norm of the residual (free DOFs,
+  !> with the constraint forces) before the last iteration, norm of its acceleration correction, norm
+  !> of the accelerations, number of factorizations of the iteration matrix].
   subroutine coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
                          start, div_limit, seg_link, q, v, a, p, carry, qf, vf, af, lf, ef, status, fail_step, &
-                         iters, nvalid)
+                         iters, nvalid, newton)
     type(coupled_system), intent(in) :: sys
     real(dp), intent(in) :: cval(:, :, :)        !< (3, >= nc, nsteps+1) [value, rate, acceleration] of the rows
     real(dp), intent(in) :: t0, dt, tol
@@ -994,14 +1159,15 @@ contains
     real(dp), intent(inout) :: carry(:)            !< (nc1 + 2) [multipliers, lref [m], work [J]]
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
+    real(dp), intent(out) :: newton(4)
     real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
     real(dp), allocatable :: lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
-    logical :: converged, refactor, use_cond
+    logical :: converged, refactor, use_cond, refresh
     type(link_mats) :: lm
-    status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0
+    status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
     nsteps = size(cval, 3) - 1
     nf = sys%nfree
     nc = sys%nc
@@ -1071,17 +1237,19 @@ contains
       vs = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
       converged = .false.
       da_prev = huge(1.0_dp)
+      refresh = .true.
       do it = 1, maxit
         q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
         v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
-        call assemble(sys, q, v, a, t, it == 1, gammap*dt, betap*dt*dt, res, lm, energy)
-        if (it == 1) then
+        call assemble(sys, q, v, a, t, refresh, gammap*dt, betap*dt*dt, res, lm, energy)
+        if (refresh) then
           call factor()
           if (status /= STATUS_OK) exit
         end if
-        call constraints(n + 1)      ! gradients (matrix part only at it == 1), values, G^T lam in res
+        call constraints(n + 1)      ! gradients (matrix part only after a factorization), values, G^T lam in res
         if (status /= STATUS_OK) exit
         rf = -res(freeidx)
+        newton(1) = norm2(rf)
         call band_solve_rhs(rf)
         if (status /= STATUS_OK) exit
         if (nc > 0) then   ! Schur complement on the multipliers
@@ -1097,7 +1265,10 @@ contains
         end if
         a(freeidx) = a(freeidx) + rf
         da_norm = sqrt(sum(rf**2)); a_norm = sqrt(sum(a(freeidx)**2))
+        newton(2:3) = [da_norm, a_norm]
         iters = iters + 1
+        refresh = newton_mode == NEWTON_FULL .or. &
+                  (newton_mode == NEWTON_AUTO .and. it > 1 .and. da_norm > NEWTON_RATE*da_prev)
         ! converged (relative to the accelerations, or the position correction below 1e-2 tol of the
         ! mechanism size), or stagnated at the round-off level of the residual (no further contraction
         ! while already within sqrt(tol): the stiff chord terms limit the attainable precision)
@@ -1305,6 +1476,7 @@ contains
 
     !> Factorize S (assembled in lm): condensed, or the whole band (reference).
     subroutine factor()
+      newton(4) = newton(4) + 1.0_dp
       if (use_cond) then
         call lm_factor(sys, lm, status)
       else

@@ -6,11 +6,11 @@
 module flexmech_coupled_api
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
-  use flexmech_coupled, only: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, &
+  use flexmech_coupled, only: coupled_set_newton, coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, &
                               coupled_set_solver, coupled_residual, coupled_rows
   implicit none
   private
-  public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_residuals, cpl_rows
+  public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_residuals, cpl_rows
 
 contains
 
@@ -35,10 +35,11 @@ contains
   !> with status 6 when coupled_elastic_measure (flexmech_coupled) exceeds it; seg_link(nseg) is the
   !> mechanism link of each segment (segments of a link listed consecutively from its start).  Frames: qf, vf, af (ndof, nframes), lf (nc1, nframes)
   !> the multipliers (constraint forces), ef (4, nframes) [kinetic, potential, work of the inputs, max
-  !> Newton iterations since the last frame]; nvalid: number of valid frames.
+  !> Newton iterations since the last frame]; nvalid: number of valid frames; newton(4): the last
+  !> iteration's residual, correction and acceleration norms, factorizations (coupled_run).
   subroutine cpl_run(ni, nr, ndof, nc1, nsteps, nframes, nseg, ispec, rspec, cval, t0, dt, alpha_m, alpha_f, &
                      beta, gamma, out_every, tol, maxit, start, div_limit, seg_link, q, v, a, pa, carry, &
-                     qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
+                     qf, vf, af, lf, ef, status, fail_step, iters, nvalid, newton)
     integer, intent(in) :: ni, nr, ndof, nc1, nsteps, nframes, nseg
     integer, intent(in) :: ispec(ni)
     real(dp), intent(in) :: rspec(nr)
@@ -50,12 +51,15 @@ contains
     real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
     real(dp), intent(out) :: lf(nc1, nframes)
     integer, intent(out) :: status, fail_step, iters, nvalid
+    real(dp), intent(out) :: newton(4)
     type(coupled_system) :: sys
     qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
+    newton = 0.0_dp
     call build_checked(ispec, rspec, ndof, nc1, sys, status)
     if (status /= STATUS_OK) return
     call coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, start, &
-                     div_limit, seg_link, q, v, a, pa, carry, qf, vf, af, lf, ef, status, fail_step, iters, nvalid)
+                     div_limit, seg_link, q, v, a, pa, carry, qf, vf, af, lf, ef, status, fail_step, iters, nvalid, &
+                     newton)
   end subroutine cpl_run
 
   !> Linear solver of every later cpl_run in this process: mode -1 (default) automatic, 1 condensed
@@ -66,6 +70,15 @@ contains
     integer, intent(out) :: status
     call coupled_set_solver(mode, status)
   end subroutine cpl_set_solver
+
+  !> When every later cpl_run rebuilds the iteration matrix in a step: 0 once per step (modified
+  !> Newton), 1 at every iteration (Newton), 2 (default) once and again when an iteration contracts
+  !> the correction by less than 0.1.  status 4 for another mode.
+  subroutine cpl_set_newton(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    call coupled_set_newton(mode, status)
+  end subroutine cpl_set_newton
 
   !> Residual (all DOFs; inertia, elastic, gravity and force drives, no constraint forces), M, C_v, K_t
   !> (dense, free DOFs) and [kinetic, potential] energy at one state and time t [s].

@@ -48,10 +48,12 @@ contains
 
   !> Marker at node k (0..n) of a segment of n elements, at fraction w of its length; q, v the
   !> all-DOF vectors, cols(3n+3) the all-DOF numbers of the segment's local vector
-  !> [xs ys xe ye th_0 (p_j v_j th_j)_{j=1..n-1} th_n].
-  pure subroutine segment_marker(q, v, cols, n, k, w, ms)
+  !> [xs ys xe ye th_0 (p_j v_j th_j)_{j=1..n-1} th_n]; absang: the th_k are the nodes' absolute
+  !> angles psi_k [rad] (the nonlinear model's shared node angles) instead of angles from the chord.
+  pure subroutine segment_marker(q, v, cols, n, k, w, absang, ms)
     real(dp), intent(in) :: q(:), v(:), w
     integer, intent(in) :: cols(:), n, k
+    logical, intent(in) :: absang
     type(marker_state), intent(out) :: ms
     real(dp) :: c(2), cd(2), l2, cs, sn, g(2), om, al0, u(2), ud(2), ru(2), rou(2), roud(2), rs(2), re(2)
     integer :: kt, j
@@ -92,6 +94,10 @@ contains
     end if
     ms%loc(ms%n) = kt
     ms%dpsi(ms%n) = 1.0_dp
+    if (absang) then          ! psi = psi_k itself: no chord part
+      ms%psi = q(cols(kt)); ms%psid = v(cols(kt)); ms%psia0 = 0.0_dp
+      ms%dpsi(1:4) = 0.0_dp
+    end if
     ms%col(1:ms%n) = cols(ms%loc(1:ms%n))
   end subroutine segment_marker
 

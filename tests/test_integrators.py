@@ -87,7 +87,7 @@ KED_OMEGA = 1.0                                                                #
 
 # coupled loop: one segment, one element, fixed chord (ends and th_1 fixed): only th_0 free,
 # m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L (flat description: flexmech_coupled, coupled_build)
-CPL_SDOF = (np.array([1, 0, 6, 1] + [0] * 8 + [1] + list(range(1, 7)) + [0, 0, 0, 0, 1, 0], np.int32),
+CPL_SDOF = (np.array([1, 0, 6, 1] + [0] * 8 + [1] + list(range(1, 7)) + [0, 0, 0, 0, 1, 0] + [0], np.int32),
             np.array([1.0, 105.0, 1e3, 0.25, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]))   # L, rho A, EA, EI; node fractions
 CPL_OMEGA = 1.0
 CPL_Q0 = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
@@ -112,7 +112,7 @@ def cpl_steps(h, coef, u, v, p, nsteps=1):
     q, vv, a, pp = CPL_Q0.copy(), np.zeros(6), np.zeros(6), np.zeros(6)
     q[4], vv[4], pp[4] = u, v, p
     zeros3 = np.zeros((3, 1, nsteps + 1), order="F")
-    qf, vf, af, lf, ef, status, _, _, nvalid = kernels.cpl.cpl_run(
+    qf, vf, af, lf, ef, status, _, _, nvalid, _ = kernels.cpl.cpl_run(
         nsteps + 1, *CPL_SDOF, zeros3, 0.0, h, *coef, 1, 1e-14, 25, 0, 1e300, np.array([1], np.int32), q, vv, a, pp,
         np.zeros(3))
     check_status(status, "cpl_run")

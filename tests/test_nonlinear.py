@@ -162,3 +162,83 @@ def test_gap_study_reduced(cases_dir):
     assert rows[("classic", "quasi_static", "torque")]["errors"][-1] < 0.2 * rows[("classic", "none", "seed")]["errors"][-1]
     text = "\n".join(gap_table("manipulator", study))
     assert "Closest over" in text and "| coupled | none | seed | 2 |" in text
+
+
+# ----------------------------------------------------------------------------- shared node angles (theory.md 12.1-12.2)
+def _seed_state(cases_dir, epl, dt, t_end):
+    """The nonlinear seed four-bar run to t_end; (prepared, model, kernel state q, v, a)."""
+    from flexmech_py.simulate import Prepared
+
+    case = fm.load_case(cases_dir / "fourbar_hac.toml",
+                        overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'"])
+    p = Prepared(case, elements_per_link=epl)
+    p.run("nonlinear")
+    cm = p.coupled["nonlinear"]
+    return p, cm, cm.last_run["q"], cm.last_run["v"], cm.last_run["a"]
+
+
+def test_shared_angles_round_trip(cases_dir):
+    """Layout -> kernel -> layout gives back the chord-relative angles, rates and accelerations."""
+    _, cm, q, v, a = _seed_state(cases_dir, 4, 1e-4, 0.02)
+    qr, vr, ar = cm.shared.from_kernel(q, v, a)
+    qk, vk, ak = cm.shared.to_kernel(qr, vr, ar)
+    used = np.setdiff1d(np.arange(cm.ndof), cm.shared.unused)
+    for x, y in ((q, qk), (v, vk), (a, ak)):
+        assert np.abs(x[used] - y[used]).max() <= 1e-12 * max(1.0, np.abs(x).max())
+    assert len(cm.shared.keep) == len(cm.rows) - sum(r.role == "interior" for r in cm.rows)
+
+
+def test_iteration_matrix_is_the_derivative_of_the_residual(cases_dir):
+    """S = M + gamma' dt C_v + beta' dt^2 K_t of the kernel against central differences of the Fortran
+    residual at a state of the seed four-bar (16 el/link, the issue's step): M to 1e-8, C_v to 1e-6, the
+    contraction rho(S^-1 (S_fd - S)) of a Newton iteration below 1e-3."""
+    from flexmech_py import kernels
+
+    dt, t = 1.25e-5, 2.5e-4
+    p, cm, q, v, a = _seed_state(cases_dir, 16, dt, t)
+    ispec, rspec = cm._spec(p.gravity, (0.0, 0.0), kernel=True)
+    res, mm, cmat, km, _, status = kernels.cpl.cpl_dense(int(cm.shared.free_of.max()), ispec, rspec, q, v, a, t)
+    assert status == 0
+    free = np.flatnonzero(cm.shared.free_of > 0)
+    free = free[np.argsort(cm.shared.free_of[free])]
+
+    def residual(x):
+        return kernels.cpl.cpl_residuals(ispec, rspec, np.asfortranarray(x[0][:, None]), x[1], x[2], t)[0][free, 0]
+
+    bp, gp = 0.25 * dt * dt, 0.5 * dt
+    parts = [np.zeros((free.size, free.size)) for _ in range(3)]        # d/dq, d/dv, d/da
+    for j, d in enumerate(free):
+        for k, (x, rel) in enumerate(((q, 1e-7), (v, 1e-5), (a, 1e-3))):
+            h = rel * max(1.0, abs(x[d]))
+            up, dn = [q.copy(), v.copy(), a.copy()], [q.copy(), v.copy(), a.copy()]
+            up[k][d] += h
+            dn[k][d] -= h
+            parts[k][:, j] = (residual(up) - residual(dn)) / (2 * h)
+    assert np.abs(mm - parts[2]).max() <= 1e-8 * np.abs(mm).max()
+    assert np.abs(cmat - parts[1]).max() <= 1e-6 * np.abs(cmat).max()
+    s = mm + gp * cmat + bp * km
+    s_fd = parts[2] + gp * parts[1] + bp * parts[0]
+    assert np.abs(np.linalg.eigvals(np.linalg.solve(s, s_fd - s))).max() < 1e-3
+
+
+def test_newton_refresh_beats_the_predictor_matrix(cases_dir):
+    """On the seed four-bar at 16 el/link and dt = 1.25e-5 s the crank's node angle accelerates at
+    ~1e9 rad/s^2 and the matrix of the predictor (modified Newton, mode 0) contracts slowly; full
+    Newton (1) and the automatic refresh (2, the default) take fewer iterations per step."""
+    from flexmech_py import kernels
+    from flexmech_py.simulate import Prepared
+
+    case = fm.load_case(cases_dir / "fourbar_hac.toml",
+                        overrides=["solver.dt=1.25e-5", "solver.t_end=2.5e-3", "solver.error_estimate='none'"])
+    mean = {}
+    try:
+        for m in (0, 1, 2):
+            assert kernels.cpl.cpl_set_newton(m) == 0
+            newton = Prepared(case, elements_per_link=16).run("nonlinear").extra["coupled"]["newton"]
+            mean[m] = newton["mean_per_step"]
+            if m == 0:
+                assert newton["factorizations_per_step"] == pytest.approx(1.0, abs=1e-2)
+    finally:
+        kernels.cpl.cpl_set_newton(2)
+    assert mean[1] <= 4.2 and mean[1] < mean[2] < mean[0]
+    assert kernels.cpl.cpl_set_newton(5) != 0
