@@ -362,6 +362,33 @@ def bench_memory(cases: Path, quick: bool) -> list[dict]:
 
 # ---------------------------------------------------------------------------------------- driver
 
+#: side-by-side runs with Exudyn: (model, elements per link, t_end [s]) in full and quick mode
+SIDE_BY_SIDE = {False: [("nonlinear", 16, 0.25), ("coupled", 2, 0.25)], True: [("nonlinear", 4, 0.005), ("coupled", 2, 0.005)]}
+
+
+def bench_side_by_side(seed: Path, quick: bool, progress) -> list[dict]:
+    """The seed four-bar in flexmech and in Exudyn (flexmech_py.bench_exudyn), dt = 1.25e-5 s,
+    generalized-alpha rho_inf = 0.8; [] with one line when Exudyn is not installed."""
+    from . import bench_exudyn
+
+    why = bench_exudyn.unavailable()
+    if why is not None:
+        progress(why)
+        return []
+    rows = []
+    for model, epl, t_end in SIDE_BY_SIDE[quick]:
+        r = bench_exudyn.side_by_side(seed, epl=epl, dt=1.25e-5, t_end=t_end, model=model)
+        d = r["strain_difference"]
+        rows.append({"model": model, "elements_per_link": epl, "steps": int(round(t_end / 1.25e-5)),
+                     "flexmech_cpu_s": r["flexmech_cpu_s"], "exudyn_cpu_s": r["exudyn_cpu_s"], "speedup": r["speedup"],
+                     "newton_per_step": r["newton"]["mean_per_step"],
+                     "strain_coupler_diff": d["strain_coupler_mid"], "strain_follower_diff": d["strain_follower_mid"]})
+        progress(f"  {model}, {epl} el/link: flexmech {r['flexmech_cpu_s']:.3g} s, Exudyn {r['exudyn_cpu_s']:.3g} s CPU "
+                 f"({r['speedup']:.2f}x); midspan strains differ by {100 * d['strain_coupler_mid']:.2g} % (coupler), "
+                 f"{100 * d['strain_follower_mid']:.2g} % (follower) of flexmech's peak")
+    return rows
+
+
 def _write_csv(path: Path, rows: list[dict]) -> None:
     with open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
@@ -443,6 +470,8 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
     solves = bench_solves(seed, quick, progress)
     progress("memory of long runs (subprocesses)")
     memory = bench_memory(cases, quick)
+    progress("side by side with Exudyn (seed four-bar)")
+    exudyn = bench_side_by_side(seed, quick, progress)
 
     summary = []
     notes = {"python_startup": "python -c pass", "import": "import flexmech_py.cli (start-up subtracted)",
@@ -480,6 +509,9 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
         for k in ("tracemalloc_peak_MB", "maxrss_MB", "wall_s"):
             summary.append({"metric": f"memory.{m['steps']}_steps.{k}", "value": m[k], "unit": k.rsplit("_", 1)[-1],
                             "note": f"fourbar_constant_speed, {m['frames']} frames (every 1000th step)"})
+    for r in exudyn:
+        summary.append({"metric": f"exudyn.{r['model']}.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
+                        "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed four-bar, {r['steps']} steps of 1.25e-5 s"})
     summary.append({"metric": "bench_wall", "value": time.perf_counter() - t_all, "unit": "s", "note": "quick" if quick else "full"})
 
     paths = [out / "bench_ladder.csv", out / "bench_solves.csv", out / "bench_summary.csv", out / "bench_seed.csv"]
@@ -487,11 +519,14 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
     _write_csv(paths[1], solves)
     _write_csv(paths[2], summary)
     _write_csv(paths[3], seeds)
+    if exudyn:
+        paths.append(out / "bench_exudyn.csv")
+        _write_csv(paths[-1], exudyn)
     png = _plot(out / "bench.png", ladder, solves)
     if png is not None:
         paths.append(png)
     return {"startup": startup, "seeds": seeds, "peak": peak, "ladder": ladder, "reference": ref, "solves": solves,
-            "memory": memory, "summary": summary, "paths": paths}
+            "memory": memory, "exudyn": exudyn, "summary": summary, "paths": paths}
 
 
 def table(rows: list[dict], keys) -> str:
@@ -517,6 +552,10 @@ def report(res: dict) -> str:
            table(res["solves"], ["elements_per_link", "dofs", "bandwidth", "banded_us", "dense_us"]),
            "", "long runs (output every 1000th step)",
            table(res["memory"], ["steps", "frames", "tracemalloc_peak_MB", "maxrss_MB", "wall_s"]),
+           "", "side by side with Exudyn (seed four-bar, dt = 1.25e-5 s, generalized-alpha 0.8; CPU of the time integration)",
+           table(res["exudyn"], ["model", "elements_per_link", "steps", "flexmech_cpu_s", "exudyn_cpu_s", "speedup",
+                                 "newton_per_step", "strain_coupler_diff", "strain_follower_diff"])
+           if res.get("exudyn") else "  (not run: Exudyn is not installed)",
            "", "summary", table(res["summary"], ["metric", "value", "unit", "note"])]
     return "\n".join(out)
 

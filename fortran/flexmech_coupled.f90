@@ -43,6 +43,7 @@ module flexmech_coupled
   public :: coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, coupled_elastic_measure
   public :: coupled_residual, coupled_rows
   public :: coupled_set_newton, NEWTON_MODIFIED, NEWTON_FULL, NEWTON_AUTO
+  public :: coupled_set_start, START_ACCELERATION, START_VELOCITY, coupled_set_inertia
   public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED, STATUS_NEWTON, COUPLED_NSPEC_HEADER
   public :: MK_GROUND, MK_NODE, MK_BODY
 
@@ -62,6 +63,14 @@ module flexmech_coupled
   integer, parameter :: NEWTON_MODIFIED = 0, NEWTON_FULL = 1, NEWTON_AUTO = 2
   real(dp), parameter :: NEWTON_RATE = 0.1_dp
   integer :: newton_mode = NEWTON_AUTO
+  !> Where the Newton iteration of a step starts (docs/theory.md section 12.2): START_ACCELERATION at
+  !> the last step's acceleration (q = q* + beta' dt^2 a_n, which for Newmark is q_n + dt v_n +
+  !> dt^2/2 a_n), START_VELOCITY (default) at the position q_n + dt v_n (an unresolved stiff mode's
+  !> acceleration swings by its whole size from step to step: starting from a_n puts the first
+  !> iterate beta' dt^2 |a_n| away, radians at fine meshes).
+  integer, parameter :: START_ACCELERATION = 0, START_VELOCITY = 1
+  integer :: start_mode = START_VELOCITY
+  logical :: legacy_inertia = .false.    !< test switch: one-element segments by Gauss points too
   !> Marker kinds: a ground point, a node of a segment, a point of a rigid body.
   integer, parameter :: MK_GROUND = 0, MK_NODE = 1, MK_BODY = 2
   integer, parameter :: COUPLED_NSPEC_HEADER = 12   !< integers before the first block of ispec
@@ -81,6 +90,9 @@ module flexmech_coupled
     !> (nseg) 1: the segment's th DOFs are absolute node angles psi_k, shared with the neighbouring
     !> segments of its link (the nonlinear model, docs/theory.md section 12.1), 0: angles from the chord
     integer, allocatable :: absang(:)
+    !> (4, 4, nseg) for one-element segments: G = int phi phi^T dm over phi = [1 - xi, xi, N_0, N_1]
+    !> (distributed mass and point masses; element_inertia), zero for the others
+    real(dp), allocatable :: gram(:, :, :)
     real(dp), allocatable :: prop(:, :)          !< (4, nseg) [L, rho*A, E*A, E*I]
     real(dp), allocatable :: wn(:, :)            !< (maxn+1, nseg) node fractions of each segment (0 .. 1)
     real(dp), allocatable :: me(:, :, :), ke(:, :, :)  !< (6, 6, elements) local element mass, stiffness
@@ -124,6 +136,27 @@ contains
     newton_mode = mode
     status = STATUS_OK
   end subroutine coupled_set_newton
+
+  !> Start of every later coupled_run's Newton iterations (START_*); status STATUS_BAD_INPUT otherwise.
+  subroutine coupled_set_start(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    status = STATUS_BAD_INPUT
+    if (mode /= START_ACCELERATION .and. mode /= START_VELOCITY) return
+    start_mode = mode
+    status = STATUS_OK
+  end subroutine coupled_set_start
+
+  !> Inertia of one-element segments in every later call: 0 closed form (element_inertia, the
+  !> default), 1 by the Gauss points (mass_point; a test of the closed form).
+  subroutine coupled_set_inertia(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    status = STATUS_BAD_INPUT
+    if (mode /= 0 .and. mode /= 1) return
+    legacy_inertia = mode == 1
+    status = STATUS_OK
+  end subroutine coupled_set_inertia
 
   !> Build the system from its flat description; status STATUS_BAD_INPUT on bad sizes or indices.
   !> ispec (integers, 1-based indices):
@@ -194,6 +227,7 @@ contains
     ! checks of indices and values
     if (any(sys%n_el < 1) .or. any(sys%n_el > sys%maxn) .or. any(sys%free_of < 0)) return
     if (any(sys%absang < 0) .or. any(sys%absang > 1)) return
+    if (any(sys%absang == 1 .and. sys%n_el /= 1)) return
     sys%nfree = maxval([0, sys%free_of])
     if (sys%nfree < 1 .or. any(sys%prop <= 0.0_dp)) return
     do s = 1, ns
@@ -246,6 +280,7 @@ contains
       sys%el_off(s) = sys%el_off(s - 1) + sys%n_el(s - 1)
     end do
     allocate (sys%me(6, 6, sum(sys%n_el)), sys%ke(6, 6, sum(sys%n_el)))
+    call gram_matrices(sys)
     do s = 1, ns
       do e = 1, sys%n_el(s)
         le = sys%prop(1, s)*(sys%wn(e + 1, s) - sys%wn(e, s))
@@ -269,6 +304,112 @@ contains
     sys%ku = sys%kl
     status = STATUS_OK
   end subroutine coupled_build
+
+  !> The Gram matrices G = int phi phi^T dm of the one-element segments (see element_inertia): the
+  !> distributed mass by the 4-point Gauss rule (exact: degree 6) and the point masses.
+  subroutine gram_matrices(sys)
+    type(coupled_system), intent(inout) :: sys
+    integer :: s, k, i
+    allocate (sys%gram(4, 4, sys%nseg))
+    sys%gram = 0.0_dp
+    do s = 1, sys%nseg
+      if (sys%n_el(s) /= 1) cycle
+      do k = 1, 4
+        call add_point(s, gx(k), gw(k)*sys%prop(2, s)*sys%prop(1, s))
+      end do
+      do i = 1, sys%npm
+        if (sys%pm_seg(i) == s) call add_point(s, sys%pm_prop(1, i), sys%pm_prop(2, i))
+      end do
+    end do
+  contains
+    subroutine add_point(s, xi, dm)
+      integer, intent(in) :: s
+      real(dp), intent(in) :: xi, dm
+      real(dp) :: ph(4), le
+      integer :: j
+      le = sys%prop(1, s)
+      ph = [1.0_dp - xi, xi, le*(xi - 2.0_dp*xi**2 + xi**3), le*(-xi**2 + xi**3)]
+      do j = 1, 4
+        sys%gram(:, j, s) = sys%gram(:, j, s) + dm*ph*ph(j)
+      end do
+    end subroutine add_point
+  end subroutine gram_matrices
+
+  !> Inertia and gravity of a one-element segment in closed form (docs/theory.md section 12.3),
+  !> local DOFs [xs, ys, xe, ye, th_0, th_1].  Its velocity r', acceleration r'' and the columns of
+  !> J = dr'/dq' (and of dr''/dv, dr''/dq) are fields X(xi) = sum_a phi_a(xi) X_a over phi = [1 - xi,
+  !> xi, N_0, N_1] (N_0, N_1 the transverse Hermite shapes of th_0, th_1; the elastic field is
+  !> w = N_0 th_0 + N_1 th_1 along e2), so every integral of mass_point is a form in the segment's
+  !> Gram matrix G (gram_matrices): the same residual, energies, S blocks and angle-column sums as
+  !> mass_point summed over the Gauss points and point masses, without a loop over points.
+  subroutine element_inertia(sys, l, q, v, a, want, cc, ck, r, lm, ekin, epot, msum, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), cc, ck
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), ekin, epot
+    real(dp), intent(inout), optional :: msum(:), csum(:)
+    type(link_mats), intent(inout) :: lm
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, e1(2), e2(2), w(4), wd(4), wdd(4), c(2), cdot(2), w0(2)
+    real(dp) :: gm(4, 4), acc(2, 4), vel(2, 4), jf(2, 4, 6), gj(2, 4, 6), bv(2, 4, 6), bf(2, 4, 6), blk(6, 6)
+    real(dp) :: acj(2, 4)
+    integer :: i, j, b, cl(6)
+    gm = sys%gram(:, :, l)
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    e1 = [cs, sn]; e2 = [-sn, cs]
+    w = [0.0_dp, 0.0_dp, q(5), q(6)]; wd = [0.0_dp, 0.0_dp, v(5), v(6)]; wdd = [0.0_dp, 0.0_dp, a(5), a(6)]
+    vel(:, 1) = v(1:2); vel(:, 2) = v(3:4)
+    acc(:, 1) = a(1:2) - sys%grav; acc(:, 2) = a(3:4) - sys%grav        ! gravity: 1 = phi_1 + phi_2
+    do b = 3, 4
+      vel(:, b) = -om*w(b)*e1 + wd(b)*e2
+      acc(:, b) = -(al*w(b) + 2.0_dp*om*wd(b))*e1 + (wdd(b) - om*om*w(b))*e2
+    end do
+    ekin = ekin + 0.5_dp*sum(gm*matmul(transpose(vel), vel))
+    epot = epot - sum((gm(1, :) + gm(2, :))*[dot_product(sys%grav, q(1:2)), dot_product(sys%grav, q(3:4)), &
+                                             w(3)*dot_product(sys%grav, e2), w(4)*dot_product(sys%grav, e2)])
+    jf = 0.0_dp                               ! J = dr'/dq' by columns
+    do j = 1, 2
+      jf(j, 1, j) = 1.0_dp; jf(j, 2, 2 + j) = 1.0_dp
+      do b = 3, 4
+        jf(:, b, j) = w(b)*g(j)*e1
+        jf(:, b, 2 + j) = -w(b)*g(j)*e1
+      end do
+    end do
+    jf(:, 3, 5) = e2; jf(:, 4, 6) = e2
+    do j = 1, 6                               ! gj = G J (G symmetric)
+      do b = 1, 4
+        gj(:, b, j) = matmul(jf(:, :, j), gm(:, b))
+      end do
+      r(j) = r(j) + sum(gj(:, :, j)*acc)
+    end do
+    if (.not. want) return
+    c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
+    w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*cdot(1) + c(2)*cdot(2))*g)
+    bv = 0.0_dp                               ! dr''/dv by columns
+    do j = 1, 2
+      acj = 0.0_dp
+      do b = 3, 4
+        acj(:, b) = -w(b)*w0(j)*e1 + (-2.0_dp*om*w(b)*e2 - 2.0_dp*wd(b)*e1)*g(j)
+      end do
+      bv(:, :, j) = -acj; bv(:, :, 2 + j) = acj
+    end do
+    bv(:, 3, 5) = -2.0_dp*om*e1; bv(:, 4, 6) = -2.0_dp*om*e1
+    bf = jf + cc*bv                           ! + ck dr''/dq at fixed chord (the angle columns only)
+    bf(:, 3, 5) = bf(:, 3, 5) + ck*(-al*e1 - om*om*e2)
+    bf(:, 4, 6) = bf(:, 4, 6) + ck*(-al*e1 - om*om*e2)
+    do j = 1, 6
+      do i = 1, 6
+        blk(i, j) = sum(gj(:, :, i)*bf(:, :, j))
+      end do
+    end do
+    cl = [1, 2, 3, 4, 5, 6]
+    call lm_add_block(lm, l, 6, cl, blk)
+    if (.not. present(msum)) return
+    do i = 1, 6
+      msum(i) = msum(i) + sum(gj(:, :, i)*(jf(:, :, 5) + jf(:, :, 6)))
+      csum(i) = csum(i) + sum(gj(:, :, i)*(bv(:, :, 5) + bv(:, :, 6)))
+    end do
+  end subroutine element_inertia
 
   !> State of marker m at the all-DOF state (q, v) (flexmech_markers).
   pure subroutine get_marker(sys, m, q, v, ms)
@@ -387,7 +528,8 @@ contains
     integer, intent(in) :: l, e
     real(dp), intent(in) :: q(:), v(:), a(:), xi, w, le, dm, cc, ck
     logical, intent(in) :: want
-    real(dp), intent(inout) :: r(:), ekin, epot, msum(:), csum(:)
+    real(dp), intent(inout) :: r(:), ekin, epot
+    real(dp), intent(inout), optional :: msum(:), csum(:)
     type(link_mats), intent(inout) :: lm
     integer :: n, idx(6), i, j, nl, ncl, cl(10)
     real(dp) :: jth(2), bth(2)
@@ -406,7 +548,7 @@ contains
       end if
     end do
     ul = matmul(nm, de); uld = matmul(nm, dv); uldd = matmul(nm, da)
-    rot = reshape([cs, sn, -sn, cs], [2, 2])
+    rot(1, 1) = cs; rot(2, 1) = sn; rot(1, 2) = -sn; rot(2, 2) = cs
     ru = matmul(rot, ul)                     ! R u
     rou = [-ru(2), ru(1)]                    ! R Omega u = Omega R u
     roud = matmul(rot, [-uld(2), uld(1)])    ! R Omega u'
@@ -430,7 +572,9 @@ contains
       jac(:, ncl) = matmul(rot, nm(:, i))
     end do
     rdd = rdd - sys%grav
-    r(cl(1:ncl)) = r(cl(1:ncl)) + dm*matmul(rdd, jac(:, 1:ncl))
+    do j = 1, ncl
+      r(cl(j)) = r(cl(j)) + dm*(rdd(1)*jac(1, j) + rdd(2)*jac(2, j))
+    end do
     if (.not. want) return
     ! dr''/dv: chord velocity through omega and alpha0, elastic velocities through 2 omega R Omega N
     c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
@@ -452,6 +596,7 @@ contains
       end do
     end do
     call lm_add_block(lm, l, ncl, cl, blk)
+    if (.not. present(msum)) return
     jth = 0.0_dp; bth = 0.0_dp          ! the element's angle columns: idx(3) and idx(6)
     j = 4
     do i = 1, 6
@@ -481,17 +626,17 @@ contains
     logical, intent(in) :: want
     real(dp), intent(out) :: r(:), ekin, epot
     type(link_mats), intent(inout) :: lm
-    integer :: n, nl, k, it(sys%maxn + 1)
-    real(dp) :: qr(size(q)), vr(size(q)), ar(size(q)), msum(size(q)), csum(size(q))
+    integer :: n, nl, k, it(2)
+    real(dp) :: qr(6), vr(6), ar(6), msum(6), csum(6)
     real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, c(2), l2, h(2, 2)
     if (sys%absang(l) == 0) then
-      call link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+      call link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
       return
     end if
-    n = sys%n_el(l); nl = 3*n + 3
+    n = 1; nl = 6                  ! absolute angles: one element per segment (coupled_build)
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     phi = atan2(sn, cs)
-    qr = q; vr = v; ar = a
+    qr = q(1:6); vr = v(1:6); ar = a(1:6)
     do k = 0, n
       it(k + 1) = th_index(n, k)
       qr(it(k + 1)) = wrap(q(it(k + 1)) - phi)
@@ -539,13 +684,14 @@ contains
     end do
   end subroutine angle_rate_terms
 
-  !> S <- (I + E)^T S (I + E) on segment l's blocks (nl local DOFs), E(th_k, 1:4) = e for the local
-  !> angle DOFs th(:): the change from chord-relative to absolute node angles (see link_eval).
+  !> S <- (I + E)^T S (I + E) on segment l's blocks (nl <= 6 local DOFs: one element), E(th_k, 1:4) =
+  !> e for the local angle DOFs th(:): the change from chord-relative to absolute node angles (see
+  !> link_eval).
   pure subroutine lm_transform(lm, l, nl, th, e)
     type(link_mats), intent(inout) :: lm
     integer, intent(in) :: l, nl, th(:)
     real(dp), intent(in) :: e(4)
-    real(dp) :: scol(nl), srow(nl), stt
+    real(dp) :: scol(6), srow(6), stt
     integer :: i, j, k
     scol = 0.0_dp; srow = 0.0_dp
     do k = 1, size(th)
@@ -592,15 +738,20 @@ contains
     real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
     logical, intent(in) :: want
     real(dp), intent(out) :: r(:), ekin, epot
-    real(dp), intent(out) :: msum(:), csum(:)   !< (nl) sums of the angle columns of M and C_v (if want)
+    real(dp), intent(out), optional :: msum(:), csum(:)   !< (nl) sums of the angle columns of M and C_v (if want)
     type(link_mats), intent(inout) :: lm
     integer :: n, nl, e, k, i, j, idx(6), cl5(5)
     real(dp) :: len, le, dw, rho_a, ea, c(2), ell, f, cc(2, 2), de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
-    real(dp) :: cs, sn, g(2), om, al0, al, dpsi(sys%maxld), w0(2), d5(5), blk(5, 5)
+    real(dp) :: cs, sn, g(2), om, al0, al, w0(2), d5(5), blk(5, 5)
     n = sys%n_el(l); nl = 3*n + 3
     len = sys%prop(1, l); rho_a = sys%prop(2, l); ea = sys%prop(3, l)
     r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
-    msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
+    if (present(msum)) then
+      msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
+    end if
+    if (n == 1 .and. .not. legacy_inertia) then      ! one element: closed form
+      call element_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    else
     do e = 1, n          ! distributed mass
       dw = sys%wn(e + 1, l) - sys%wn(e, l)
       le = len*dw
@@ -617,18 +768,17 @@ contains
       call mass_point(sys, l, q, v, a, e, xi, sys%wn(e, l) + xi*dw, len*dw, sys%pm_prop(2, i), want, &
                       ccv, ckt, r, lm, ekin, epot, msum, csum)
     end do
+    end if
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     do i = 1, sys%nri    ! rotary inertias turning with this link: psi = phi + th_k
       if (sys%ri_seg(i) /= l) cycle
       k = th_index(n, sys%ri_node(i))
-      dpsi(1:nl) = 0.0_dp
-      dpsi(1:2) = -g; dpsi(3:4) = g; dpsi(k) = 1.0_dp
+      cl5 = [1, 2, 3, 4, k]                 ! d psi / d q is nonzero on these local DOFs only
+      d5 = [-g(1), -g(2), g(1), g(2), 1.0_dp]
       psi_dd = al + a(k)
-      r(1:nl) = r(1:nl) + sys%ri_j(i)*psi_dd*dpsi(1:nl)
+      r(cl5) = r(cl5) + sys%ri_j(i)*psi_dd*d5
       ekin = ekin + 0.5_dp*sys%ri_j(i)*(om + v(k))**2
-      if (want) then     ! dpsi is nonzero on the local DOFs cl5 = [1..4, k] only
-        cl5 = [1, 2, 3, 4, k]
-        d5 = dpsi(cl5)
+      if (want) then
         do j = 1, 5
           blk(:, j) = sys%ri_j(i)*d5(j)*d5
         end do
@@ -640,7 +790,7 @@ contains
           blk(:, 2 + j) = blk(:, 2 + j) + ccv*sys%ri_j(i)*w0(j)*d5
         end do
         call lm_add_block(lm, l, 5, cl5, blk)
-        msum(cl5) = msum(cl5) + sys%ri_j(i)*d5
+        if (present(msum)) msum(cl5) = msum(cl5) + sys%ri_j(i)*d5
       end if
     end do
     ! chord stretch: U = 1/2 EA/L (|c| - L)^2
@@ -651,7 +801,8 @@ contains
     epot = epot + 0.5_dp*ea/len*(ell - len)**2
     if (want) then
       cc(:, 1) = c*c(1)/ell**2; cc(:, 2) = c*c(2)/ell**2
-      cc = ckt*(ea/len*cc + f/ell*(reshape([1.0_dp, 0.0_dp, 0.0_dp, 1.0_dp], [2, 2]) - cc))
+      cc = ckt*(ea/len*cc - f/ell*cc)
+      cc(1, 1) = cc(1, 1) + ckt*f/ell; cc(2, 2) = cc(2, 2) + ckt*f/ell
       lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) + cc; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) + cc
       lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) - cc; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) - cc
     end if
@@ -680,9 +831,11 @@ contains
             call lm_add(lm, l, idx(i), idx(j), ckt*sys%ke(i, j, sys%el_off(l) + e) + ccv*ce(i, j))
           end do
         end do
-        do i = 1, 6
-          if (idx(i) > 0) csum(idx(i)) = csum(idx(i)) + ce(i, 3) + ce(i, 6)
-        end do
+        if (present(csum)) then
+          do i = 1, 6
+            if (idx(i) > 0) csum(idx(i)) = csum(idx(i)) + ce(i, 3) + ce(i, 6)
+          end do
+        end if
       end if
     end do
   end subroutine link_eval_rel
@@ -1164,7 +1317,7 @@ contains
     real(dp), allocatable :: lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
-    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
+    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t, rho
     logical :: converged, refactor, use_cond, refresh
     type(link_mats) :: lm
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
@@ -1238,6 +1391,7 @@ contains
       converged = .false.
       da_prev = huge(1.0_dp)
       refresh = .true.
+      if (start_mode == START_VELOCITY) a(freeidx) = (q(freeidx) + dt*v(freeidx) - qs(freeidx))/(betap*dt*dt)
       do it = 1, maxit
         q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
         v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
@@ -1272,7 +1426,11 @@ contains
         ! converged (relative to the accelerations, or the position correction below 1e-2 tol of the
         ! mechanism size), or stagnated at the round-off level of the residual (no further contraction
         ! while already within sqrt(tol): the stiff chord terms limit the attainable precision)
+        ! or the error left after this correction, estimated from the contraction rate rho of the
+        ! last two corrections (|a - a*| ~ rho/(1 - rho) |da|), within tol
+        rho = da_norm/da_prev
         if (da_norm <= tol*(a_norm + 1.0e-30) .or. betap*dt*dt*da_norm <= 1.0e-2_dp*tol*lref .or. &
+            (it > 1 .and. rho < 0.5_dp .and. rho/(1.0_dp - rho)*da_norm <= tol*(a_norm + 1.0e-30)) .or. &
             (it > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))) then
           converged = .true.
           exit

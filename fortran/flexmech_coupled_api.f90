@@ -6,11 +6,12 @@
 module flexmech_coupled_api
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
-  use flexmech_coupled, only: coupled_set_newton, coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, &
+  use flexmech_coupled, only: coupled_set_newton, coupled_set_start, coupled_set_inertia, &
+                              coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, &
                               coupled_set_solver, coupled_residual, coupled_rows
   implicit none
   private
-  public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_residuals, cpl_rows
+  public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_set_start, cpl_set_inertia, cpl_residuals, cpl_rows
 
 contains
 
@@ -79,6 +80,22 @@ contains
     integer, intent(out) :: status
     call coupled_set_newton(mode, status)
   end subroutine cpl_set_newton
+
+  !> Where every later cpl_run starts a step's Newton iterations: 0 at the last acceleration, 1
+  !> (default) at the position q_n + dt v_n.  status 4 for another mode.
+  subroutine cpl_set_start(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    call coupled_set_start(mode, status)
+  end subroutine cpl_set_start
+
+  !> Inertia of one-element segments in every later call: 0 (default) in closed form, 1 by Gauss
+  !> points (the check of the closed form).  status 4 for another mode.
+  subroutine cpl_set_inertia(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    call coupled_set_inertia(mode, status)
+  end subroutine cpl_set_inertia
 
   !> Residual (all DOFs; inertia, elastic, gravity and force drives, no constraint forces), M, C_v, K_t
   !> (dense, free DOFs) and [kinetic, potential] energy at one state and time t [s].

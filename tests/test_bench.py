@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import bench, reference
+from flexmech_py import bench, bench_exudyn, reference
 from flexmech_py.cli import main
 from flexmech_py.simulate import Prepared
 
@@ -55,6 +55,15 @@ def test_bench_quick_writes_wellformed_csv_and_png(tmp_path, cases_dir, capsys):
     assert {r["case"] for r in seeds} == {p.stem for p in cases_dir.glob("*.toml")}
     mem = [r for k, r in summary.items() if k.startswith("memory.") and k.endswith("tracemalloc_peak_MB")]
     assert len(mem) == 2
+    side = tmp_path / "bench_exudyn.csv"
+    if bench_exudyn.unavailable() is None:      # Exudyn installed: the side-by-side rows
+        rows = _rows(side)
+        assert {r["model"] for r in rows} == {"nonlinear", "coupled"}
+        for r in rows:
+            assert float(r["speedup"]) == pytest.approx(float(r["exudyn_cpu_s"]) / float(r["flexmech_cpu_s"]), rel=1e-3)
+            assert math.isfinite(float(r["strain_coupler_diff"])) and float(r["newton_per_step"]) >= 1
+    else:                                       # one line says why, no file
+        assert not side.exists() and "Exudyn is not installed (pip install exudyn" in out
     png = tmp_path / "bench.png"
     if png.exists():   # matplotlib installed
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -100,3 +109,15 @@ def test_flop_model_and_exponent_fit():
     x = np.array([16, 32, 64, 128.0])
     assert bench.fit_exponent(x, 3 * x ** 1.5) == pytest.approx(1.5)
     assert math.isnan(bench.fit_exponent([1.0], [2.0]))
+
+
+def test_side_by_side_with_exudyn_follows_the_same_mechanism(cases_dir):
+    """The Exudyn model of the side-by-side benchmark is the seed four-bar: over its first 0.05 s (4
+    elements per link) the crank turns by the same angle in both (within 1 %), and the coupler's
+    midspan strain has the same sign and order at the end."""
+    pytest.importorskip("exudyn")
+    r = bench_exudyn.side_by_side(cases_dir / "fourbar_hac.toml", epl=4, dt=1.25e-5, t_end=0.05)
+    fx, ex = r["flexmech"], r["exudyn"]
+    assert abs(ex["crank_angle"][-1] - fx["crank_angle"][-1]) < 0.01 * abs(fx["crank_angle"][-1])
+    a, b = fx["strain_coupler_mid"][-1], np.interp(fx["t"][-1], ex["t"], ex["strain_coupler_mid"])
+    assert a * b > 0 and 0.5 < b / a < 2

@@ -221,24 +221,77 @@ def test_iteration_matrix_is_the_derivative_of_the_residual(cases_dir):
     assert np.abs(np.linalg.eigvals(np.linalg.solve(s, s_fd - s))).max() < 1e-3
 
 
-def test_newton_refresh_beats_the_predictor_matrix(cases_dir):
-    """On the seed four-bar at 16 el/link and dt = 1.25e-5 s the crank's node angle accelerates at
-    ~1e9 rad/s^2 and the matrix of the predictor (modified Newton, mode 0) contracts slowly; full
-    Newton (1) and the automatic refresh (2, the default) take fewer iterations per step."""
+def _seed_newton(cases_dir, epl, dt, t_end, start, mode):
     from flexmech_py import kernels
     from flexmech_py.simulate import Prepared
 
     case = fm.load_case(cases_dir / "fourbar_hac.toml",
-                        overrides=["solver.dt=1.25e-5", "solver.t_end=2.5e-3", "solver.error_estimate='none'"])
-    mean = {}
+                        overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'"])
     try:
-        for m in (0, 1, 2):
-            assert kernels.cpl.cpl_set_newton(m) == 0
-            newton = Prepared(case, elements_per_link=16).run("nonlinear").extra["coupled"]["newton"]
-            mean[m] = newton["mean_per_step"]
-            if m == 0:
-                assert newton["factorizations_per_step"] == pytest.approx(1.0, abs=1e-2)
+        assert kernels.cpl.cpl_set_start(start) == 0 and kernels.cpl.cpl_set_newton(mode) == 0
+        return Prepared(case, elements_per_link=epl).run("nonlinear").extra["coupled"]["newton"]
     finally:
+        kernels.cpl.cpl_set_start(1)
         kernels.cpl.cpl_set_newton(2)
-    assert mean[1] <= 4.2 and mean[1] < mean[2] < mean[0]
-    assert kernels.cpl.cpl_set_newton(5) != 0
+
+
+def test_newton_start_and_matrix_refresh(cases_dir):
+    """Seed four-bar, 16 el/link, dt = 1.25e-5 s (theory.md 12.2).  Started at the last acceleration
+    (start 0), the first iterate lies beta' dt^2 |a_n| away (the crank's node angle accelerates at
+    ~1e9 rad/s^2) and the matrix of the predictor contracts slowly: full Newton (1) < automatic
+    refresh (2) < modified Newton (0) in iterations per step.  Started at q_n + dt v_n (start 1, the
+    default) every policy takes 2 iterations and the automatic one factorizes once per step."""
+    old = {m: _seed_newton(cases_dir, 16, 1.25e-5, 2.5e-3, 0, m)["mean_per_step"] for m in (0, 1, 2)}
+    assert old[1] < old[2] < old[0]
+    for m in (0, 1, 2):
+        nw = _seed_newton(cases_dir, 16, 1.25e-5, 2.5e-3, 1, m)
+        assert nw["mean_per_step"] <= 2.0 + 1e-9
+        if m != 1:
+            assert nw["factorizations_per_step"] < 1.01
+    from flexmech_py import kernels
+    assert kernels.cpl.cpl_set_newton(5) != 0 and kernels.cpl.cpl_set_start(2) != 0
+
+
+def test_newton_converges_at_64_elements_per_link(cases_dir):
+    """At 64 el/link and dt = 1e-5 s Newton started at the last acceleration fails at the first step
+    (the first iterate turns the crank's node angle by radians); started at q_n + dt v_n it takes 2
+    iterations per step."""
+    from flexmech_py.errors import SolverError
+
+    with pytest.raises(SolverError) as info:
+        _seed_newton(cases_dir, 64, 1e-5, 2e-4, 0, 2)
+    assert info.value.code == 5
+    assert _seed_newton(cases_dir, 64, 1e-5, 2e-4, 1, 2)["max_per_step"] <= 2
+
+
+def test_closed_form_inertia_equals_the_gauss_points(cases_dir):
+    """The one-element inertia in closed form (theory.md 12.3) against the Gauss-point evaluation of
+    the same integrals, at a state of the seed four-bar (point masses on elements), the manipulator
+    (payload, hub) and the slider-crank: M, C_v, K_t and the energies equal to 1e-13, the residual
+    to 1e-13 of its inertia terms M a (its own size is a cancellation of larger terms)."""
+    from flexmech_py import kernels
+    from flexmech_py.simulate import Prepared
+
+    for name, epl in (("fourbar_hac", 4), ("manipulator_bricout", 3), ("slider_crank", 2)):
+        case = fm.load_case(cases_dir / f"{name}.toml", overrides=["solver.t_end=0.01", "solver.error_estimate='none'"])
+        p = Prepared(case, elements_per_link=epl)
+        p.run("nonlinear")
+        cm = p.coupled["nonlinear"]
+        st = cm.last_run
+        ispec, rspec = cm._spec(p.gravity, (0.0, 0.0), kernel=True)
+        nf = int(cm.shared.free_of.max())
+        out = []
+        try:
+            for mode in (1, 0):
+                assert kernels.cpl.cpl_set_inertia(mode) == 0
+                out.append(kernels.cpl.cpl_dense(nf, ispec, rspec, st["q"], st["v"], st["a"], 0.01))
+        finally:
+            kernels.cpl.cpl_set_inertia(0)
+        free = np.flatnonzero(cm.shared.free_of > 0)
+        free = free[np.argsort(cm.shared.free_of[free])]
+        for i in (1, 2, 3, 4):
+            x, y = out[0][i], out[1][i]
+            assert np.abs(x - y).max() <= 1e-13 * max(np.abs(x).max(), 1e-300), (name, i)
+        scale = np.abs(out[0][1] @ st["a"][free]).max()
+        assert np.abs(out[0][0][free] - out[1][0][free]).max() <= 1e-13 * scale, name
+    assert kernels.cpl.cpl_set_inertia(3) != 0

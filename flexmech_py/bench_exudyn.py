@@ -1,0 +1,230 @@
+"""Side by side with Exudyn (issue 12; docs/performance.md, "Side by side with Exudyn").
+
+The seed four-bar (cases/fourbar_hac.toml) run by flexmech's nonlinear model and by Exudyn
+(https://github.com/jgerstmayr/EXUDYN, pip ``exudyn``) with its planar ANCF cable element
+(``ObjectANCFCable2D``: cubic in the nodal positions and slopes, geometrically exact), on the same
+mesh (``elements_per_link`` elements per link, nodes at the same places), the same step and the same
+integrator family (generalized-alpha with the same spectral radius), the same loads (torque
+1 + 0.5 sin(alpha) N m on the crank's root node, where alpha is the angle of the crank's tangent
+there, and the two point masses at the crank-coupler and coupler-follower joints).  Joints are pins:
+coordinate constraints between the end nodes' positions (Exudyn) and shared position DOFs
+(flexmech).  Both give the midspan bending strains (curvature x the half depth), compared over the
+run, and the CPU time of the time integration (model building not counted on either side).
+
+Exudyn is an optional benchmark dependency: :func:`unavailable` says why the section is skipped.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+__all__ = ["unavailable", "side_by_side", "SEED_TORQUE"]
+
+SEED_TORQUE = (1.0, 0.5)       # N m: tau = a + b sin(alpha) (cases/fourbar_hac.toml, [drive])
+
+
+def unavailable() -> str | None:
+    """None when Exudyn imports, else the one line that says why the comparison is skipped."""
+    try:
+        import exudyn  # noqa: F401
+    except ImportError:
+        return "Exudyn is not installed (pip install exudyn, an optional benchmark dependency): side-by-side skipped"
+    return None
+
+
+def _seed_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float):
+    from .case import load_case
+
+    return load_case(case_path, overrides=[f"solver.dt={dt!r}", f"solver.t_end={t_end!r}", "solver.output_every=10",
+                                           "solver.integrator='generalized-alpha'", f"solver.rho_inf={rho_inf!r}",
+                                           "solver.error_estimate='none'", f"mesh.elements_per_link={epl}"])
+
+
+def run_flexmech(case, model: str = "nonlinear") -> dict:
+    """flexmech's run (nonlinear, or the coupled model of seed Section 3): frames every 10th step, CPU
+    of the kernel [s]."""
+    from .simulate import Prepared
+
+    p = Prepared(case)
+    p._checked = True
+    r = p.run(model)
+    return {"t": r.t, "strain_coupler_mid": r.columns["strain_coupler_mid"],
+            "strain_follower_mid": r.columns["strain_follower_mid"], "cpu_s": p.last_cpu["kernel_cpu_s"],
+            "crank_angle": r.columns["crank_angle"],
+            "newton": r.extra["coupled"]["newton"], "rigid": p.rm}
+
+
+def _link_geometry(case, rm) -> list[tuple]:
+    """(start x, y, angle, length, rho A, EA, EI, half depth) of every link at t = 0."""
+    km = rm.motion
+    out = []
+    for li, ln in enumerate(case["links"]):
+        out.append((float(km.ox[0, li]), float(km.oy[0, li]), float(km.phi[0, li]), ln["length"],
+                    ln["density"] * ln["area"], ln["youngs_modulus"] * ln["area"],
+                    ln["youngs_modulus"] * ln["second_moment"], ln["half_depth"]))
+    return out
+
+
+def build_exudyn(case, geometry, epl: int, masses):
+    """The Exudyn system of the seed four-bar: (system container, mbs, nodes per link, elements per
+    link).  Every joint is a pin between link ends or a link end and the ground."""
+    import exudyn as exu
+    from exudyn.itemInterface import (CoordinateConstraint, LoadCoordinate, MarkerNodeCoordinate, NodePoint2D,
+                                      NodePoint2DSlope1, NodePointGround, ObjectANCFCable2D, ObjectMassPoint2D)
+
+    sc = exu.SystemContainer()
+    mbs = sc.AddSystem()
+    ground = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
+    nodes, elems = [], []
+    for x0, y0, ang, length, rho_a, ea, ei, _ in geometry:
+        c, s = np.cos(ang), np.sin(ang)
+        ns = [mbs.AddNode(NodePoint2DSlope1(referenceCoordinates=[x0 + k * length / epl * c, y0 + k * length / epl * s,
+                                                                  c, s])) for k in range(epl + 1)]
+        es = [mbs.AddObject(ObjectANCFCable2D(nodeNumbers=[ns[k], ns[k + 1]], length=length / epl,
+                                              massPerLength=rho_a, bendingStiffness=ei,
+                                              axialStiffness=ea)) for k in range(epl)]
+        nodes.append(ns)
+        elems.append(es)
+
+    def coord(n, i):
+        return mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=n, coordinate=i))
+
+    def tie(na, nb):          # equal position displacements (same reference position)
+        for i in (0, 1):
+            mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(na, i), coord(nb, i)]))
+
+    mech = case.mechanism
+    for j in mech.joints:     # pins at link ends: tied to the ground or to each other
+        ends = [None if pr.body is None else nodes[mech.link_index(pr.body.name)][0 if pr.point == "start" else -1]
+                for pr in mech.joint_points(j)]
+        if None in ends:
+            n = ends[0] if ends[1] is None else ends[1]
+            for i in (0, 1):
+                mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(ground, 0), coord(n, i)]))
+        else:
+            tie(*ends)
+    for (li, end), mass in masses:
+        n = nodes[li][-1 if end else 0]
+        ref = mbs.GetNodeParameter(n, "referenceCoordinates")
+        pm = mbs.AddNode(NodePoint2D(referenceCoordinates=[ref[0], ref[1]]))
+        mbs.AddObject(ObjectMassPoint2D(mass=mass, nodeNumber=pm))
+        tie(n, pm)
+
+    root = nodes[0][0]
+    ang0 = geometry[0][2]
+    a, b = SEED_TORQUE
+
+    def torque(tt):           # tau(alpha) on the root node's tangent angle alpha = atan2(s_y, s_x)
+        q = mbs.GetNodeOutput(root, exu.OutputVariableType.CoordinatesTotal)
+        sx, sy = q[2], q[3]
+        alpha = np.arctan2(sy, sx) - ang0
+        tau = a + b * np.sin(alpha)
+        n2 = sx * sx + sy * sy
+        return tau, sx, sy, n2
+
+    def load_sx(mbs_, t, load):   # generalized force tau d(alpha)/d(s_x) = -tau s_y / |s|^2
+        tau, sx, sy, n2 = torque(t)
+        return -tau * sy / n2
+
+    def load_sy(mbs_, t, load):
+        tau, sx, sy, n2 = torque(t)
+        return tau * sx / n2
+
+    mbs.AddLoad(LoadCoordinate(markerNumber=coord(root, 2), load=0.0, loadUserFunction=load_sx))
+    mbs.AddLoad(LoadCoordinate(markerNumber=coord(root, 3), load=0.0, loadUserFunction=load_sy))
+    mbs.Assemble()
+    return sc, mbs, nodes, elems
+
+
+def _curvature(mbs, elem, local_x: float) -> float:
+    import exudyn as exu
+
+    return float(np.asarray(mbs.GetObjectOutputBody(elem, exu.OutputVariableType.CurvatureLocal,
+                                                    localPosition=[local_x, 0.0, 0.0])).ravel()[0])
+
+
+def run_exudyn(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float, masses) -> dict:
+    """Exudyn's run: midspan strains every 10th step (read between solver calls of 10 steps is not
+    possible without a restart, so a sensor-free run gives the CPU time and a second, recorded run
+    the strains)."""
+    import exudyn as exu
+
+    nsteps = int(round(t_end / dt))
+    sc, mbs, nodes, elems = build_exudyn(case, geometry, epl, masses)
+    ss = exu.SimulationSettings()
+    ti = ss.timeIntegration
+    ti.numberOfSteps, ti.endTime, ti.verboseMode = nsteps, t_end, 0
+    ti.generalizedAlpha.spectralRadius = rho_inf
+    ti.newton.relativeTolerance = 1e-8
+    ss.solution.file.write = False
+    ss.solution.sensors.writePeriod = 10 * dt
+    ss.show.statistics = False
+    ss.show.computationTime = False
+    ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
+    mid = []        # (element, local x) at the coupler's and the follower's midspan
+    for li in (1, 2):
+        k = epl // 2
+        mid.append((elems[li][k - 1], geometry[li][3] / epl) if epl % 2 == 0 else (elems[li][k], 0.5 * geometry[li][3] / epl))
+    rec = {"t": [], "k1": [], "k2": [], "alpha": []}
+    root = nodes[0][0]
+
+    def step_record(mbs_, t):     # preStepUserFunction: records every 10th step
+        if len(rec["t"]) == 0 or t >= rec["t"][-1] + 10 * dt - 0.5 * dt:
+            rec["t"].append(t)
+            rec["k1"].append(_curvature(mbs_, *mid[0]))
+            rec["k2"].append(_curvature(mbs_, *mid[1]))
+            q = mbs_.GetNodeOutput(root, exu.OutputVariableType.CoordinatesTotal)
+            rec["alpha"].append(float(np.arctan2(q[3], q[2])))
+        return True
+
+    c0 = time.process_time()
+    exu.SolveDynamic(mbs, ss)
+    cpu = time.process_time() - c0
+    sc2, mbs2, _, _ = build_exudyn(case, geometry, epl, masses)
+    mbs2.SetPreStepUserFunction(step_record)
+    exu.SolveDynamic(mbs2, ss)
+    t = np.array(rec["t"])
+    return {"t": t, "strain_coupler_mid": np.array(rec["k1"]) * geometry[1][7],
+            "strain_follower_mid": np.array(rec["k2"]) * geometry[2][7], "cpu_s": cpu, "steps": nsteps,
+            "crank_angle": np.unwrap(np.array(rec["alpha"])) - geometry[0][2]}
+
+
+def _seed_masses(case) -> list:
+    """((link, 1 = end), mass) of the case's point masses at link ends."""
+    out = []
+    mech = case.mechanism
+    for li, link in enumerate(mech.links):
+        for frac, mass in link.lumped:
+            out.append(((li, int(frac > 0.5)), float(mass)))
+    return out
+
+
+def compare(fx: dict, ex: dict, t_max: float) -> dict:
+    """Largest difference of the midspan strains over t <= t_max, relative to flexmech's peak."""
+    out = {}
+    for k in ("strain_coupler_mid", "strain_follower_mid"):
+        t = fx["t"][fx["t"] <= t_max]
+        a = fx[k][: t.size]
+        b = np.interp(t, ex["t"], ex[k])
+        out[k] = float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
+    return out
+
+
+def side_by_side(case_path, epl: int = 16, dt: float = 1.25e-5, t_end: float = 0.25, rho_inf: float = 0.8,
+                 t_compare: float | None = None, model: str = "nonlinear") -> dict:
+    """Both runs of the seed four-bar (flexmech's ``model``); CPU times, their ratio, the strain
+    differences over t <= t_compare (default: the run)."""
+    why = unavailable()
+    if why is not None:
+        return {"skipped": why}
+    case = _seed_case(case_path, epl, dt, t_end, rho_inf)
+    fx = run_flexmech(case, model)
+    geometry = _link_geometry(case, fx["rigid"])
+    ex = run_exudyn(case, geometry, epl, dt, t_end, rho_inf, _seed_masses(case))
+    diff = compare(fx, ex, t_end if t_compare is None else t_compare)
+    return {"model": model, "elements_per_link": epl, "dt": dt, "t_end": t_end, "rho_inf": rho_inf,
+            "flexmech_cpu_s": fx["cpu_s"],
+            "exudyn_cpu_s": ex["cpu_s"], "speedup": ex["cpu_s"] / fx["cpu_s"], "newton": fx["newton"],
+            "strain_difference": diff, "flexmech": fx, "exudyn": ex}
