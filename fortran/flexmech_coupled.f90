@@ -68,8 +68,11 @@ module flexmech_coupled
   !> dt^2/2 a_n), START_VELOCITY (default) at the position q_n + dt v_n (an unresolved stiff mode's
   !> acceleration swings by its whole size from step to step: starting from a_n puts the first
   !> iterate beta' dt^2 |a_n| away, radians at fine meshes).
-  integer, parameter :: START_ACCELERATION = 0, START_VELOCITY = 1
+  integer, parameter :: START_ACCELERATION = 0, START_VELOCITY = 1, START_POSITION = 2
   integer :: start_mode = START_VELOCITY
+  !> START_VELOCITY starts again at q_n when the first correction moves the configuration by more
+  !> than this fraction of the mechanism's size
+  real(dp), parameter :: RESTART_MOVE = 0.05_dp
   logical :: legacy_inertia = .false.    !< test switch: one-element segments by Gauss points too
   !> Marker kinds: a ground point, a node of a segment, a point of a rigid body.
   integer, parameter :: MK_GROUND = 0, MK_NODE = 1, MK_BODY = 2
@@ -142,7 +145,7 @@ contains
     integer, intent(in) :: mode
     integer, intent(out) :: status
     status = STATUS_BAD_INPUT
-    if (mode /= START_ACCELERATION .and. mode /= START_VELOCITY) return
+    if (mode < START_ACCELERATION .or. mode > START_POSITION) return
     start_mode = mode
     status = STATUS_OK
   end subroutine coupled_set_start
@@ -1314,11 +1317,11 @@ contains
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
     real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
-    real(dp), allocatable :: lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:)
+    real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
-    integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc
+    integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc, kat
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t, rho
-    logical :: converged, refactor, use_cond, refresh
+    logical :: converged, refactor, use_cond, refresh, second
     type(link_mats) :: lm
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
     nsteps = size(cval, 3) - 1
@@ -1352,10 +1355,10 @@ contains
     else
       allocate (ab(band_rows(sys%kl, sys%ku), nf))
     end if
-    allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf))
+    allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf), qn(sys%ndof))
     w = 0.0_dp
     allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
-              dlam(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
+              dlam(max(1, nc)), lamn(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
               lam0(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
               tau0(max(1, sys%nd)))
     gt = 0.0_dp
@@ -1391,8 +1394,12 @@ contains
       converged = .false.
       da_prev = huge(1.0_dp)
       refresh = .true.
+      qn = q; lamn = lam
+      second = .false.
+      kat = 0
       if (start_mode == START_VELOCITY) a(freeidx) = (q(freeidx) + dt*v(freeidx) - qs(freeidx))/(betap*dt*dt)
-      do it = 1, maxit
+      if (start_mode == START_POSITION) a(freeidx) = (q(freeidx) - qs(freeidx))/(betap*dt*dt)
+      do it = 1, merge(2*maxit, maxit, start_mode /= START_ACCELERATION)
         q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
         v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
         call assemble(sys, q, v, a, t, refresh, gammap*dt, betap*dt*dt, res, lm, energy)
@@ -1421,8 +1428,17 @@ contains
         da_norm = sqrt(sum(rf**2)); a_norm = sqrt(sum(a(freeidx)**2))
         newton(2:3) = [da_norm, a_norm]
         iters = iters + 1
+        kat = kat + 1                ! iterations of this attempt
         refresh = newton_mode == NEWTON_FULL .or. &
-                  (newton_mode == NEWTON_AUTO .and. it > 1 .and. da_norm > NEWTON_RATE*da_prev)
+                  (newton_mode == NEWTON_AUTO .and. kat > 1 .and. da_norm > NEWTON_RATE*da_prev)
+        if (it == 1 .and. start_mode == START_VELOCITY .and. betap*dt*dt*da_norm > RESTART_MOVE*lref) then
+          ! the start q_n + dt v_n was far (an unresolved stiff mode's velocity): start again at q_n
+          lam = lamn
+          a(freeidx) = (qn(freeidx) - qs(freeidx))/(betap*dt*dt)
+          refresh = .true.
+          kat = 0
+          cycle
+        end if
         ! converged (relative to the accelerations, or the position correction below 1e-2 tol of the
         ! mechanism size), or stagnated at the round-off level of the residual (no further contraction
         ! while already within sqrt(tol): the stiff chord terms limit the attainable precision)
@@ -1430,12 +1446,22 @@ contains
         ! last two corrections (|a - a*| ~ rho/(1 - rho) |da|), within tol
         rho = da_norm/da_prev
         if (da_norm <= tol*(a_norm + 1.0e-30) .or. betap*dt*dt*da_norm <= 1.0e-2_dp*tol*lref .or. &
-            (it > 1 .and. rho < 0.5_dp .and. rho/(1.0_dp - rho)*da_norm <= tol*(a_norm + 1.0e-30)) .or. &
-            (it > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))) then
+            (kat > 1 .and. rho < 0.5_dp .and. rho/(1.0_dp - rho)*da_norm <= tol*(a_norm + 1.0e-30)) .or. &
+            (kat > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))) then
           converged = .true.
           exit
         end if
         da_prev = da_norm
+        if (it == maxit .and. start_mode /= START_ACCELERATION) then
+          ! not converged from the start: a second attempt of maxit iterations from q_n, the
+          ! matrix rebuilt at every iteration
+          lam = lamn
+          a(freeidx) = (qn(freeidx) - qs(freeidx))/(betap*dt*dt)
+          da_prev = huge(1.0_dp)
+          second = .true.
+          kat = 0
+        end if
+        refresh = refresh .or. second
       end do
       if (status == STATUS_OK .and. .not. converged) status = STATUS_NEWTON
       if (status /= STATUS_OK) then
