@@ -34,10 +34,11 @@ def unavailable() -> str | None:
     return None
 
 
-def _seed_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float):
+def _seed_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float, node_angles: str = "shared"):
     from .case import load_case
 
     return load_case(case_path, overrides=[f"solver.dt={dt!r}", f"solver.t_end={t_end!r}", "solver.output_every=10",
+                                           f"solver.node_angles={node_angles!r}",
                                            "solver.integrator='generalized-alpha'", f"solver.rho_inf={rho_inf!r}",
                                            "solver.error_estimate='none'", f"mesh.elements_per_link={epl}"])
 

@@ -35,6 +35,10 @@ SUPERPOSITION_MODELS = ("hac", "classic", "classic-translational")
 MODELS = SUPERPOSITION_MODELS + ("coupled", "nonlinear")
 INTEGRATORS = ("newmark", "hht", "generalized-alpha")
 # the parameter key of each integrator (solver.<key>), its default and its range
+#: the nonlinear model's node angles (docs/theory.md 12.1): each element's end rotations from its
+#: chord, welded at interior nodes ("relative", the default), or one absolute angle per node shared by
+#: its two elements ("shared": no weld rows, time per step linear in the elements)
+NODE_ANGLES = ("relative", "shared")
 INTEGRATOR_PARAMS = {"newmark": ("beta", "gamma"), "hht": ("hht_alpha",), "generalized-alpha": ("rho_inf",)}
 HHT_ALPHA_DEFAULT, HHT_ALPHA_MAX = 0.05, 1.0 / 3.0
 RHO_INF_DEFAULT = 0.8
@@ -243,7 +247,7 @@ def validate_case(raw: dict, source: str = "<case>") -> Case:
 def _solver(sol: dict, mech) -> dict:
     v.keys(sol, {"t_end", "dt", "output_every", "integrator", "beta", "gamma", "hht_alpha", "rho_inf", "divergence_limit",
                  "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit",
-                 "geometric_stiffness", "geometric_tol", "geometric_maxit", "error_estimate"}, "solver")
+                 "geometric_stiffness", "geometric_tol", "geometric_maxit", "error_estimate", "node_angles"}, "solver")
     t_end = v.num(sol, "t_end", "solver", positive=True, required=True)
     dt = v.num(sol, "dt", "solver", positive=True, required=True)
     if dt > t_end:
@@ -264,7 +268,8 @@ def _solver(sol: dict, mech) -> dict:
                                           choices=("none", "current", "lagged", "quasi_static")),
             "geometric_tol": v.num(sol, "geometric_tol", "solver", default=1e-8, positive=True),
             "geometric_maxit": v.whole(sol, "geometric_maxit", "solver", default=50),
-            "error_estimate": v.text(sol, "error_estimate", "solver", default="time", choices=ERROR_ESTIMATES)}
+            "error_estimate": v.text(sol, "error_estimate", "solver", default="time", choices=ERROR_ESTIMATES),
+            "node_angles": v.text(sol, "node_angles", "solver", default="relative", choices=NODE_ANGLES)}
 
 
 def _check_tables_cover_run(mech, t_end: float) -> None:

@@ -38,8 +38,10 @@ class CoupledModel:
         self.last_run = None
         self._flat = None
         self._kflat = None
-        #: the nonlinear model's kernel integrates shared node angles (coupled_layout.SharedAngles)
-        self.shared = SharedAngles.of(layout) if layout.split else None
+        #: the nonlinear model with solver.node_angles = "shared": the kernel integrates one absolute
+        #: angle per node (coupled_layout.SharedAngles); None: chord-relative angles and weld rows
+        shared = layout.split and layout.case["solver"].get("node_angles", "relative") == "shared"
+        self.shared = SharedAngles.of(layout) if shared else None
 
     @classmethod
     def from_case(cls, case: dict, split: bool = False) -> "CoupledModel":

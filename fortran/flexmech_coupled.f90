@@ -474,7 +474,8 @@ contains
 
   pure real(dp) function wrap(x)
     real(dp), intent(in) :: x
-    wrap = atan2(sin(x), cos(x))
+    real(dp), parameter :: twopi = 6.283185307179586_dp
+    wrap = x - twopi*anint(x/twopi)     ! the principal value (-pi, pi], up to the end point
   end function wrap
 
   !> Position in the link vector of the elastic DOFs of element e (1..n): [p, v, th, p, v, th], 0 = none.
@@ -746,9 +747,11 @@ contains
     integer :: n, nl, e, k, i, j, idx(6), cl5(5)
     real(dp) :: len, le, dw, rho_a, ea, c(2), ell, f, cc(2, 2), de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
     real(dp) :: cs, sn, g(2), om, al0, al, w0(2), d5(5), blk(5, 5)
+    logical :: damped
     n = sys%n_el(l); nl = 3*n + 3
     len = sys%prop(1, l); rho_a = sys%prop(2, l); ea = sys%prop(3, l)
     r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
+    damped = sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp
     if (present(msum)) then
       msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
     end if
@@ -821,8 +824,12 @@ contains
       end do
       fe = matmul(sys%ke(:, :, sys%el_off(l) + e), de)
       epot = epot + 0.5_dp*dot_product(de, fe)
-      ce = sys%ray(1)*sys%me(:, :, sys%el_off(l) + e) + sys%ray(2)*sys%ke(:, :, sys%el_off(l) + e)
-      if (sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp) fe = fe + matmul(ce, dv)
+      if (damped) then
+        ce = sys%ray(1)*sys%me(:, :, sys%el_off(l) + e) + sys%ray(2)*sys%ke(:, :, sys%el_off(l) + e)
+        fe = fe + matmul(ce, dv)
+      else
+        ce = 0.0_dp
+      end if
       do i = 1, 6
         if (idx(i) > 0) r(idx(i)) = r(idx(i)) + fe(i)
       end do
@@ -831,10 +838,10 @@ contains
           if (idx(j) == 0) cycle
           do i = 1, 6
             if (idx(i) == 0) cycle
-            call lm_add(lm, l, idx(i), idx(j), ckt*sys%ke(i, j, sys%el_off(l) + e) + ccv*ce(i, j))
+            call lm_add(lm, l, idx(i), idx(j), ckt*sys%ke(i, j, sys%el_off(l) + e) + ccv*ce(i, j))  ! ce = 0 undamped
           end do
         end do
-        if (present(csum)) then
+        if (present(csum) .and. damped) then
           do i = 1, 6
             if (idx(i) > 0) csum(idx(i)) = csum(idx(i)) + ce(i, 3) + ce(i, 6)
           end do

@@ -170,7 +170,8 @@ def _seed_state(cases_dir, epl, dt, t_end):
     from flexmech_py.simulate import Prepared
 
     case = fm.load_case(cases_dir / "fourbar_hac.toml",
-                        overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'"])
+                        overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'",
+                                   "solver.node_angles='shared'"])
     p = Prepared(case, elements_per_link=epl)
     p.run("nonlinear")
     cm = p.coupled["nonlinear"]
@@ -226,7 +227,8 @@ def _seed_newton(cases_dir, epl, dt, t_end, start, mode):
     from flexmech_py.simulate import Prepared
 
     case = fm.load_case(cases_dir / "fourbar_hac.toml",
-                        overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'"])
+                        overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'",
+                                   "solver.node_angles='shared'"])
     try:
         assert kernels.cpl.cpl_set_start(start) == 0 and kernels.cpl.cpl_set_newton(mode) == 0
         return Prepared(case, elements_per_link=epl).run("nonlinear").extra["coupled"]["newton"]
@@ -273,7 +275,7 @@ def test_newton_converges_at_256_elements_per_link_with_generalized_alpha(cases_
 
     case = fm.load_case(cases_dir / "fourbar_hac.toml",
                         overrides=["solver.dt=1.25e-5", "solver.t_end=1e-3", "solver.error_estimate='none'",
-                                   "solver.integrator='generalized-alpha'"])
+                                   "solver.integrator='generalized-alpha'", "solver.node_angles='shared'"])
     assert kernels.cpl.cpl_set_start(1) == 0
     newton = Prepared(case, elements_per_link=256).run("nonlinear").extra["coupled"]["newton"]
     assert newton["mean_per_step"] <= 4.0
@@ -288,7 +290,8 @@ def test_closed_form_inertia_equals_the_gauss_points(cases_dir):
     from flexmech_py.simulate import Prepared
 
     for name, epl in (("fourbar_hac", 4), ("manipulator_bricout", 3), ("slider_crank", 2)):
-        case = fm.load_case(cases_dir / f"{name}.toml", overrides=["solver.t_end=0.01", "solver.error_estimate='none'"])
+        case = fm.load_case(cases_dir / f"{name}.toml", overrides=["solver.t_end=0.01", "solver.error_estimate='none'",
+                                                                   "solver.node_angles='shared'"])
         p = Prepared(case, elements_per_link=epl)
         p.run("nonlinear")
         cm = p.coupled["nonlinear"]
