@@ -69,8 +69,8 @@ def _link_geometry(case, rm) -> list[tuple]:
 
 
 def build_exudyn(case, geometry, epl: int, masses):
-    """The Exudyn system of the seed four-bar: (system container, mbs, nodes per link, elements per
-    link).  Every joint is a pin between link ends or a link end and the ground."""
+    """The Exudyn system of the seed four-bar, not yet assembled: (system container, mbs, nodes per
+    link, elements per link).  Every joint is a pin between link ends or a link end and the ground."""
     import exudyn as exu
     from exudyn.itemInterface import (CoordinateConstraint, LoadCoordinate, MarkerNodeCoordinate, NodePoint2D,
                                       NodePoint2DSlope1, NodePointGround, ObjectANCFCable2D, ObjectMassPoint2D)
@@ -135,25 +135,26 @@ def build_exudyn(case, geometry, epl: int, masses):
 
     mbs.AddLoad(LoadCoordinate(markerNumber=coord(root, 2), load=0.0, loadUserFunction=load_sx))
     mbs.AddLoad(LoadCoordinate(markerNumber=coord(root, 3), load=0.0, loadUserFunction=load_sy))
-    mbs.Assemble()
     return sc, mbs, nodes, elems
 
 
-def _curvature(mbs, elem, local_x: float) -> float:
-    import exudyn as exu
-
-    return float(np.asarray(mbs.GetObjectOutputBody(elem, exu.OutputVariableType.CurvatureLocal,
-                                                    localPosition=[local_x, 0.0, 0.0])).ravel()[0])
-
-
 def run_exudyn(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float, masses) -> dict:
-    """Exudyn's run: midspan strains every 10th step (read between solver calls of 10 steps is not
-    possible without a restart, so a sensor-free run gives the CPU time and a second, recorded run
-    the strains)."""
+    """Exudyn's run: the midspan curvatures and the crank's root-node coordinates recorded every 10th
+    step by Exudyn's own sensors (as flexmech writes every 10th frame), and the CPU time of the solve."""
     import exudyn as exu
+    from exudyn.itemInterface import SensorBody, SensorNode
 
     nsteps = int(round(t_end / dt))
     sc, mbs, nodes, elems = build_exudyn(case, geometry, epl, masses)
+    sensors = []    # the curvature at the coupler's and the follower's midspan: (element, local x)
+    for li in (1, 2):
+        k = epl // 2
+        elem, x = (elems[li][k - 1], geometry[li][3] / epl) if epl % 2 == 0 else (elems[li][k], 0.5 * geometry[li][3] / epl)
+        sensors.append(mbs.AddSensor(SensorBody(bodyNumber=elem, localPosition=[x, 0.0, 0.0], storeInternal=True,
+                                                outputVariableType=exu.OutputVariableType.CurvatureLocal)))
+    sensors.append(mbs.AddSensor(SensorNode(nodeNumber=nodes[0][0], storeInternal=True,
+                                            outputVariableType=exu.OutputVariableType.CoordinatesTotal)))
+    mbs.Assemble()
     ss = exu.SimulationSettings()
     ti = ss.timeIntegration
     ti.numberOfSteps, ti.endTime, ti.verboseMode = nsteps, t_end, 0
@@ -164,32 +165,13 @@ def run_exudyn(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float
     ss.show.statistics = False
     ss.show.computationTime = False
     ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
-    mid = []        # (element, local x) at the coupler's and the follower's midspan
-    for li in (1, 2):
-        k = epl // 2
-        mid.append((elems[li][k - 1], geometry[li][3] / epl) if epl % 2 == 0 else (elems[li][k], 0.5 * geometry[li][3] / epl))
-    rec = {"t": [], "k1": [], "k2": [], "alpha": []}
-    root = nodes[0][0]
-
-    def step_record(mbs_, t):     # preStepUserFunction: records every 10th step
-        if len(rec["t"]) == 0 or t >= rec["t"][-1] + 10 * dt - 0.5 * dt:
-            rec["t"].append(t)
-            rec["k1"].append(_curvature(mbs_, *mid[0]))
-            rec["k2"].append(_curvature(mbs_, *mid[1]))
-            q = mbs_.GetNodeOutput(root, exu.OutputVariableType.CoordinatesTotal)
-            rec["alpha"].append(float(np.arctan2(q[3], q[2])))
-        return True
-
     c0 = time.process_time()
     exu.SolveDynamic(mbs, ss)
     cpu = time.process_time() - c0
-    sc2, mbs2, _, _ = build_exudyn(case, geometry, epl, masses)
-    mbs2.SetPreStepUserFunction(step_record)
-    exu.SolveDynamic(mbs2, ss)
-    t = np.array(rec["t"])
-    return {"t": t, "strain_coupler_mid": np.array(rec["k1"]) * geometry[1][7],
-            "strain_follower_mid": np.array(rec["k2"]) * geometry[2][7], "cpu_s": cpu, "steps": nsteps,
-            "crank_angle": np.unwrap(np.array(rec["alpha"])) - geometry[0][2]}
+    k1, k2, root = (mbs.GetSensorStoredData(s) for s in sensors)
+    return {"t": k1[:, 0], "strain_coupler_mid": k1[:, 1] * geometry[1][7],
+            "strain_follower_mid": k2[:, 1] * geometry[2][7], "cpu_s": cpu, "steps": nsteps,
+            "crank_angle": np.unwrap(np.arctan2(root[:, 4], root[:, 3])) - geometry[0][2]}
 
 
 def _seed_masses(case) -> list:

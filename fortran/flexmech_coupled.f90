@@ -73,7 +73,10 @@ module flexmech_coupled
   !> START_VELOCITY starts again at q_n when the first correction moves the configuration by more
   !> than this fraction of the mechanism's size
   real(dp), parameter :: RESTART_MOVE = 0.05_dp
-  logical :: legacy_inertia = .false.    !< test switch: one-element segments by Gauss points too
+  !> Inertia of one-element segments: INERTIA_CLOSED (default, element_inertia) or INERTIA_GAUSS
+  !> (mass_point at the Gauss points, as longer segments; the check of the closed form)
+  integer, parameter :: INERTIA_CLOSED = 0, INERTIA_GAUSS = 1
+  integer :: inertia_mode = INERTIA_CLOSED
   !> Marker kinds: a ground point, a node of a segment, a point of a rigid body.
   integer, parameter :: MK_GROUND = 0, MK_NODE = 1, MK_BODY = 2
   integer, parameter :: COUPLED_NSPEC_HEADER = 12   !< integers before the first block of ispec
@@ -130,35 +133,37 @@ module flexmech_coupled
 
 contains
 
+  !> var = mode when lo <= mode <= hi (status STATUS_OK), else var unchanged and STATUS_BAD_INPUT:
+  !> the setters of the module's modes.
+  pure subroutine set_mode(mode, lo, hi, var, status)
+    integer, intent(in) :: mode, lo, hi
+    integer, intent(inout) :: var
+    integer, intent(out) :: status
+    status = STATUS_BAD_INPUT
+    if (mode < lo .or. mode > hi) return
+    var = mode
+    status = STATUS_OK
+  end subroutine set_mode
+
   !> Matrix refresh policy of every later coupled_run (NEWTON_*); status STATUS_BAD_INPUT otherwise.
   subroutine coupled_set_newton(mode, status)
     integer, intent(in) :: mode
     integer, intent(out) :: status
-    status = STATUS_BAD_INPUT
-    if (mode < NEWTON_MODIFIED .or. mode > NEWTON_AUTO) return
-    newton_mode = mode
-    status = STATUS_OK
+    call set_mode(mode, NEWTON_MODIFIED, NEWTON_AUTO, newton_mode, status)
   end subroutine coupled_set_newton
 
   !> Start of every later coupled_run's Newton iterations (START_*); status STATUS_BAD_INPUT otherwise.
   subroutine coupled_set_start(mode, status)
     integer, intent(in) :: mode
     integer, intent(out) :: status
-    status = STATUS_BAD_INPUT
-    if (mode < START_ACCELERATION .or. mode > START_POSITION) return
-    start_mode = mode
-    status = STATUS_OK
+    call set_mode(mode, START_ACCELERATION, START_POSITION, start_mode, status)
   end subroutine coupled_set_start
 
-  !> Inertia of one-element segments in every later call: 0 closed form (element_inertia, the
-  !> default), 1 by the Gauss points (mass_point; a test of the closed form).
+  !> Inertia of one-element segments in every later call (INERTIA_*); status STATUS_BAD_INPUT otherwise.
   subroutine coupled_set_inertia(mode, status)
     integer, intent(in) :: mode
     integer, intent(out) :: status
-    status = STATUS_BAD_INPUT
-    if (mode /= 0 .and. mode /= 1) return
-    legacy_inertia = mode == 1
-    status = STATUS_OK
+    call set_mode(mode, INERTIA_CLOSED, INERTIA_GAUSS, inertia_mode, status)
   end subroutine coupled_set_inertia
 
   !> Build the system from its flat description; status STATUS_BAD_INPUT on bad sizes or indices.
@@ -755,7 +760,7 @@ contains
     if (present(msum)) then
       msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
     end if
-    if (n == 1 .and. .not. legacy_inertia) then      ! one element: closed form
+    if (n == 1 .and. inertia_mode == INERTIA_CLOSED) then      ! one element: closed form
       call element_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
     else
     do e = 1, n          ! distributed mass
@@ -993,10 +998,7 @@ contains
   subroutine coupled_set_solver(mode, status)
     integer, intent(in) :: mode
     integer, intent(out) :: status
-    status = STATUS_BAD_INPUT
-    if (mode < SOLVER_AUTO .or. mode > SOLVER_CONDENSED) return
-    solver_mode = mode
-    status = STATUS_OK
+    call set_mode(mode, SOLVER_AUTO, SOLVER_CONDENSED, solver_mode, status)
   end subroutine coupled_set_solver
 
   !> Allocate the segment-block storage of S (see link_mats) and, when every segment's elastic DOFs
@@ -1405,7 +1407,7 @@ contains
       second = .false.
       kat = 0
       if (start_mode == START_VELOCITY) a(freeidx) = (q(freeidx) + dt*v(freeidx) - qs(freeidx))/(betap*dt*dt)
-      if (start_mode == START_POSITION) a(freeidx) = (q(freeidx) - qs(freeidx))/(betap*dt*dt)
+      if (start_mode == START_POSITION) call restart_at_qn()
       do it = 1, merge(2*maxit, maxit, start_mode /= START_ACCELERATION)
         q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
         v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
@@ -1440,10 +1442,8 @@ contains
                   (newton_mode == NEWTON_AUTO .and. kat > 1 .and. da_norm > NEWTON_RATE*da_prev)
         if (it == 1 .and. start_mode == START_VELOCITY .and. betap*dt*dt*da_norm > RESTART_MOVE*lref) then
           ! the start q_n + dt v_n was far (an unresolved stiff mode's velocity): start again at q_n
-          lam = lamn
-          a(freeidx) = (qn(freeidx) - qs(freeidx))/(betap*dt*dt)
+          call restart_at_qn()
           refresh = .true.
-          kat = 0
           cycle
         end if
         ! converged (relative to the accelerations, or the position correction below 1e-2 tol of the
@@ -1462,11 +1462,8 @@ contains
         if (it == maxit .and. start_mode /= START_ACCELERATION) then
           ! not converged from the start: a second attempt of maxit iterations from q_n, the
           ! matrix rebuilt at every iteration
-          lam = lamn
-          a(freeidx) = (qn(freeidx) - qs(freeidx))/(betap*dt*dt)
-          da_prev = huge(1.0_dp)
+          call restart_at_qn()
           second = .true.
-          kat = 0
         end if
         refresh = refresh .or. second
       end do
@@ -1497,6 +1494,15 @@ contains
     call save_carry()
 
   contains
+
+    !> Start the step's iteration (again) at the last step's position q_n and multipliers: the
+    !> acceleration that puts q at qn, a fresh contraction history.
+    subroutine restart_at_qn()
+      lam = lamn
+      a(freeidx) = (qn(freeidx) - qs(freeidx))/(betap*dt*dt)
+      da_prev = huge(1.0_dp)
+      kat = 0
+    end subroutine restart_at_qn
 
     !> The state a continuation needs besides (q, v, a, p): multipliers, lref, work.
     subroutine save_carry()
