@@ -483,6 +483,7 @@ def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0),
     ispec += [m[0] for m in mk] + [0 if m[0] == MK_GROUND else m[1] + 1 for m in mk] + [m[2] for m in mk]
     ispec += [i for r in rows for i in (r.kind, r.a + 1, r.b + 1, r.aux)] + dv
     ispec += [int(shared is not None)] * nseg
+    ispec += [int(lay.split)] * nseg          # shallow-arch axial strain: the nonlinear model's elements
     wn = np.zeros((nseg, maxn + 1))
     prop = []
     for si, (li, k0, k1) in enumerate(lay.segments):

@@ -176,7 +176,8 @@ def curvature(cm: CoupledModel, qf, li: int, frac: float) -> np.ndarray:
 
 def axial_forces(cm: CoupledModel, qf) -> np.ndarray:
     """(nel, nf) axial force [N] of every element of the mesh (flexible links in order): EA times the
-    chord stretch of its segment plus its elastic axial strain."""
+    chord stretch of its segment plus its elastic axial strain; in the nonlinear model (one element
+    per segment) plus the element's mean w'^2/2 from its end angles th (docs/theory.md 12.4)."""
     out = np.empty((cm.mesh.nel, qf.shape[1]))
     for si, (li, k0, k1) in enumerate(cm.segments):
         d, n = cm.seg_slice(si), int(cm.n_el[si])
@@ -185,6 +186,9 @@ def axial_forces(cm: CoupledModel, qf) -> np.ndarray:
         ls = L * (f[k1] - f[k0])
         ea = cm.case["links"][li]["youngs_modulus"] * cm.case["links"][li]["area"]
         eps_c = np.hypot(*(qf[d[2:4]] - qf[d[0:2]])) / ls - 1.0
+        if cm.split:
+            t0, t1 = qf[_th(d, n, 0)], qf[_th(d, n, 1)]
+            eps_c = eps_c + (4.0 * t0 * t0 - 2.0 * t0 * t1 + 4.0 * t1 * t1) / 60.0
         els = cm.mesh.link_elements(li)
         for e in range(n):
             p1 = qf[d[3 * e + 2]] if 0 < e < n else 0.0

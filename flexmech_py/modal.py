@@ -38,8 +38,9 @@ ZERO_STIFFNESS = 1e-12
 #: a mode with more than this fraction of its kinetic energy in the rigid-body subspace is reported as a
 #: rigid-body mode
 RIGID_FRACTION = 0.5
-QS_MAXIT = 12           # Newton iterations of the coupled models' quasi-static state at most
+QS_MAXIT = 40           # Newton iterations of the coupled models' quasi-static state at most
 QS_TOL = 1e-11          # ... until the update is below QS_TOL x the mechanism's length
+QS_MAXSTEP = 0.1        # an update larger than this x the mechanism's length is scaled down to it
 FD_STEP = 1e-6          # central-difference step x the mechanism's length (positions; angles alike)
 
 
@@ -196,6 +197,9 @@ def coupled_rigid_subspace(cm, q0: np.ndarray, m: np.ndarray) -> np.ndarray:
 def quasi_static_state(lin: _Linearization, q0, cval, m, z):
     """Newton on the quasi-static equations R(q) + G^T lam = 0, g(q) = cval, the update kept
     M-orthogonal to the rigid-body motions z (the mechanism's free DOFs are not moved by it).
+    An update longer than QS_MAXSTEP x the mechanism's length is shortened to it (the inertia loads
+    of a fast mechanism can put the first full Newton step far beyond the equilibrium; measured on
+    extreme/critical_fourbar, nonlinear model: 19 iterations, diverging without the limit).
     Returns (q, lam, K_T, G)."""
     cm, f = lin.cm, lin.free
     nc = len(cm.rows)
@@ -210,9 +214,11 @@ def quasi_static_state(lin: _Linearization, q0, cval, m, z):
         a[n:n + nc, :n], a[n + nc:, :n] = gm, mz.T
         rhs = -np.concatenate([r, lin.violation(g, cval), np.zeros(nz)])
         sol = np.linalg.lstsq(a, rhs, rcond=None)[0]
-        q[f] += sol[:n]
-        lam += sol[n:n + nc]
-        if np.max(np.abs(sol[:n])) < QS_TOL * lref:
+        step = np.max(np.abs(sol[:n]))
+        scale = min(1.0, QS_MAXSTEP * lref / max(step, 1e-300))
+        q[f] += scale * sol[:n]
+        lam += scale * sol[n:n + nc]
+        if step < QS_TOL * lref:
             break
     else:
         raise SolverError("the quasi-static state of the modal analysis did not converge (the frozen "

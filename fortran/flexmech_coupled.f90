@@ -96,6 +96,9 @@ module flexmech_coupled
     !> (nseg) 1: the segment's th DOFs are absolute node angles psi_k, shared with the neighbouring
     !> segments of its link (the nonlinear model, docs/theory.md section 12.1), 0: angles from the chord
     integer, allocatable :: absang(:)
+    !> (nseg) 1: the segment is one co-rotational element whose axial strain holds its mean w'^2/2
+    !> (shallow arch, the nonlinear model, docs/theory.md section 12.4), 0: the chord stretch alone
+    integer, allocatable :: arch(:)
     !> (4, 4, nseg) for one-element segments: G = int phi phi^T dm over phi = [1 - xi, xi, N_0, N_1]
     !> (distributed mass and point masses; element_inertia), zero for the others
     real(dp), allocatable :: gram(:, :, :)
@@ -171,7 +174,7 @@ contains
   !>   [nseg, nrb, ndof, maxn, npm, nri, nmk, nc, nd, nh, nth, ntab,
   !>    n_el(nseg), ld(3 maxn + 3, nseg), rb_dof(3, nrb), free_of(ndof), pm_seg(npm), pm_el(npm),
   !>    ri_seg(nri), ri_node(nri), mk_kind(nmk), mk_idx(nmk), mk_node(nmk), con(4, nc), dv(5, nd),
-  !>    absang(nseg)]
+  !>    absang(nseg), arch(nseg)]
   !> rspec (reals):
   !>   [prop(4, nseg), wn(maxn + 1, nseg), rb_m(3, nrb), pm_prop(2, npm), ri_j(nri), mk_pos(2, nmk),
   !>    con_dir(2, nc), dv_dir(2, nd), dv_par(4, nd), dv_harm(2 nh, nd), dv_th(3, nth, nd),
@@ -199,7 +202,7 @@ contains
     ns = sys%nseg; ml = 3*sys%maxn + 3; sys%maxld = ml
     if (ns < 1 .or. sys%maxn < 1 .or. sys%ndof < 1) return
     if (size(ispec) /= COUPLED_NSPEC_HEADER + ns*(1 + ml) + 3*sys%nrb + sys%ndof + 2*sys%npm + 2*sys%nri &
-        + 3*sys%nmk + 4*sys%nc + 5*sys%nd + ns) return
+        + 3*sys%nmk + 4*sys%nc + 5*sys%nd + 2*ns) return
     if (size(rspec) /= ns*(4 + sys%maxn + 1) + 3*sys%nrb + 2*sys%npm + sys%nri + 2*sys%nmk + 2*sys%nc &
         + (2 + NPAR + 2*sys%nh + 3*sys%nth)*sys%nd + 5*ntab + 4) return
     o = COUPLED_NSPEC_HEADER
@@ -216,7 +219,8 @@ contains
     sys%mk_node = ispec(o + 1:o + sys%nmk); o = o + sys%nmk
     sys%con = reshape(ispec(o + 1:o + 4*sys%nc), [4, sys%nc]); o = o + 4*sys%nc
     sys%dv = reshape(ispec(o + 1:o + 5*sys%nd), [5, sys%nd]); o = o + 5*sys%nd
-    sys%absang = ispec(o + 1:o + ns)
+    sys%absang = ispec(o + 1:o + ns); o = o + ns
+    sys%arch = ispec(o + 1:o + ns)
     o = 0
     sys%prop = reshape(rspec(o + 1:o + 4*ns), [4, ns]); o = o + 4*ns
     sys%wn = reshape(rspec(o + 1:o + (sys%maxn + 1)*ns), [sys%maxn + 1, ns]); o = o + (sys%maxn + 1)*ns
@@ -236,6 +240,7 @@ contains
     if (any(sys%n_el < 1) .or. any(sys%n_el > sys%maxn) .or. any(sys%free_of < 0)) return
     if (any(sys%absang < 0) .or. any(sys%absang > 1)) return
     if (any(sys%absang == 1 .and. sys%n_el /= 1)) return
+    if (any(sys%arch < 0) .or. any(sys%arch > 1) .or. any(sys%arch == 1 .and. sys%n_el /= 1)) return
     sys%nfree = maxval([0, sys%free_of])
     if (sys%nfree < 1 .or. any(sys%prop <= 0.0_dp)) return
     do s = 1, ns
@@ -750,11 +755,11 @@ contains
     real(dp), intent(out), optional :: msum(:), csum(:)   !< (nl) sums of the angle columns of M and C_v (if want)
     type(link_mats), intent(inout) :: lm
     integer :: n, nl, e, k, i, j, idx(6), cl5(5)
-    real(dp) :: len, le, dw, rho_a, ea, c(2), ell, f, cc(2, 2), de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
+    real(dp) :: len, le, dw, rho_a, c(2), ell, de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
     real(dp) :: cs, sn, g(2), om, al0, al, w0(2), d5(5), blk(5, 5)
     logical :: damped
     n = sys%n_el(l); nl = 3*n + 3
-    len = sys%prop(1, l); rho_a = sys%prop(2, l); ea = sys%prop(3, l)
+    len = sys%prop(1, l); rho_a = sys%prop(2, l)
     r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
     damped = sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp
     if (present(msum)) then
@@ -804,19 +809,7 @@ contains
         if (present(msum)) msum(cl5) = msum(cl5) + sys%ri_j(i)*d5
       end if
     end do
-    ! chord stretch: U = 1/2 EA/L (|c| - L)^2
-    c = q(3:4) - q(1:2)
-    f = ea/len*(ell - len)
-    r(1:2) = r(1:2) - f*c/ell
-    r(3:4) = r(3:4) + f*c/ell
-    epot = epot + 0.5_dp*ea/len*(ell - len)**2
-    if (want) then
-      cc(:, 1) = c*c(1)/ell**2; cc(:, 2) = c*c(2)/ell**2
-      cc = ckt*(ea/len*cc - f/ell*cc)
-      cc(1, 1) = cc(1, 1) + ckt*f/ell; cc(2, 2) = cc(2, 2) + ckt*f/ell
-      lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) + cc; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) + cc
-      lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) - cc; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) - cc
-    end if
+    call axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
     ! elastic strain energy and Rayleigh damping, element by element (local DOFs)
     do e = 1, n
       idx = elem_index(n, e)
@@ -854,6 +847,56 @@ contains
       end if
     end do
   end subroutine link_eval_rel
+
+  !> Axial strain energy of segment l, U = 1/2 EA L eps^2 [J], its residual and (if want) ckt times its
+  !> stiffness. eps = (|c| - L)/L, c = re - rs the chord [m], L the segment's length; for a shallow-arch
+  !> segment (sys%arch, one element) eps also holds the element's mean w'^2/2 from its chord-relative
+  !> end angles th = (th_0, th_1) [rad]: eps += th^T A th / 60, A = [4 -1; -1 4] (docs/theory.md 12.4).
+  !> Local DOFs: 1:4 = (xs, ys, xe, ye) [m], 5:6 = (th_0, th_1) for a one-element segment.
+  subroutine axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), ell, ckt
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), epot
+    type(link_mats), intent(inout) :: lm
+    real(dp) :: len, ea, c(2), u(2), eps, f, cc(2, 2), th(2), ath(2)
+    integer :: i, j
+    len = sys%prop(1, l); ea = sys%prop(3, l)
+    c = q(3:4) - q(1:2); u = c/ell
+    eps = (ell - len)/len
+    ath = 0.0_dp
+    if (sys%arch(l) == 1) then
+      th = q(5:6)
+      ath = [4.0_dp*th(1) - th(2), 4.0_dp*th(2) - th(1)]/30.0_dp     ! d eps / d th
+      eps = eps + 0.5_dp*dot_product(th, ath)
+    end if
+    f = ea*eps                               ! axial force [N]
+    r(1:2) = r(1:2) - f*u
+    r(3:4) = r(3:4) + f*u
+    if (sys%arch(l) == 1) r(5:6) = r(5:6) + f*len*ath
+    epot = epot + 0.5_dp*ea*len*eps**2
+    if (.not. want) return
+    cc(:, 1) = u*u(1); cc(:, 2) = u*u(2)
+    cc = ckt*(ea/len*cc - f/ell*cc)
+    cc(1, 1) = cc(1, 1) + ckt*f/ell; cc(2, 2) = cc(2, 2) + ckt*f/ell
+    lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) + cc; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) + cc
+    lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) - cc; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) - cc
+    if (sys%arch(l) == 0) return
+    do j = 1, 2
+      do i = 1, 2        ! d2U/d(re) d(th) = EA u ath^T, the start with the opposite sign
+        call lm_add(lm, l, 2 + i, 4 + j, ckt*ea*u(i)*ath(j))
+        call lm_add(lm, l, 4 + j, 2 + i, ckt*ea*u(i)*ath(j))
+        call lm_add(lm, l, i, 4 + j, -ckt*ea*u(i)*ath(j))
+        call lm_add(lm, l, 4 + j, i, -ckt*ea*u(i)*ath(j))
+      end do
+    end do
+    do j = 1, 2          ! d2U/dth2 = EA L ath ath^T + f L A / 30
+      do i = 1, 2
+        call lm_add(lm, l, 4 + i, 4 + j, ckt*(ea*len*ath(i)*ath(j) + f*len*merge(4.0_dp, -1.0_dp, i == j)/30.0_dp))
+      end do
+    end do
+  end subroutine axial_strain
 
   !> Position of th_k (node k = 0..n) in the link vector.
   pure integer function th_index(n, k)
