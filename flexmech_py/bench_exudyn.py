@@ -195,10 +195,18 @@ def compare(fx: dict, ex: dict, t_max: float) -> dict:
     return out
 
 
+def first_revolution(fx: dict) -> float | None:
+    """Time [s] at which flexmech's crank has turned by 2 pi from its start; None within the run."""
+    turned = np.abs(fx["crank_angle"] - fx["crank_angle"][0])
+    k = int(np.searchsorted(turned, 2.0 * np.pi))
+    return float(fx["t"][k]) if k < turned.size else None
+
+
 def side_by_side(case_path, epl: int = 16, dt: float = 1.25e-5, t_end: float = 0.25, rho_inf: float = 0.8,
                  t_compare: float | None = None, model: str = "nonlinear") -> dict:
     """Both runs of the seed four-bar (flexmech's ``model``); CPU times, their ratio, the strain
-    differences over t <= t_compare (default: the run)."""
+    differences over t <= t_compare (default: the run) and over the crank's first revolution
+    (``strain_difference_revolution``, None when the run ends before it)."""
     why = unavailable()
     if why is not None:
         return {"skipped": why}
@@ -207,7 +215,10 @@ def side_by_side(case_path, epl: int = 16, dt: float = 1.25e-5, t_end: float = 0
     geometry = _link_geometry(case, fx["rigid"])
     ex = run_exudyn(case, geometry, epl, dt, t_end, rho_inf, _seed_masses(case))
     diff = compare(fx, ex, t_end if t_compare is None else t_compare)
+    rev = first_revolution(fx)
     return {"model": model, "elements_per_link": epl, "dt": dt, "t_end": t_end, "rho_inf": rho_inf,
+            "first_revolution_s": rev,
+            "strain_difference_revolution": None if rev is None else compare(fx, ex, rev),
             "flexmech_cpu_s": fx["cpu_s"],
             "exudyn_cpu_s": ex["cpu_s"], "speedup": ex["cpu_s"] / fx["cpu_s"], "newton": fx["newton"],
             "strain_difference": diff, "flexmech": fx, "exudyn": ex}

@@ -365,7 +365,7 @@ contains
     type(link_mats), intent(inout) :: lm
     real(dp) :: cs, sn, ell, g(2), om, al0, al, e1(2), e2(2), w(4), wd(4), wdd(4), c(2), cdot(2), w0(2)
     real(dp) :: gm(4, 4), acc(2, 4), vel(2, 4), jf(2, 4, 6), gj(2, 4, 6), bv(2, 4, 6), bf(2, 4, 6), blk(6, 6)
-    real(dp) :: acj(2, 4)
+    real(dp) :: acj(2, 4), ga(2, 4), gv(2, 4), s1
     integer :: i, j, b, cl(6)
     gm = sys%gram(:, :, l)
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
@@ -377,9 +377,17 @@ contains
       vel(:, b) = -om*w(b)*e1 + wd(b)*e2
       acc(:, b) = -(al*w(b) + 2.0_dp*om*wd(b))*e1 + (wdd(b) - om*om*w(b))*e2
     end do
-    ekin = ekin + 0.5_dp*sum(gm*matmul(transpose(vel), vel))
+    ga = matmul(acc, gm); gv = matmul(vel, gm)     ! (G r'')_a and (G r')_a, 2 x 4
+    ekin = ekin + 0.5_dp*sum(gv*vel)
     epot = epot - sum((gm(1, :) + gm(2, :))*[dot_product(sys%grav, q(1:2)), dot_product(sys%grav, q(3:4)), &
                                              w(3)*dot_product(sys%grav, e2), w(4)*dot_product(sys%grav, e2)])
+    ! R_j = sum_a J_a,j . (G r'')_a over the nonzero columns of J (see jf below)
+    s1 = w(3)*dot_product(e1, ga(:, 3)) + w(4)*dot_product(e1, ga(:, 4))
+    r(1:2) = r(1:2) + ga(:, 1) + s1*g
+    r(3:4) = r(3:4) + ga(:, 2) - s1*g
+    r(5) = r(5) + dot_product(e2, ga(:, 3))
+    r(6) = r(6) + dot_product(e2, ga(:, 4))
+    if (.not. want) return
     jf = 0.0_dp                               ! J = dr'/dq' by columns
     do j = 1, 2
       jf(j, 1, j) = 1.0_dp; jf(j, 2, 2 + j) = 1.0_dp
@@ -393,9 +401,7 @@ contains
       do b = 1, 4
         gj(:, b, j) = matmul(jf(:, :, j), gm(:, b))
       end do
-      r(j) = r(j) + sum(gj(:, :, j)*acc)
     end do
-    if (.not. want) return
     c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
     w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*cdot(1) + c(2)*cdot(2))*g)
     bv = 0.0_dp                               ! dr''/dv by columns
@@ -810,6 +816,12 @@ contains
       end if
     end do
     call axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
+    if (n == 1 .and. .not. damped .and. .not. want) then   ! one element: only th_0, th_1 (local 5, 6)
+      fe(1:2) = matmul(sys%ke([3, 6], [3, 6], sys%el_off(l) + 1), q(5:6))
+      r(5:6) = r(5:6) + fe(1:2)
+      epot = epot + 0.5_dp*dot_product(q(5:6), fe(1:2))
+      return
+    end if
     ! elastic strain energy and Rayleigh damping, element by element (local DOFs)
     do e = 1, n
       idx = elem_index(n, e)
