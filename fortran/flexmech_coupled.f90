@@ -102,6 +102,9 @@ module flexmech_coupled
     !> (4, 4, nseg) for one-element segments: G = int phi phi^T dm over phi = [1 - xi, xi, N_0, N_1]
     !> (distributed mass and point masses; element_inertia), zero for the others
     real(dp), allocatable :: gram(:, :, :)
+    !> (6, 6, total elements) for the elements of longer segments: G = int psi psi^T dm over
+    !> psi = [1 - xi, xi, H_v0, H_th0, H_v1, H_th1] (element_inertia_residual), zero for the others
+    real(dp), allocatable :: gram6(:, :, :)
     real(dp), allocatable :: prop(:, :)          !< (4, nseg) [L, rho*A, E*A, E*I]
     real(dp), allocatable :: wn(:, :)            !< (maxn+1, nseg) node fractions of each segment (0 .. 1)
     real(dp), allocatable :: me(:, :, :), ke(:, :, :)  !< (6, 6, elements) local element mass, stiffness
@@ -322,11 +325,26 @@ contains
   !> distributed mass by the 4-point Gauss rule (exact: degree 6) and the point masses.
   subroutine gram_matrices(sys)
     type(coupled_system), intent(inout) :: sys
-    integer :: s, k, i
-    allocate (sys%gram(4, 4, sys%nseg))
-    sys%gram = 0.0_dp
+    integer :: s, k, i, e
+    real(dp) :: le
+    allocate (sys%gram(4, 4, sys%nseg), sys%gram6(6, 6, max(1, sum(sys%n_el))))
+    sys%gram = 0.0_dp; sys%gram6 = 0.0_dp
     do s = 1, sys%nseg
-      if (sys%n_el(s) /= 1) cycle
+      if (sys%n_el(s) /= 1) then
+        do e = 1, sys%n_el(s)
+          le = sys%prop(1, s)*(sys%wn(e + 1, s) - sys%wn(e, s))
+          do k = 1, 4
+            call add_element_point(sys%el_off(s) + e, gx(k), le, gw(k)*sys%prop(2, s)*le)
+          end do
+        end do
+        do i = 1, sys%npm
+          if (sys%pm_seg(i) /= s) cycle
+          e = sys%pm_el(i)
+          le = sys%prop(1, s)*(sys%wn(e + 1, s) - sys%wn(e, s))
+          call add_element_point(sys%el_off(s) + e, sys%pm_prop(1, i), le, sys%pm_prop(2, i))
+        end do
+        cycle
+      end if
       do k = 1, 4
         call add_point(s, gx(k), gw(k)*sys%prop(2, s)*sys%prop(1, s))
       end do
@@ -335,6 +353,18 @@ contains
       end do
     end do
   contains
+    subroutine add_element_point(ge, xi, le, dm)
+      integer, intent(in) :: ge
+      real(dp), intent(in) :: xi, le, dm
+      real(dp) :: nm(2, 6), ps(6)
+      integer :: j
+      nm = shape_fn(xi, le)
+      ps = [nm(1, 1), nm(1, 4), nm(2, 2), nm(2, 3), nm(2, 5), nm(2, 6)]
+      do j = 1, 6
+        sys%gram6(:, j, ge) = sys%gram6(:, j, ge) + dm*ps*ps(j)
+      end do
+    end subroutine add_element_point
+
     subroutine add_point(s, xi, dm)
       integer, intent(in) :: s
       real(dp), intent(in) :: xi, dm
@@ -537,6 +567,54 @@ contains
     al0 = -2.0_dp*(c(1)*cd(1) + c(2)*cd(2))*om/l2   ! part of alpha independent of the accelerations
     al = al0 + g(1)*cdd(1) + g(2)*cdd(2)
   end subroutine chord
+
+  !> Residual, kinetic and gravity energy of the inertia of element e of a longer segment l in
+  !> closed form (what mass_point gives summed over the element's Gauss points and point masses):
+  !> over psi = [1 - xi, xi, H_v0, H_th0, H_v1, H_th1] every field of mass_point is sum_a psi_a X_a,
+  !> with (1 - w) = (1 - w_0) psi_1 + (1 - w_1) psi_2, w = w_0 psi_1 + w_1 psi_2 (w_0, w_1 the element's
+  !> node fractions) and R u = sum_a psi_a U_a (U_1 = p_0 e1, U_2 = p_1 e1, U_3 = v_0 e2, U_4 = th_0 e2,
+  !> U_5 = v_1 e2, U_6 = th_1 e2), so R_j = sum_a J_a,j . (G r'')_a with G = sys%gram6 (docs/theory.md
+  !> section 12.3).  Local DOFs of the segment as in link_eval_rel.
+  subroutine element_inertia_residual(sys, l, e, q, v, a, r, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l, e
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(inout) :: r(:), ekin, epot
+    integer, parameter :: basis(6) = [1, 3, 4, 2, 5, 6]      ! psi of the element DOFs [p, v, th, p, v, th]
+    integer :: idx(6), i, b
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, e1(2), e2(2), gm(6, 6), cst(6), cen(6), dir(2, 6)
+    real(dp) :: u(2, 6), ud(2, 6), udd(2, 6), rd(2, 6), rdd(2, 6), ga(2, 6), gv(2, 6), s1, w0, w1
+    gm = sys%gram6(:, :, sys%el_off(l) + e)
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    e1 = [cs, sn]; e2 = [-sn, cs]
+    w0 = sys%wn(e, l); w1 = sys%wn(e + 1, l)
+    cst = [1.0_dp - w0, 1.0_dp - w1, 0.0_dp, 0.0_dp, 0.0_dp, 0.0_dp]
+    cen = [w0, w1, 0.0_dp, 0.0_dp, 0.0_dp, 0.0_dp]
+    idx = elem_index(sys%n_el(l), e)
+    u = 0.0_dp; ud = 0.0_dp; udd = 0.0_dp
+    do i = 1, 6
+      dir(:, i) = merge(e1, e2, i == 1 .or. i == 4)
+      if (idx(i) == 0) cycle
+      b = basis(i)
+      u(:, b) = q(idx(i))*dir(:, i); ud(:, b) = v(idx(i))*dir(:, i); udd(:, b) = a(idx(i))*dir(:, i)
+    end do
+    do b = 1, 6           ! r' and r'' - g by basis function (Omega x = (-x_2, x_1))
+      rd(:, b) = cst(b)*v(1:2) + cen(b)*v(3:4) + om*[-u(2, b), u(1, b)] + ud(:, b)
+      rdd(:, b) = cst(b)*(a(1:2) - sys%grav) + cen(b)*(a(3:4) - sys%grav) + al*[-u(2, b), u(1, b)] &
+                  - om*om*u(:, b) + 2.0_dp*om*[-ud(2, b), ud(1, b)] + udd(:, b)
+    end do
+    ga = matmul(rdd, gm); gv = matmul(rd, gm)
+    ekin = ekin + 0.5_dp*sum(gv*rd)
+    do b = 1, 6           ! int r dm = sum_b r_b (G_b1 + G_b2): psi_1 + psi_2 = 1
+      epot = epot - (gm(b, 1) + gm(b, 2))*dot_product(sys%grav, cst(b)*q(1:2) + cen(b)*q(3:4) + u(:, b))
+    end do
+    s1 = sum(-u(2, :)*ga(1, :) + u(1, :)*ga(2, :))           ! sum_b (Omega U_b) . (G r'')_b
+    r(1:2) = r(1:2) + matmul(ga, cst) - s1*g
+    r(3:4) = r(3:4) + matmul(ga, cen) + s1*g
+    do i = 1, 6
+      if (idx(i) > 0) r(idx(i)) = r(idx(i)) + dot_product(dir(:, i), ga(:, basis(i)))
+    end do
+  end subroutine element_inertia_residual
 
   !> Contribution of one mass point (weight dm at segment fraction w, element e of length le at xi) to the segment
   !> residual and iteration matrix.  Adds dm * J^T (r'' - grav) to r and, if want, to segment l's
@@ -773,6 +851,10 @@ contains
     end if
     if (n == 1 .and. inertia_mode == INERTIA_CLOSED) then      ! one element: closed form
       call element_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    else if (.not. want .and. inertia_mode == INERTIA_CLOSED) then   ! the residual alone
+      do e = 1, n
+        call element_inertia_residual(sys, l, e, q, v, a, r, ekin, epot)
+      end do
     else
     do e = 1, n          ! distributed mass
       dw = sys%wn(e + 1, l) - sys%wn(e, l)

@@ -318,6 +318,38 @@ def test_newton_converges_at_256_elements_per_link_with_generalized_alpha(cases_
     assert newton["mean_per_step"] <= 4.0
 
 
+def test_closed_form_residual_of_longer_segments_equals_the_gauss_points(cases_dir):
+    """The coupled model's segments of several elements: the residual alone in closed form over each
+    element's Gram matrix (flexmech_coupled.f90: element_inertia_residual) against the Gauss-point
+    evaluation, at states of the seed four-bar (point masses), the manipulator (payload, hub), the
+    slider-crank, the plate six-bar and the quick-return: equal to 1e-13 of the inertia terms M a."""
+    from flexmech_py import kernels
+    from flexmech_py.simulate import Prepared
+
+    for name, epl in (("fourbar_hac", 4), ("manipulator_bricout", 3), ("slider_crank", 2), ("sixbar_plate", 2),
+                      ("quick_return", 4)):
+        case = fm.load_case(cases_dir / f"{name}.toml", overrides=["solver.t_end=0.01", "solver.error_estimate='none'"])
+        p = Prepared(case, elements_per_link=epl)
+        p.run("coupled")
+        cm = p.coupled["coupled"]
+        st = cm.last_run
+        ispec, rspec = cm._spec(p.gravity, (0.0, 0.0))
+        qs = np.asfortranarray(st["q"][:, None])
+        out = []
+        try:
+            for mode in (1, 0):
+                assert kernels.cpl.cpl_set_inertia(mode) == 0
+                out.append(kernels.cpl.cpl_residuals(ispec, rspec, qs, st["v"], st["a"], 0.01)[0][:, 0])
+        finally:
+            kernels.cpl.cpl_set_inertia(0)
+        free = np.flatnonzero(cm.free_of > 0)
+        free = free[np.argsort(cm.free_of[free])]
+        mm = kernels.cpl.cpl_dense(cm.nfree, ispec, rspec, st["q"], st["v"], st["a"], 0.01)[1]
+        scale = np.abs(mm @ st["a"][free]).max()
+        assert max(cm.n_el) > 1
+        assert np.abs(out[0] - out[1]).max() <= 1e-13 * scale, name
+
+
 def test_closed_form_inertia_equals_the_gauss_points(cases_dir):
     """The one-element inertia in closed form (theory.md 12.3) against the Gauss-point evaluation of
     the same integrals, at a state of the seed four-bar (point masses on elements), the manipulator
