@@ -1466,7 +1466,7 @@ contains
     real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc, kat
-    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t, rho
+    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
     logical :: converged, refactor, use_cond, refresh, second
     type(link_mats) :: lm
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
@@ -1493,25 +1493,7 @@ contains
     lref = max(maxval(abs(q)), tiny(1.0_dp))
     if (start == 2) lref = carry(size(carry) - 1)
     gammap = gamma*(1.0_dp - alpha_f)*c1
-    call lm_setup(sys, nc, lm)
-    use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
-                              (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
-    if (use_cond) then
-      allocate (ab(1, 1))
-    else
-      allocate (ab(band_rows(sys%kl, sys%ku), nf))
-    end if
-    allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf), qn(sys%ndof))
-    w = 0.0_dp
-    allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
-              dlam(max(1, nc)), lamn(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
-              lam0(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
-              tau0(max(1, sys%nd)))
-    gt = 0.0_dp
-    do i = 1, sys%ndof
-      if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
-    end do
-    call gradient_pattern()
+    call setup_work()
     if (start == 2) then
       lam = 0.0_dp
       lam(1:nc) = carry(1:nc)
@@ -1537,73 +1519,7 @@ contains
       w(freeidx) = alpha_f*a(freeidx) - alpha_m*p(freeidx)     ! zero for Newmark
       qs = q + dt*v + (dt*dt*(0.5_dp - beta))*p + (dt*dt*beta*c1)*w
       vs = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
-      converged = .false.
-      da_prev = huge(1.0_dp)
-      refresh = .true.
-      qn = q; lamn = lam
-      second = .false.
-      kat = 0
-      if (start_mode == START_VELOCITY) a(freeidx) = (q(freeidx) + dt*v(freeidx) - qs(freeidx))/(betap*dt*dt)
-      if (start_mode == START_POSITION) call restart_at_qn()
-      do it = 1, merge(2*maxit, maxit, start_mode /= START_ACCELERATION)
-        q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
-        v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
-        call assemble(sys, q, v, a, t, refresh, gammap*dt, betap*dt*dt, res, lm, energy)
-        if (refresh) then
-          call factor()
-          if (status /= STATUS_OK) exit
-        end if
-        call constraints(n + 1)      ! gradients (matrix part only after a factorization), values, G^T lam in res
-        if (status /= STATUS_OK) exit
-        rf = -res(freeidx)
-        newton(1) = norm2(rf)
-        call band_solve_rhs(rf)
-        if (status /= STATUS_OK) exit
-        if (nc > 0) then   ! Schur complement on the multipliers
-          do i = 1, nc
-            dlam(i) = gdot(i, rf) + gval(i)/(betap*dt*dt)
-          end do
-          call small_solve(dlam)
-          if (status /= STATUS_OK) exit
-          do i = 1, nc
-            rf = rf - x(:, i)*dlam(i)
-          end do
-          lam(1:nc) = lam(1:nc) + dlam(1:nc)
-        end if
-        a(freeidx) = a(freeidx) + rf
-        da_norm = sqrt(sum(rf**2)); a_norm = sqrt(sum(a(freeidx)**2))
-        newton(2:3) = [da_norm, a_norm]
-        iters = iters + 1
-        kat = kat + 1                ! iterations of this attempt
-        refresh = newton_mode == NEWTON_FULL .or. &
-                  (newton_mode == NEWTON_AUTO .and. kat > 1 .and. da_norm > NEWTON_RATE*da_prev)
-        if (it == 1 .and. start_mode == START_VELOCITY .and. betap*dt*dt*da_norm > RESTART_MOVE*lref) then
-          ! the start q_n + dt v_n was far (an unresolved stiff mode's velocity): start again at q_n
-          call restart_at_qn()
-          refresh = .true.
-          cycle
-        end if
-        ! converged (relative to the accelerations, or the position correction below 1e-2 tol of the
-        ! mechanism size), or stagnated at the round-off level of the residual (no further contraction
-        ! while already within sqrt(tol): the stiff chord terms limit the attainable precision)
-        ! or the error left after this correction, estimated from the contraction rate rho of the
-        ! last two corrections (|a - a*| ~ rho/(1 - rho) |da|), within tol
-        rho = da_norm/da_prev
-        if (da_norm <= tol*(a_norm + 1.0e-30) .or. betap*dt*dt*da_norm <= 1.0e-2_dp*tol*lref .or. &
-            (kat > 1 .and. rho < 0.5_dp .and. rho/(1.0_dp - rho)*da_norm <= tol*(a_norm + 1.0e-30)) .or. &
-            (kat > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))) then
-          converged = .true.
-          exit
-        end if
-        da_prev = da_norm
-        if (it == maxit .and. start_mode /= START_ACCELERATION) then
-          ! not converged from the start: a second attempt of maxit iterations from q_n, the
-          ! matrix rebuilt at every iteration
-          call restart_at_qn()
-          second = .true.
-        end if
-        refresh = refresh .or. second
-      end do
+      call newton_iterations(n)
       if (status == STATUS_OK .and. .not. converged) status = STATUS_NEWTON
       if (status /= STATUS_OK) then
         fail_step = n
@@ -1631,6 +1547,121 @@ contains
     call save_carry()
 
   contains
+
+    !> The band or condensed storage of S, the work arrays, the free-DOF index and the constraint
+    !> gradients' nonzero pattern.
+    subroutine setup_work()
+      integer :: i
+      call lm_setup(sys, nc, lm)
+      use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
+                                (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
+      if (use_cond) then
+        allocate (ab(1, 1))
+      else
+        allocate (ab(band_rows(sys%kl, sys%ku), nf))
+      end if
+      allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf), qn(sys%ndof))
+      w = 0.0_dp
+      allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
+                dlam(max(1, nc)), lamn(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
+                lam0(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
+                tau0(max(1, sys%nd)))
+      gt = 0.0_dp
+      do i = 1, sys%ndof
+        if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
+      end do
+      call gradient_pattern()
+    end subroutine setup_work
+
+
+    !> The Newton iterations of step n (predictor qs, vs set): converged, it and the state at the
+    !> accepted iterate; status on a failed factorization or solve.
+    subroutine newton_iterations(n)
+      integer, intent(in) :: n
+      converged = .false.
+      da_prev = huge(1.0_dp)
+      refresh = .true.
+      qn = q; lamn = lam
+      second = .false.
+      kat = 0
+      if (start_mode == START_VELOCITY) a(freeidx) = (q(freeidx) + dt*v(freeidx) - qs(freeidx))/(betap*dt*dt)
+      if (start_mode == START_POSITION) call restart_at_qn()
+      do it = 1, merge(2*maxit, maxit, start_mode /= START_ACCELERATION)
+        q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
+        v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
+        call assemble(sys, q, v, a, t, refresh, gammap*dt, betap*dt*dt, res, lm, energy)
+        if (refresh) then
+          call factor()
+          if (status /= STATUS_OK) exit
+        end if
+        call constraints(n + 1)      ! gradients (matrix part only after a factorization), values, G^T lam in res
+        if (status /= STATUS_OK) exit
+        call correction(gval(1:nc)/(betap*dt*dt))
+        if (status /= STATUS_OK) exit
+        iters = iters + 1
+        kat = kat + 1                ! iterations of this attempt
+        refresh = newton_mode == NEWTON_FULL .or. &
+                  (newton_mode == NEWTON_AUTO .and. kat > 1 .and. da_norm > NEWTON_RATE*da_prev)
+        if (it == 1 .and. start_mode == START_VELOCITY .and. betap*dt*dt*da_norm > RESTART_MOVE*lref) then
+          ! the start q_n + dt v_n was far (an unresolved stiff mode's velocity): start again at q_n
+          call restart_at_qn()
+          refresh = .true.
+          cycle
+        end if
+        if (accepted()) then
+          converged = .true.
+          exit
+        end if
+        da_prev = da_norm
+        if (it == maxit .and. start_mode /= START_ACCELERATION) then
+          ! not converged from the start: a second attempt of maxit iterations from q_n, the
+          ! matrix rebuilt at every iteration
+          call restart_at_qn()
+          second = .true.
+        end if
+        refresh = refresh .or. second
+      end do
+    end subroutine newton_iterations
+
+    !> One Newton correction at the assembled residual: solve S da = -R with the multipliers' Schur
+    !> complement, whose right-hand side is G S^-1 (-R) + shift (shift (nc): the rows' residual in the
+    !> units of G a), update a and lam; newton(1:3) = [|R|, |da|, |a|].
+    subroutine correction(shift)
+      real(dp), intent(in) :: shift(:)
+      integer :: i
+      rf = -res(freeidx)
+      newton(1) = norm2(rf)
+      call band_solve_rhs(rf)
+      if (status /= STATUS_OK) return
+      if (nc > 0) then   ! Schur complement on the multipliers
+        do i = 1, nc
+          dlam(i) = gdot(i, rf) + shift(i)
+        end do
+        call small_solve(dlam)
+        if (status /= STATUS_OK) return
+        do i = 1, nc
+          rf = rf - x(:, i)*dlam(i)
+        end do
+        lam(1:nc) = lam(1:nc) + dlam(1:nc)
+      end if
+      a(freeidx) = a(freeidx) + rf
+      da_norm = sqrt(sum(rf**2)); a_norm = sqrt(sum(a(freeidx)**2))
+      newton(2:3) = [da_norm, a_norm]
+    end subroutine correction
+
+    !> Accept the iterate: the correction within tol of the accelerations (or the position correction
+    !> below 1e-2 tol of the mechanism size), or stagnated at the round-off level of the residual (no
+    !> further contraction while already within sqrt(tol): the stiff chord terms limit the attainable
+    !> precision), or the error left after it, estimated from the contraction rate rho of the last two
+    !> corrections (|a - a*| ~ rho/(1 - rho) |da|), within tol.
+    logical function accepted()
+      real(dp) :: rho
+      rho = da_norm/da_prev
+      accepted = da_norm <= tol*(a_norm + 1.0e-30) .or. betap*dt*dt*da_norm <= 1.0e-2_dp*tol*lref .or. &
+                 (kat > 1 .and. rho < 0.5_dp .and. rho/(1.0_dp - rho)*da_norm <= tol*(a_norm + 1.0e-30)) .or. &
+                 (kat > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))
+    end function accepted
+
 
     !> Start the step's iteration (again) at the last step's position q_n and multipliers: the
     !> acceleration that puts q at qn, a fresh contraction history.
@@ -1674,7 +1705,7 @@ contains
     !> in S; the refinement removes its effect).
     subroutine initial_acceleration()
       integer :: k, j
-      real(dp) :: dn, an, dn_prev
+      real(dp) :: dn, an, dn_prev, shift(max(1, nc))
       dn_prev = huge(1.0_dp)
       a(freeidx) = 0.0_dp
       lam = 0.0_dp
@@ -1686,22 +1717,12 @@ contains
         end if
         call constraints(1)
         if (status /= STATUS_OK) return
-        rf = -res(freeidx)
-        call band_solve_rhs(rf)
+        do j = 1, nc        ! the rows' acceleration residual G a - (cval'' - acc0)
+          shift(j) = gdot(j, a(freeidx)) - (cval(3, j, 1) - acc0(j))
+        end do
+        call correction(shift(1:nc))
         if (status /= STATUS_OK) return
-        if (nc > 0) then
-          do j = 1, nc
-            dlam(j) = gdot(j, rf) - (cval(3, j, 1) - acc0(j) - gdot(j, a(freeidx)))
-          end do
-          call small_solve(dlam)
-          if (status /= STATUS_OK) return
-          do j = 1, nc
-            rf = rf - x(:, j)*dlam(j)
-          end do
-          lam(1:nc) = lam(1:nc) + dlam(1:nc)
-        end if
-        a(freeidx) = a(freeidx) + rf
-        dn = sqrt(sum(rf**2)); an = sqrt(sum(a(freeidx)**2))
+        dn = da_norm; an = a_norm
         if (dn <= 1.0e-3_dp*tol*(an + 1.0e-30) .or. dn > 0.5_dp*dn_prev) exit   ! converged, or round-off
         dn_prev = dn
       end do
