@@ -395,8 +395,8 @@ contains
     type(link_mats), intent(inout) :: lm
     real(dp) :: cs, sn, ell, g(2), om, al0, al, e1(2), e2(2), w(4), wd(4), wdd(4), c(2), cdot(2), w0(2)
     real(dp) :: gm(4, 4), acc(2, 4), vel(2, 4), jf(2, 4, 6), gj(2, 4, 6), bv(2, 4, 6), bf(2, 4, 6), blk(6, 6)
-    real(dp) :: acj(2, 4), ga(2, 4), gv(2, 4), s1
-    integer :: i, j, b, cl(6)
+    real(dp) :: acj(2, 4), ga(2, 4), gv(2, 4), s1, s6(6, 6)
+    integer :: i, j, b
     gm = sys%gram(:, :, l)
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     e1 = [cs, sn]; e2 = [-sn, cs]
@@ -451,8 +451,8 @@ contains
         blk(i, j) = sum(gj(:, :, i)*bf(:, :, j))
       end do
     end do
-    cl = [1, 2, 3, 4, 5, 6]
-    call lm_add_block(lm, l, 6, cl, blk)
+    call lm_block_get(lm, l, s6)
+    call lm_block_put(lm, l, s6 + blk)
     if (.not. present(msum)) return
     do i = 1, 6
       msum(i) = msum(i) + sum(gj(:, :, i)*(jf(:, :, 5) + jf(:, :, 6)))
@@ -726,7 +726,7 @@ contains
     type(link_mats), intent(inout) :: lm
     integer :: n, nl, k, it(2)
     real(dp) :: qr(6), vr(6), ar(6), msum(6), csum(6)
-    real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, c(2), l2, h(2, 2)
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, c(2), l2, h(2, 2), s6(6, 6)
     if (sys%absang(l) == 0) then
       call link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
       return
@@ -750,84 +750,94 @@ contains
     l2 = c(1)**2 + c(2)**2
     h(1, 1) = 2.0_dp*c(1)*c(2)/l2**2; h(1, 2) = (c(2)**2 - c(1)**2)/l2**2    ! d2 phi / dc2
     h(2, 1) = h(1, 2); h(2, 2) = -h(1, 1)
-    call angle_rate_terms(lm, l, nl, c, v(3:4) - v(1:2), a(3:4) - a(1:2), g, om, h, ccv, ckt, msum, csum)
-    call lm_transform(lm, l, nl, it(1:n + 1), [g(1), g(2), -g(1), -g(2)])
+    call lm_block_get(lm, l, s6)
+    call angle_rate_terms(s6, c, v(3:4) - v(1:2), a(3:4) - a(1:2), g, om, h, ccv, ckt, msum, csum)
+    call angle_transform(s6, it(1:n + 1), [g(1), g(2), -g(1), -g(2)])
     h = ckt*sr*h
-    lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) - h; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) - h
-    lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) + h; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) + h
+    s6(1:2, 1:2) = s6(1:2, 1:2) - h; s6(3:4, 3:4) = s6(3:4, 3:4) - h
+    s6(1:2, 3:4) = s6(1:2, 3:4) + h; s6(3:4, 1:2) = s6(3:4, 1:2) + h
+    call lm_block_put(lm, l, s6)
   end subroutine link_eval
 
   !> The parts of S from the chord terms of the relative angle rates th' = psi' - omega(c, c') and
-  !> th'' = psi'' - alpha(c, c', c''), as columns of the end positions (before lm_transform):
+  !> th'' = psi'' - alpha(c, c', c''), as columns of the end positions (before angle_transform):
   !> S(:, rs) += msum (ccv w0 + ckt da) + csum ckt H c', S(:, re) -= the same, with w0 = d alpha0/dc',
   !> da = d alpha/dc = H c'' + d alpha0/dc, H = d2 phi/dc2 and msum, csum the sums of the angle columns
   !> of M and C_v (alpha0 = -2 (c.c') omega / |c|^2, the velocity part of alpha).
-  pure subroutine angle_rate_terms(lm, l, nl, c, cd, cdd, g, om, h, ccv, ckt, msum, csum)
-    type(link_mats), intent(inout) :: lm
-    integer, intent(in) :: l, nl
+  pure subroutine angle_rate_terms(s6, c, cd, cdd, g, om, h, ccv, ckt, msum, csum)
+    real(dp), intent(inout) :: s6(6, 6)
     real(dp), intent(in) :: c(2), cd(2), cdd(2), g(2), om, h(2, 2), ccv, ckt, msum(:), csum(:)
-    real(dp) :: l2, sc, hc(2), w0(2), da(2), col
-    integer :: i, j
+    real(dp) :: l2, sc, hc(2), w0(2), da(2), col(6)
+    integer :: j
     l2 = c(1)**2 + c(2)**2
     sc = c(1)*cd(1) + c(2)*cd(2)
     hc = matmul(h, cd)
     w0 = -(2.0_dp/l2)*(om*c + sc*g)
     da = matmul(h, cdd) - 2.0_dp*(cd*om/l2 + sc*hc/l2 - 2.0_dp*sc*om*c/l2**2)
     do j = 1, 2
-      do i = 1, nl
-        col = msum(i)*(ccv*w0(j) + ckt*da(j)) + csum(i)*ckt*hc(j)
-        call lm_add(lm, l, i, j, col)
-        call lm_add(lm, l, i, 2 + j, -col)
-      end do
+      col = msum(1:6)*(ccv*w0(j) + ckt*da(j)) + csum(1:6)*ckt*hc(j)
+      s6(:, j) = s6(:, j) + col
+      s6(:, 2 + j) = s6(:, 2 + j) - col
     end do
   end subroutine angle_rate_terms
 
-  !> S <- (I + E)^T S (I + E) on segment l's blocks (nl <= 6 local DOFs: one element), E(th_k, 1:4) =
-  !> e for the local angle DOFs th(:): the change from chord-relative to absolute node angles (see
-  !> link_eval).
-  pure subroutine lm_transform(lm, l, nl, th, e)
-    type(link_mats), intent(inout) :: lm
-    integer, intent(in) :: l, nl, th(:)
+  !> S <- (I + E)^T S (I + E) on a one-element segment's block s6, E(th_k, 1:4) = e for its angle
+  !> DOFs th(:): the change from chord-relative to absolute node angles (see link_eval).
+  pure subroutine angle_transform(s6, th, e)
+    real(dp), intent(inout) :: s6(6, 6)
+    integer, intent(in) :: th(:)
     real(dp), intent(in) :: e(4)
-    real(dp) :: scol(6), srow(6), stt
-    integer :: i, j, k
-    scol = 0.0_dp; srow = 0.0_dp
-    do k = 1, size(th)
-      do i = 1, nl
-        scol(i) = scol(i) + lm_get(lm, l, i, th(k))
-        srow(i) = srow(i) + lm_get(lm, l, th(k), i)
-      end do
+    real(dp) :: sum_th(6)
+    integer :: j, k
+    sum_th = 0.0_dp
+    do k = 1, size(th)          ! S (I + E): columns 1:4 gain the angle columns times e
+      sum_th = sum_th + s6(:, th(k))
     end do
-    stt = sum(scol(th))
     do j = 1, 4
-      do i = 1, nl
-        call lm_add(lm, l, i, j, scol(i)*e(j))
-        call lm_add(lm, l, j, i, e(j)*srow(i))
-      end do
-      do i = 1, 4
-        call lm_add(lm, l, i, j, e(i)*e(j)*stt)
+      s6(:, j) = s6(:, j) + sum_th*e(j)
+    end do
+    sum_th = 0.0_dp
+    do k = 1, size(th)          ! (I + E)^T: rows 1:4 gain the angle rows times e
+      sum_th = sum_th + s6(th(k), :)
+    end do
+    do j = 1, 4
+      s6(j, :) = s6(j, :) + e(j)*sum_th
+    end do
+  end subroutine angle_transform
+
+  !> The 6 x 6 block of one-element segment l (local DOFs [xs ys xe ye th_0 th_1]) out of its
+  !> storage in lm, and back (lm_block_put), for dense work on it.
+  pure subroutine lm_block_get(lm, l, s6)
+    type(link_mats), intent(in) :: lm
+    integer, intent(in) :: l
+    real(dp), intent(out) :: s6(6, 6)
+    integer :: o, d, i, j
+    o = lm%off(l); d = 2*lm%kbi + 1
+    s6(1:4, 1:4) = lm%bb(:, :, l)
+    s6(1:4, 5:6) = lm%bi(1:4, o + 1:o + 2)
+    s6(5:6, 1:4) = lm%ib(o + 1:o + 2, 1:4)
+    do j = 5, 6
+      do i = 5, 6
+        s6(i, j) = lm%ai(d + i - j, o + j - 4)
       end do
     end do
-  end subroutine lm_transform
+  end subroutine lm_block_get
 
-  !> S(i, j) for the local DOFs i, j of segment l (zero outside the block structure).
-  pure real(dp) function lm_get(lm, l, i, j)
-    type(link_mats), intent(in) :: lm
-    integer, intent(in) :: l, i, j
-    if (i <= 4) then
-      if (j <= 4) then
-        lm_get = lm%bb(i, j, l)
-      else
-        lm_get = lm%bi(i, lm%off(l) + j - 4)
-      end if
-    else if (j <= 4) then
-      lm_get = lm%ib(lm%off(l) + i - 4, j)
-    else if (abs(i - j) <= lm%kbi) then
-      lm_get = lm%ai(2*lm%kbi + 1 + i - j, lm%off(l) + j - 4)
-    else
-      lm_get = 0.0_dp
-    end if
-  end function lm_get
+  pure subroutine lm_block_put(lm, l, s6)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l
+    real(dp), intent(in) :: s6(6, 6)
+    integer :: o, d, i, j
+    o = lm%off(l); d = 2*lm%kbi + 1
+    lm%bb(:, :, l) = s6(1:4, 1:4)
+    lm%bi(1:4, o + 1:o + 2) = s6(1:4, 5:6)
+    lm%ib(o + 1:o + 2, 1:4) = s6(5:6, 1:4)
+    do j = 5, 6
+      do i = 5, 6
+        lm%ai(d + i - j, o + j - 4) = s6(i, j)
+      end do
+    end do
+  end subroutine lm_block_put
 
   !> link_eval in chord-relative angles (the coupled model's segments).
   subroutine link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
