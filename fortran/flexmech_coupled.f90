@@ -135,6 +135,10 @@ module flexmech_coupled
     logical :: cond = .false.
     integer, allocatable :: off(:), ifree(:), bfree(:, :), bglob(:), ipi(:), ipb(:)
     real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :), dg(:)
+    !> assemble's work: a segment's all-DOF numbers and its local [R, q, v, a] (maxld; allocated once
+    !> by lm_setup, so that no evaluation allocates; never referenced through lm by link_eval)
+    integer, allocatable :: widx(:)
+    real(dp), allocatable :: wl(:, :)
   end type link_mats
 
 contains
@@ -609,8 +613,8 @@ contains
       epot = epot - (gm(b, 1) + gm(b, 2))*dot_product(sys%grav, cst(b)*q(1:2) + cen(b)*q(3:4) + u(:, b))
     end do
     s1 = sum(-u(2, :)*ga(1, :) + u(1, :)*ga(2, :))           ! sum_b (Omega U_b) . (G r'')_b
-    r(1:2) = r(1:2) + matmul(ga, cst) - s1*g
-    r(3:4) = r(3:4) + matmul(ga, cen) + s1*g
+    r(1:2) = r(1:2) + cst(1)*ga(:, 1) + cst(2)*ga(:, 2) - s1*g      ! cst, cen vanish past psi_2
+    r(3:4) = r(3:4) + cen(1)*ga(:, 1) + cen(2)*ga(:, 2) + s1*g
     do i = 1, 6
       if (idx(i) > 0) r(idx(i)) = r(idx(i)) + dot_product(dir(:, i), ga(:, basis(i)))
     end do
@@ -909,7 +913,9 @@ contains
     end do
     call axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
     if (n == 1 .and. .not. damped .and. .not. want) then   ! one element: only th_0, th_1 (local 5, 6)
-      fe(1:2) = matmul(sys%ke([3, 6], [3, 6], sys%el_off(l) + 1), q(5:6))
+      e = sys%el_off(l) + 1
+      fe(1) = sys%ke(3, 3, e)*q(5) + sys%ke(3, 6, e)*q(6)
+      fe(2) = sys%ke(6, 3, e)*q(5) + sys%ke(6, 6, e)*q(6)
       r(5:6) = r(5:6) + fe(1:2)
       epot = epot + 0.5_dp*dot_product(q(5:6), fe(1:2))
       return
@@ -1022,8 +1028,8 @@ contains
     logical, intent(in) :: want
     real(dp), intent(out) :: res(:), energy(2)
     type(link_mats), intent(inout) :: lm
-    integer :: l, nl, idx(sys%maxld)
-    real(dp) :: rl(sys%maxld), ql(sys%maxld), vl(sys%maxld), al(sys%maxld), ek, ep
+    integer :: l, nl
+    real(dp) :: ek, ep
     res = 0.0_dp
     energy = 0.0_dp
     if (want) then
@@ -1031,10 +1037,10 @@ contains
     end if
     do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3
-      idx(1:nl) = sys%ld(1:nl, l)
-      ql(1:nl) = q(idx(1:nl)); vl(1:nl) = v(idx(1:nl)); al(1:nl) = a(idx(1:nl))
-      call link_eval(sys, l, ql(1:nl), vl(1:nl), al(1:nl), want, cc, ck, rl, lm, ek, ep)
-      res(idx(1:nl)) = res(idx(1:nl)) + rl(1:nl)
+      lm%widx(1:nl) = sys%ld(1:nl, l)
+      lm%wl(1:nl, 2) = q(lm%widx(1:nl)); lm%wl(1:nl, 3) = v(lm%widx(1:nl)); lm%wl(1:nl, 4) = a(lm%widx(1:nl))
+      call link_eval(sys, l, lm%wl(1:nl, 2), lm%wl(1:nl, 3), lm%wl(1:nl, 4), want, cc, ck, lm%wl(:, 1), lm, ek, ep)
+      res(lm%widx(1:nl)) = res(lm%widx(1:nl)) + lm%wl(1:nl, 1)
       energy = energy + [ek, ep]
     end do
     call bodies_eval(sys, q, v, a, want, res, lm, energy)
@@ -1157,7 +1163,7 @@ contains
     integer :: l, n, nl, e, k, f, idx(6), lo, hi
     integer, allocatable :: cnt(:), bnum(:)
     logical, allocatable :: isb(:)
-    allocate (lm%off(sys%nseg), lm%bfree(4, sys%nseg))
+    allocate (lm%off(sys%nseg), lm%bfree(4, sys%nseg), lm%widx(sys%maxld), lm%wl(sys%maxld, 4))
     lm%ni = 0; lm%kbi = 0
     do l = 1, sys%nseg
       n = sys%n_el(l); nl = 3*n + 3
@@ -1268,33 +1274,32 @@ contains
     type(coupled_system), intent(in) :: sys
     type(link_mats), intent(in) :: lm
     real(dp), intent(out) :: ab(:, :)
-    integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d, fidx(sys%maxld)
+    integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d
     ab = 0.0_dp
     d = sys%kl + sys%ku + 1
     do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3; m = nl - 4; o = lm%off(l)
-      fidx(1:nl) = sys%free_of(sys%ld(1:nl, l))
       do j = 1, 4
-        fj = fidx(j)
+        fj = sys%free_of(sys%ld(j, l))
         if (fj == 0) cycle
         do i = 1, 4
-          fi = fidx(i)
+          fi = sys%free_of(sys%ld(i, l))
           if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bb(i, j, l)
         end do
         do ii = 1, m
-          fi = fidx(4 + ii)
+          fi = sys%free_of(sys%ld(4 + ii, l))
           if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ib(o + ii, j)
         end do
       end do
       do jj = 1, m
-        fj = fidx(4 + jj)
+        fj = sys%free_of(sys%ld(4 + jj, l))
         if (fj == 0) cycle
         do i = 1, 4
-          fi = fidx(i)
+          fi = sys%free_of(sys%ld(i, l))
           if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bi(i, o + jj)
         end do
         do ii = max(1, jj - lm%kbi), min(m, jj + lm%kbi)
-          fi = fidx(4 + ii)
+          fi = sys%free_of(sys%ld(4 + ii, l))
           if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ai(2*lm%kbi + 1 + ii - jj, o + jj)
         end do
       end do
@@ -1473,7 +1478,7 @@ contains
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
     real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
-    real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:)
+    real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc, kat
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
@@ -1574,7 +1579,7 @@ contains
       w = 0.0_dp
       allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
                 dlam(max(1, nc)), lamn(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
-                lam0(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
+                lam0(max(1, nc)), gsh(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
                 tau0(max(1, sys%nd)))
       gt = 0.0_dp
       do i = 1, sys%ndof
@@ -1606,7 +1611,8 @@ contains
         end if
         call constraints(n + 1)      ! gradients (matrix part only after a factorization), values, G^T lam in res
         if (status /= STATUS_OK) exit
-        call correction(gval(1:nc)/(betap*dt*dt))
+        gsh(1:nc) = gval(1:nc)/(betap*dt*dt)
+        call correction(gsh(1:nc))
         if (status /= STATUS_OK) exit
         iters = iters + 1
         kat = kat + 1                ! iterations of this attempt
