@@ -197,9 +197,8 @@ def compare(fx: dict, ex: dict, t_max: float) -> dict:
 
 def first_revolution(fx: dict) -> float | None:
     """Time [s] at which flexmech's crank has turned by 2 pi from its start; None within the run."""
-    turned = np.abs(fx["crank_angle"] - fx["crank_angle"][0])
-    k = int(np.searchsorted(turned, 2.0 * np.pi))
-    return float(fx["t"][k]) if k < turned.size else None
+    past = np.flatnonzero(np.abs(fx["crank_angle"] - fx["crank_angle"][0]) >= 2.0 * np.pi)
+    return float(fx["t"][past[0]]) if past.size else None      # the first frame past it (not sorted)
 
 
 def side_by_side(case_path, epl: int = 16, dt: float = 1.25e-5, t_end: float = 0.25, rho_inf: float = 0.8,

@@ -73,8 +73,9 @@ module flexmech_coupled
   !> START_VELOCITY starts again at q_n when the first correction moves the configuration by more
   !> than this fraction of the mechanism's size
   real(dp), parameter :: RESTART_MOVE = 0.05_dp
-  !> Inertia of one-element segments: INERTIA_CLOSED (default, element_inertia) or INERTIA_GAUSS
-  !> (mass_point at the Gauss points, as longer segments; the check of the closed form)
+  !> Inertia in closed form over the elements' Gram matrices: INERTIA_CLOSED (default; one-element
+  !> segments element_inertia, the residual of longer ones element_inertia_residual) or INERTIA_GAUSS
+  !> (mass_point at the Gauss points throughout; the check of the closed form)
   integer, parameter :: INERTIA_CLOSED = 0, INERTIA_GAUSS = 1
   integer :: inertia_mode = INERTIA_CLOSED
   !> Marker kinds: a ground point, a node of a segment, a point of a rigid body.
@@ -99,12 +100,12 @@ module flexmech_coupled
     !> (nseg) 1: the segment is one co-rotational element whose axial strain holds its mean w'^2/2
     !> (shallow arch, the nonlinear model, docs/theory.md section 12.4), 0: the chord stretch alone
     integer, allocatable :: arch(:)
-    !> (4, 4, nseg) for one-element segments: G = int phi phi^T dm over phi = [1 - xi, xi, N_0, N_1]
-    !> (distributed mass and point masses; element_inertia), zero for the others
-    real(dp), allocatable :: gram(:, :, :)
-    !> (6, 6, total elements) for the elements of longer segments: G = int psi psi^T dm over
-    !> psi = [1 - xi, xi, H_v0, H_th0, H_v1, H_th1] (element_inertia_residual), zero for the others
+    !> (6, 6, total elements) per element: G = int psi psi^T dm over psi = [1 - xi, xi, H_v0, H_th0,
+    !> H_v1, H_th1] (the shapes of shape_fn; distributed mass and point masses; element_inertia_residual)
     real(dp), allocatable :: gram6(:, :, :)
+    !> (4, 4, nseg) its phi = [1 - xi, xi, H_th0, H_th1] part for one-element segments, copied once
+    !> (element_inertia reads it in the hot path), zero for the others
+    real(dp), allocatable :: gram(:, :, :)
     real(dp), allocatable :: prop(:, :)          !< (4, nseg) [L, rho*A, E*A, E*I]
     real(dp), allocatable :: wn(:, :)            !< (maxn+1, nseg) node fractions of each segment (0 .. 1)
     real(dp), allocatable :: me(:, :, :), ke(:, :, :)  !< (6, 6, elements) local element mass, stiffness
@@ -325,59 +326,43 @@ contains
     status = STATUS_OK
   end subroutine coupled_build
 
-  !> The Gram matrices G = int phi phi^T dm of the one-element segments (see element_inertia): the
-  !> distributed mass by the 4-point Gauss rule (exact: degree 6) and the point masses.
+  !> The Gram matrix G = int psi psi^T dm of every element (see sys%gram6): the distributed mass by
+  !> the 4-point Gauss rule (exact: degree 6) and the point masses; its phi part (sys%gram).
   subroutine gram_matrices(sys)
     type(coupled_system), intent(inout) :: sys
     integer :: s, k, i, e
-    real(dp) :: le
-    allocate (sys%gram(4, 4, sys%nseg), sys%gram6(6, 6, max(1, sum(sys%n_el))))
-    sys%gram = 0.0_dp; sys%gram6 = 0.0_dp
+    allocate (sys%gram6(6, 6, sum(sys%n_el)))
+    sys%gram6 = 0.0_dp
     do s = 1, sys%nseg
-      if (sys%n_el(s) /= 1) then
-        do e = 1, sys%n_el(s)
-          le = sys%prop(1, s)*(sys%wn(e + 1, s) - sys%wn(e, s))
-          do k = 1, 4
-            call add_element_point(sys%el_off(s) + e, gx(k), le, gw(k)*sys%prop(2, s)*le)
-          end do
+      do e = 1, sys%n_el(s)
+        do k = 1, 4
+          call add_point(s, e, gx(k), gw(k)*sys%prop(2, s)*element_length(s, e))
         end do
-        do i = 1, sys%npm
-          if (sys%pm_seg(i) /= s) cycle
-          e = sys%pm_el(i)
-          le = sys%prop(1, s)*(sys%wn(e + 1, s) - sys%wn(e, s))
-          call add_element_point(sys%el_off(s) + e, sys%pm_prop(1, i), le, sys%pm_prop(2, i))
-        end do
-        cycle
-      end if
-      do k = 1, 4
-        call add_point(s, gx(k), gw(k)*sys%prop(2, s)*sys%prop(1, s))
-      end do
-      do i = 1, sys%npm
-        if (sys%pm_seg(i) == s) call add_point(s, sys%pm_prop(1, i), sys%pm_prop(2, i))
       end do
     end do
+    do i = 1, sys%npm
+      call add_point(sys%pm_seg(i), sys%pm_el(i), sys%pm_prop(1, i), sys%pm_prop(2, i))
+    end do
+    allocate (sys%gram(4, 4, sys%nseg))
+    sys%gram = 0.0_dp
+    do s = 1, sys%nseg
+      if (sys%n_el(s) == 1) sys%gram(:, :, s) = sys%gram6([1, 2, 4, 6], [1, 2, 4, 6], sys%el_off(s) + 1)
+    end do
   contains
-    subroutine add_element_point(ge, xi, le, dm)
-      integer, intent(in) :: ge
-      real(dp), intent(in) :: xi, le, dm
+    pure real(dp) function element_length(s, e)
+      integer, intent(in) :: s, e
+      element_length = sys%prop(1, s)*(sys%wn(e + 1, s) - sys%wn(e, s))
+    end function element_length
+
+    subroutine add_point(s, e, xi, dm)
+      integer, intent(in) :: s, e
+      real(dp), intent(in) :: xi, dm
       real(dp) :: nm(2, 6), ps(6)
       integer :: j
-      nm = shape_fn(xi, le)
+      nm = shape_fn(xi, element_length(s, e))
       ps = [nm(1, 1), nm(1, 4), nm(2, 2), nm(2, 3), nm(2, 5), nm(2, 6)]
       do j = 1, 6
-        sys%gram6(:, j, ge) = sys%gram6(:, j, ge) + dm*ps*ps(j)
-      end do
-    end subroutine add_element_point
-
-    subroutine add_point(s, xi, dm)
-      integer, intent(in) :: s
-      real(dp), intent(in) :: xi, dm
-      real(dp) :: ph(4), le
-      integer :: j
-      le = sys%prop(1, s)
-      ph = [1.0_dp - xi, xi, le*(xi - 2.0_dp*xi**2 + xi**3), le*(-xi**2 + xi**3)]
-      do j = 1, 4
-        sys%gram(:, j, s) = sys%gram(:, j, s) + dm*ph*ph(j)
+        sys%gram6(:, j, sys%el_off(s) + e) = sys%gram6(:, j, sys%el_off(s) + e) + dm*ps*ps(j)
       end do
     end subroutine add_point
   end subroutine gram_matrices
@@ -387,8 +372,8 @@ contains
   !> J = dr'/dq' (and of dr''/dv, dr''/dq) are fields X(xi) = sum_a phi_a(xi) X_a over phi = [1 - xi,
   !> xi, N_0, N_1] (N_0, N_1 the transverse Hermite shapes of th_0, th_1; the elastic field is
   !> w = N_0 th_0 + N_1 th_1 along e2), so every integral of mass_point is a form in the segment's
-  !> Gram matrix G (gram_matrices): the same residual, energies, S blocks and angle-column sums as
-  !> mass_point summed over the Gauss points and point masses, without a loop over points.
+  !> Gram matrix G (sys%gram, the phi part of gram6): the same residual, energies, S blocks and angle-column
+  !> sums as mass_point summed over the Gauss points and point masses, without a loop over points.
   subroutine element_inertia(sys, l, q, v, a, want, cc, ck, r, lm, ekin, epot, msum, csum)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
@@ -852,14 +837,10 @@ contains
     real(dp), intent(out) :: r(:), ekin, epot
     real(dp), intent(out), optional :: msum(:), csum(:)   !< (nl) sums of the angle columns of M and C_v (if want)
     type(link_mats), intent(inout) :: lm
-    integer :: n, nl, e, k, i, j, idx(6), cl5(5)
-    real(dp) :: len, le, dw, rho_a, c(2), ell, de(6), dv(6), fe(6), ce(6, 6), xi, psi_dd
-    real(dp) :: cs, sn, g(2), om, al0, al, w0(2), d5(5), blk(5, 5)
-    logical :: damped
+    integer :: n, nl, e
+    real(dp) :: cs, sn, ell, g(2), om, al0, al
     n = sys%n_el(l); nl = 3*n + 3
-    len = sys%prop(1, l); rho_a = sys%prop(2, l)
     r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
-    damped = sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp
     if (present(msum)) then
       msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
     end if
@@ -870,6 +851,28 @@ contains
         call element_inertia_residual(sys, l, e, q, v, a, r, ekin, epot)
       end do
     else
+      call gauss_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    end if
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    call rotary_inertias(sys, l, q, v, a, want, ccv, ell, g, om, al, r, lm, ekin, msum)
+    call axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
+    call bending_forces(sys, l, q, v, want, ccv, ckt, r, lm, epot, csum)
+  end subroutine link_eval_rel
+
+  !> Inertia and gravity of segment l by mass_point at each element's Gauss points and at the
+  !> point masses on the segment (local DOFs as link_eval_rel).
+  subroutine gauss_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), ekin, epot
+    real(dp), intent(inout), optional :: msum(:), csum(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: n, e, k, i
+    real(dp) :: len, rho_a, dw, le, xi
+    n = sys%n_el(l)
+    len = sys%prop(1, l); rho_a = sys%prop(2, l)
     do e = 1, n          ! distributed mass
       dw = sys%wn(e + 1, l) - sys%wn(e, l)
       le = len*dw
@@ -886,11 +889,23 @@ contains
       call mass_point(sys, l, q, v, a, e, xi, sys%wn(e, l) + xi*dw, len*dw, sys%pm_prop(2, i), want, &
                       ccv, ckt, r, lm, ekin, epot, msum, csum)
     end do
-    end if
-    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+  end subroutine gauss_inertia
+
+  !> Rotary inertias turning with segment l (psi = phi + th_k at their node): residual, kinetic energy
+  !> and (if want) their blocks of S and angle-column sums; ell, g, om, al the chord quantities.
+  subroutine rotary_inertias(sys, l, q, v, a, want, ccv, ell, g, om, al, r, lm, ekin, msum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ell, g(2), om, al
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), ekin
+    real(dp), intent(inout), optional :: msum(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: i, j, k, cl5(5)
+    real(dp) :: c(2), w0(2), d5(5), blk(5, 5), psi_dd
     do i = 1, sys%nri    ! rotary inertias turning with this link: psi = phi + th_k
       if (sys%ri_seg(i) /= l) cycle
-      k = th_index(n, sys%ri_node(i))
+      k = th_index(sys%n_el(l), sys%ri_node(i))
       cl5 = [1, 2, 3, 4, k]                 ! d psi / d q is nonzero on these local DOFs only
       d5 = [-g(1), -g(2), g(1), g(2), 1.0_dp]
       psi_dd = al + a(k)
@@ -911,16 +926,24 @@ contains
         if (present(msum)) msum(cl5) = msum(cl5) + sys%ri_j(i)*d5
       end if
     end do
-    call axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
-    if (n == 1 .and. .not. damped .and. .not. want) then   ! one element: only th_0, th_1 (local 5, 6)
-      e = sys%el_off(l) + 1
-      fe(1) = sys%ke(3, 3, e)*q(5) + sys%ke(3, 6, e)*q(6)
-      fe(2) = sys%ke(6, 3, e)*q(5) + sys%ke(6, 6, e)*q(6)
-      r(5:6) = r(5:6) + fe(1:2)
-      epot = epot + 0.5_dp*dot_product(q(5:6), fe(1:2))
-      return
-    end if
-    ! elastic strain energy and Rayleigh damping, element by element (local DOFs)
+  end subroutine rotary_inertias
+
+  !> Bending (the elements' local stiffness K) and Rayleigh damping of segment l, element by element
+  !> over its local DOFs: residual, strain energy and (if want) ckt K + ccv C in S, C's angle-column
+  !> sums in csum.
+  subroutine bending_forces(sys, l, q, v, want, ccv, ckt, r, lm, epot, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), epot
+    real(dp), intent(inout), optional :: csum(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: n, e, i, j, idx(6)
+    real(dp) :: de(6), dv(6), fe(6), ce(6, 6), val
+    logical :: damped
+    n = sys%n_el(l)
+    damped = sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp
     do e = 1, n
       idx = elem_index(n, e)
       do i = 1, 6
@@ -930,13 +953,14 @@ contains
           de(i) = 0.0_dp; dv(i) = 0.0_dp
         end if
       end do
-      fe = matmul(sys%ke(:, :, sys%el_off(l) + e), de)
+      fe = 0.0_dp
+      do j = 1, 6              ! K de over the element's DOFs present here (th only in a one-element segment)
+        if (idx(j) > 0) fe = fe + sys%ke(:, j, sys%el_off(l) + e)*de(j)
+      end do
       epot = epot + 0.5_dp*dot_product(de, fe)
       if (damped) then
         ce = sys%ray(1)*sys%me(:, :, sys%el_off(l) + e) + sys%ray(2)*sys%ke(:, :, sys%el_off(l) + e)
         fe = fe + matmul(ce, dv)
-      else
-        ce = 0.0_dp
       end if
       do i = 1, 6
         if (idx(i) > 0) r(idx(i)) = r(idx(i)) + fe(i)
@@ -946,7 +970,9 @@ contains
           if (idx(j) == 0) cycle
           do i = 1, 6
             if (idx(i) == 0) cycle
-            call lm_add(lm, l, idx(i), idx(j), ckt*sys%ke(i, j, sys%el_off(l) + e) + ccv*ce(i, j))  ! ce = 0 undamped
+            val = ckt*sys%ke(i, j, sys%el_off(l) + e)
+            if (damped) val = val + ccv*ce(i, j)
+            call lm_add(lm, l, idx(i), idx(j), val)
           end do
         end do
         if (present(csum) .and. damped) then
@@ -956,7 +982,7 @@ contains
         end if
       end if
     end do
-  end subroutine link_eval_rel
+  end subroutine bending_forces
 
   !> Axial strain energy of segment l, U = 1/2 EA L eps^2 [J], its residual and (if want) ckt times its
   !> stiffness. eps = (|c| - L)/L, c = re - rs the chord [m], L the segment's length; for a shallow-arch
@@ -1480,7 +1506,7 @@ contains
     real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
     real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
-    integer :: nsteps, n, it, i, frame, info, itmax_frame, nf, nc, kat
+    integer :: nsteps, n, it, frame, info, itmax_frame, nf, nc, kat
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
     logical :: converged, refactor, use_cond, refresh, second
     type(link_mats) :: lm
@@ -1588,7 +1614,6 @@ contains
       call gradient_pattern()
     end subroutine setup_work
 
-
     !> The Newton iterations of step n (predictor qs, vs set): converged, it and the state at the
     !> accepted iterate; status on a failed factorization or solve.
     subroutine newton_iterations(n)
@@ -1677,7 +1702,6 @@ contains
                  (kat > 1 .and. rho < 0.5_dp .and. rho/(1.0_dp - rho)*da_norm <= tol*(a_norm + 1.0e-30)) .or. &
                  (kat > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))
     end function accepted
-
 
     !> Start the step's iteration (again) at the last step's position q_n and multipliers: the
     !> acceleration that puts q at qn, a fresh contraction history.

@@ -82,15 +82,15 @@ contains
   end subroutine cpl_set_newton
 
   !> Where every later cpl_run starts a step's Newton iterations: 0 at the last acceleration, 1
-  !> (default) at the position q_n + dt v_n.  status 4 for another mode.
+  !> (default) at the position q_n + dt v_n, 2 at q_n.  status 4 for another mode.
   subroutine cpl_set_start(mode, status)
     integer, intent(in) :: mode
     integer, intent(out) :: status
     call coupled_set_start(mode, status)
   end subroutine cpl_set_start
 
-  !> Inertia of one-element segments in every later call: 0 (default) in closed form, 1 by Gauss
-  !> points (the check of the closed form).  status 4 for another mode.
+  !> Inertia in every later call: 0 (default) in closed form (one-element segments; the residual of
+  !> longer ones), 1 by Gauss points (the check of the closed form).  status 4 for another mode.
   subroutine cpl_set_inertia(mode, status)
     integer, intent(in) :: mode
     integer, intent(out) :: status
