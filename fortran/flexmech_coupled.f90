@@ -1054,7 +1054,7 @@ contains
     logical, intent(in) :: want
     real(dp), intent(out) :: res(:), energy(2)
     type(link_mats), intent(inout) :: lm
-    integer :: l, nl
+    integer :: l, nl, i, j
     real(dp) :: ek, ep
     res = 0.0_dp
     energy = 0.0_dp
@@ -1063,10 +1063,16 @@ contains
     end if
     do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3
-      lm%widx(1:nl) = sys%ld(1:nl, l)
-      lm%wl(1:nl, 2) = q(lm%widx(1:nl)); lm%wl(1:nl, 3) = v(lm%widx(1:nl)); lm%wl(1:nl, 4) = a(lm%widx(1:nl))
+      do i = 1, nl          ! explicit loops: vector-subscripted sections copy through the heap
+        j = sys%ld(i, l)
+        lm%widx(i) = j
+        lm%wl(i, 2) = q(j); lm%wl(i, 3) = v(j); lm%wl(i, 4) = a(j)
+      end do
       call link_eval(sys, l, lm%wl(1:nl, 2), lm%wl(1:nl, 3), lm%wl(1:nl, 4), want, cc, ck, lm%wl(:, 1), lm, ek, ep)
-      res(lm%widx(1:nl)) = res(lm%widx(1:nl)) + lm%wl(1:nl, 1)
+      do i = 1, nl
+        j = lm%widx(i)
+        res(j) = res(j) + lm%wl(i, 1)
+      end do
       energy = energy + [ek, ep]
     end do
     call bodies_eval(sys, q, v, a, want, res, lm, energy)
@@ -1685,8 +1691,12 @@ contains
         end do
         lam(1:nc) = lam(1:nc) + dlam(1:nc)
       end if
-      a(freeidx) = a(freeidx) + rf
-      da_norm = sqrt(sum(rf**2)); a_norm = sqrt(sum(a(freeidx)**2))
+      a_norm = 0.0_dp
+      do i = 1, nf         ! a loop: a(freeidx) = a(freeidx) + rf would copy through the heap
+        a(freeidx(i)) = a(freeidx(i)) + rf(i)
+        a_norm = a_norm + a(freeidx(i))**2
+      end do
+      da_norm = sqrt(sum(rf**2)); a_norm = sqrt(a_norm)
       newton(2:3) = [da_norm, a_norm]
     end subroutine correction
 
