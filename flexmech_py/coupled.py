@@ -3,7 +3,7 @@ rigid and elastic coordinates in one system (docs/theory.md sections 11-12).
 
 :class:`CoupledModel` is a case's model: its layout (segments, rigid bodies, markers, constraint rows
 and force drives: :mod:`flexmech_py.coupled_layout`), its state on the rigid-body solution, the
-values of its constraint rows, and the calls of the compiled kernel (fortran/flexmech_coupled.f90).
+values of its constraint rows, and the calls of the compiled kernel (fortran/flexmech_coupled_*.f90).
 Outputs and diagnostics of a run: :mod:`flexmech_py.coupled_outputs`.
 """
 
@@ -227,7 +227,7 @@ class CoupledModel:
         return g[:nc], gq[:nc]
 
     def post(self, qf, vf, af, lf, tf, measures, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0)) -> dict:
-        """Frames evaluated on the model (flexmech_coupled: coupled_post): ``markers`` (9, nmk, nf)
+        """Frames evaluated on the model (flexmech_coupled_post): ``markers`` (9, nmk, nf)
         [x, y, psi, rates, accelerations] of every marker, ``measures`` (3, nm, nf) [value, rate,
         acceleration] of the measure Rows, ``forces`` (nd, nf) the force drives' values, ``ends``
         (4, nseg, nf) the segment-end residuals (joint forces through shared DOFs)."""

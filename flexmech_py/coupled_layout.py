@@ -1,6 +1,6 @@
 """The layout of the coupled and nonlinear models (flexmech_py.coupled) built from a mechanism:
 segments and their DOFs, rigid bodies, markers, constraint rows per joint, force drives, lumped
-inertias, and the kernel's flat description (fortran/flexmech_coupled.f90: coupled_build).
+inertias, and the kernel's flat description (fortran/flexmech_coupled_system.f90: coupled_build).
 
 - Every flexible link is one beam *segment* (coupled model) or one segment per element (nonlinear
   model): the absolute positions of the segment ends (shared by the segments that meet there) and
@@ -29,7 +29,7 @@ __all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "JOINT_ROW
            "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",
            "start_value", "flat_description"]
 
-# constraint kinds (flexmech_markers) and marker kinds (flexmech_coupled)
+# constraint kinds (flexmech_markers) and marker kinds (flexmech_coupled_system)
 CON_POINT, CON_ANGLE, CON_PROJECTION = 1, 2, 3
 MK_GROUND, MK_NODE, MK_BODY = 0, 1, 2
 J_FLOOR = 1e-6     # a rigid body without rotary inertia: J_S = J_FLOOR m lref^2 in the iteration matrix
@@ -456,7 +456,7 @@ class SharedAngles:
 # ----------------------------------------------------------------------------- the flat description
 def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0),
                      shared: SharedAngles | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(ispec, rspec) of flexmech_coupled: coupled_build (layout documented there); with ``shared``
+    """(ispec, rspec) of flexmech_coupled_system: coupled_build (layout documented there); with ``shared``
     the nonlinear model's kernel description (shared node angles, no interior welds)."""
     ld, free_of, rows = lay.ld, lay.free_of, lay.rows
     if shared is not None:

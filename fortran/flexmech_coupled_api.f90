@@ -1,14 +1,17 @@
 !> Flat API of the coupled and nonlinear models facing f2py: plain arrays and scalars only.  Python
-!> (flexmech_py/coupled.py) packs the model into ispec(ni), rspec(nr) (layout: flexmech_coupled,
+!> (flexmech_py/coupled.py) packs the model into ispec(ni), rspec(nr) (layout: flexmech_coupled_system,
 !> coupled_build) and calls these through flexmech_py.kernels; every routine returns a status code
 !> (flexmech_lapack: 4 bad input, 5 Newton failure, 6 divergence limit).
 !>   ndof all DOFs (q, v, a), nfree free DOFs, nc1 = max(1, constraint rows), nframes output frames.
 module flexmech_coupled_api
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
-  use flexmech_coupled, only: coupled_set_newton, coupled_set_start, coupled_set_inertia, &
-                              coupled_system, coupled_build, coupled_run, coupled_dense, coupled_post, &
-                              coupled_set_solver, coupled_residual, coupled_rows
+  use flexmech_coupled_system, only: coupled_system, coupled_build
+  use flexmech_coupled_rows, only: coupled_rows
+  use flexmech_coupled_element, only: coupled_set_inertia
+  use flexmech_coupled_assembly, only: coupled_dense, coupled_residual
+  use flexmech_coupled_run, only: coupled_run, coupled_set_newton, coupled_set_start, coupled_set_solver
+  use flexmech_coupled_post, only: coupled_post
   implicit none
   private
   public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_set_start, cpl_set_inertia, cpl_residuals, cpl_rows
@@ -33,7 +36,7 @@ contains
   !> last state reached.  start = 1: a fresh run (the free accelerations a and the multipliers made
   !> consistent, pa = a, carry not read); 0: the same with pa as given; 2: continue the run that left
   !> (q, v, a, pa, carry) (the same steps as one uninterrupted run).  div_limit [m] > 0: the run stops
-  !> with status 6 when coupled_elastic_measure (flexmech_coupled) exceeds it; seg_link(nseg) is the
+  !> with status 6 when coupled_elastic_measure (flexmech_coupled_run) exceeds it; seg_link(nseg) is the
   !> mechanism link of each segment (segments of a link listed consecutively from its start).  Frames: qf, vf, af (ndof, nframes), lf (nc1, nframes)
   !> the multipliers (constraint forces), ef (4, nframes) [kinetic, potential, work of the inputs, max
   !> Newton iterations since the last frame]; nvalid: number of valid frames; newton(4): the last
@@ -147,7 +150,7 @@ contains
   end subroutine cpl_rows
 
   !> Frames (qf, vf, af (ndof, nf), multipliers lf (nc1, nf), times tf (nf)) evaluated on the model
-  !> (flexmech_coupled: coupled_post): marker states mks (9, nmk, nf), measure rows meas (4, nm) with
+  !> (flexmech_coupled_post): marker states mks (9, nmk, nf), measure rows meas (4, nm) with
   !> directions meas_dir (2, nm) -> mv (3, nm, nf), force-drive values dvals (nd1, nf) (nd1 >= the
   !> force drives), segment-end residuals rend (4, nseg, nf).
   subroutine cpl_post(ni, nr, ndof, nc1, nf, nmk, nm, nd1, nseg, ispec, rspec, qf, vf, af, lf, tf, meas, &

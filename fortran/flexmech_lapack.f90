@@ -11,7 +11,7 @@
 !>   5  iterations inside a step did not converge (Newton in the coupled and nonlinear models,
 !>      the axial forces of the geometric stiffness)
 !>   6  the elastic state exceeded the divergence limit `div_limit` given to the time loop
-!>      (flexmech_newmark: max |u| over the free translational DOFs; flexmech_coupled: the largest
+!>      (flexmech_newmark: max |u| over the free translational DOFs; flexmech_coupled_run: the largest
 !>      node offset from the straight link chord or change of the chord length); the step that
 !>      crossed it is returned in fail_step
 !>   7  the mechanism reached a singular position: its constraint Jacobian (with the kinematic drives)

@@ -1,7 +1,7 @@
 """Time integrators (issue 5, section 1) and the divergence guard, through the real Fortran loops.
 
 The generalized-alpha family in the Arnold-Bruls form (docs/theory.md section 15) runs inside
-both time loops: flexmech_newmark (superposition models) and flexmech_coupled (coupled and
+both time loops: flexmech_newmark (superposition models) and flexmech_coupled_run (coupled and
 nonlinear models).  Checked here:
 
 (a) the amplification matrix of a single-DOF oscillator, measured from one-step runs of each loop,
@@ -86,7 +86,7 @@ KED_SDOF = (np.array([0, 0, 0, 1, 0, 0], np.int32), np.array([1], np.int32),
 KED_OMEGA = 1.0                                                                # sqrt(k / m)
 
 # coupled loop: one segment, one element, fixed chord (ends and th_1 fixed): only th_0 free,
-# m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L (flat description: flexmech_coupled, coupled_build); absang = arch = 0
+# m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L (flat description: flexmech_coupled_system, coupled_build); absang = arch = 0
 CPL_SDOF = (np.array([1, 0, 6, 1] + [0] * 8 + [1] + list(range(1, 7)) + [0, 0, 0, 0, 1, 0] + [0, 0], np.int32),
             np.array([1.0, 105.0, 1e3, 0.25, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]))   # L, rho A, EA, EI; node fractions
 CPL_OMEGA = 1.0

@@ -320,7 +320,7 @@ def test_newton_converges_at_256_elements_per_link_with_generalized_alpha(cases_
 
 def test_closed_form_residual_of_longer_segments_equals_the_gauss_points(cases_dir):
     """The coupled model's segments of several elements: the residual alone in closed form over each
-    element's Gram matrix (flexmech_coupled.f90: element_inertia_residual) against the Gauss-point
+    element's Gram matrix (flexmech_coupled_element.f90: element_inertia_residual) against the Gauss-point
     evaluation, at states of the seed four-bar (point masses), the manipulator (payload, hub), the
     slider-crank, the plate six-bar and the quick-return: equal to 1e-13 of the inertia terms M a."""
     from flexmech_py import kernels

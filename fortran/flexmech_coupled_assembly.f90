@@ -1,0 +1,131 @@
+!> The coupled and nonlinear models' global residual and iteration matrix: every segment (link_eval),
+!> the rigid bodies and the force drives, at one state; the dense parts and batches of residuals for
+!> tests and the modal analysis.
+module flexmech_coupled_assembly
+  use flexmech_kinds, only: dp
+  use flexmech_assembly, only: band_rows, band_to_dense
+  use flexmech_markers, only: marker_state, MAXCOL
+  use flexmech_coupled_system, only: coupled_system
+  use flexmech_coupled_rows, only: drive_load
+  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_to_band
+  use flexmech_coupled_element, only: link_eval
+  implicit none
+  private
+  public :: assemble, coupled_dense, coupled_residual
+
+contains
+
+  !> Assemble the global residual R (all DOFs) at time t and, if want, the iteration matrix
+  !> S = M + cc*C_v + ck*K_t over the free DOFs (segment blocks and the rigid bodies' diagonal, in lm).
+  !> R holds the inertia, elastic, damping, gravity and force-drive terms (not the constraint forces).
+  !> Returns energies [kinetic, potential (strain + gravity)].
+  subroutine assemble(sys, q, v, a, t, want, cc, ck, res, lm, energy)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), a(:), t, cc, ck
+    logical, intent(in) :: want
+    real(dp), intent(out) :: res(:), energy(2)
+    type(link_mats), intent(inout) :: lm
+    integer :: l, nl, i, j
+    real(dp) :: ek, ep
+    res = 0.0_dp
+    energy = 0.0_dp
+    if (want) then
+      lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp; lm%dg = 0.0_dp
+    end if
+    do l = 1, sys%nseg
+      nl = 3*sys%n_el(l) + 3
+      do i = 1, nl          ! explicit loops: vector-subscripted sections copy through the heap
+        j = sys%ld(i, l)
+        lm%widx(i) = j
+        lm%wl(i, 2) = q(j); lm%wl(i, 3) = v(j); lm%wl(i, 4) = a(j)
+      end do
+      call link_eval(sys, l, lm%wl(1:nl, 2), lm%wl(1:nl, 3), lm%wl(1:nl, 4), want, cc, ck, lm%wl(:, 1), lm, ek, ep)
+      do i = 1, nl
+        j = lm%widx(i)
+        res(j) = res(j) + lm%wl(i, 1)
+      end do
+      energy = energy + [ek, ep]
+    end do
+    call bodies_eval(sys, q, v, a, want, res, lm, energy)
+    call drive_loads(sys, q, v, t, res)
+  end subroutine assemble
+
+  !> Rigid bodies: residual m (a_C - grav), J alpha; S gets diag(m, m, J_S) (J_S > 0 also for a body
+  !> of zero inertia whose angle a constraint holds); energies 1/2 m |v_C|^2 + 1/2 J omega^2, -m grav.r_C.
+  subroutine bodies_eval(sys, q, v, a, want, res, lm, energy)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: res(:), energy(2)
+    type(link_mats), intent(inout) :: lm
+    integer :: b, k, d(3), f
+    real(dp) :: m, jc
+    do b = 1, sys%nrb
+      d = sys%rb_dof(:, b)
+      m = sys%rb_m(1, b); jc = sys%rb_m(2, b)
+      res(d(1:2)) = res(d(1:2)) + m*(a(d(1:2)) - sys%grav)
+      res(d(3)) = res(d(3)) + jc*a(d(3))
+      energy(1) = energy(1) + 0.5_dp*(m*(v(d(1))**2 + v(d(2))**2) + jc*v(d(3))**2)
+      energy(2) = energy(2) - m*dot_product(sys%grav, q(d(1:2)))
+      if (.not. want) cycle
+      do k = 1, 3
+        f = sys%free_of(d(k))
+        if (f > 0) lm%dg(f) = lm%dg(f) + merge(m, sys%rb_m(3, b), k < 3)
+      end do
+    end do
+  end subroutine bodies_eval
+
+  !> Force drives: res -= tau(theta, t) d theta/dq on the drives' joint coordinates.
+  subroutine drive_loads(sys, q, v, t, res)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), t
+    real(dp), intent(inout) :: res(:)
+    integer :: i, j, nc, cols(2*MAXCOL)
+    real(dp) :: tau, theta, grad(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    do i = 1, sys%nd
+      call drive_load(sys, i, q, v, t, tau, theta, nc, cols, grad, ma, mb)
+      do j = 1, nc
+        res(cols(j)) = res(cols(j)) - tau*grad(j)
+      end do
+    end do
+  end subroutine drive_loads
+
+  !> Dense residual (all DOFs, without constraint forces), iteration-matrix parts over the free DOFs and
+  !> energies at one state and time t (for tests and analysis): mm = M, cm = C_v, km = K_t,
+  !> energy = [kinetic, potential].  A rigid body's diagonal in mm is [m, m, J_S].
+  subroutine coupled_dense(sys, q, v, a, t, res, mm, cm, km, energy)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), a(:), t
+    real(dp), intent(out) :: res(:), mm(:, :), cm(:, :), km(:, :), energy(2)
+    real(dp), allocatable :: ab(:, :)
+    type(link_mats) :: lm
+    call lm_setup(sys, 1, lm)
+    allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree))
+    call assemble(sys, q, v, a, t, .true., 0.0_dp, 0.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
+    mm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree)
+    call assemble(sys, q, v, a, t, .true., 1.0_dp, 0.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
+    cm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+    call assemble(sys, q, v, a, t, .true., 0.0_dp, 1.0_dp, res, lm, energy)
+    call lm_to_band(sys, lm, ab)
+    km = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+  end subroutine coupled_dense
+
+  !> Residual res (all DOFs: inertia, elastic, damping, gravity and force drives, no constraint forces)
+  !> at each of ns states (q(:, s), v, a) at time t [s] (modal analysis: its derivatives by differences).
+  subroutine coupled_residual(sys, q, v, a, t, res)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:, :), v(:), a(:), t
+    real(dp), intent(out) :: res(:, :)
+    type(link_mats) :: lm
+    real(dp) :: energy(2)
+    integer :: s
+    call lm_setup(sys, 1, lm)
+    do s = 1, size(q, 2)
+      call assemble(sys, q(:, s), v, a, t, .false., 0.0_dp, 0.0_dp, res(:, s), lm, energy)
+    end do
+  end subroutine coupled_residual
+
+end module flexmech_coupled_assembly

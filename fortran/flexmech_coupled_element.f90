@@ -1,0 +1,570 @@
+!> The segments of the coupled and nonlinear models: residual, energies and blocks of the iteration
+!> matrix of one segment (link_eval) from its local vector [xs, ys, xe, ye, th_0, p_1, v_1, th_1, ...,
+!> th_n] (flexmech_coupled_system): inertia in closed form over the elements' Gram matrices or at the
+!> Gauss points, rotary inertias, the axial strain of the chord (and of the shallow arch), bending and
+!> Rayleigh damping; absolute node angles carried to the chord-relative ones (docs/theory.md 11-12).
+module flexmech_coupled_element
+  use flexmech_kinds, only: dp
+  use flexmech_lapack, only: STATUS_OK
+  use flexmech_coupled_system, only: coupled_system, set_mode, wrap, elem_index, shape_fn, th_index, gx, gw
+  use flexmech_coupled_storage, only: link_mats, lm_add, lm_add_block, lm_block_get, lm_block_put
+  implicit none
+  private
+  public :: link_eval, coupled_set_inertia, INERTIA_CLOSED, INERTIA_GAUSS
+
+  !> Inertia in closed form over the elements' Gram matrices: INERTIA_CLOSED (default; one-element
+  !> segments element_inertia, the residual of longer ones element_inertia_residual) or INERTIA_GAUSS
+  !> (mass_point at the Gauss points throughout; the check of the closed form)
+  integer, parameter :: INERTIA_CLOSED = 0, INERTIA_GAUSS = 1
+  integer :: inertia_mode = INERTIA_CLOSED
+
+contains
+
+  !> Inertia of one-element segments in every later call (INERTIA_*); status STATUS_BAD_INPUT otherwise.
+  subroutine coupled_set_inertia(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    call set_mode(mode, INERTIA_CLOSED, INERTIA_GAUSS, inertia_mode, status)
+  end subroutine coupled_set_inertia
+
+  !> Residual (local vector of length nld), energies and, if want, the blocks of segment l of the
+  !> iteration matrix S = M + ccv C_v + ckt K_t (added to lm, which the caller has zeroed).
+  !> A segment with absolute node angles (sys%absang(l) = 1, the nonlinear model) is evaluated in the
+  !> chord-relative angles th_k = psi_k - phi, th_k' = psi_k' - omega, th_k'' = psi_k'' - alpha, and
+  !> its residual and matrix carried back by T = d th / d(xs, ys, xe, ye, psi) (docs/theory.md 12.1):
+  !>   R = T^T R_rel,   S = T^T S_rel T - ckt (sum_k R_rel,th_k) d2phi/d(rs, re)2,
+  !> the last term the geometric stiffness of the end moments turning with the chord.
+  subroutine link_eval(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(out) :: r(:), ekin, epot
+    type(link_mats), intent(inout) :: lm
+    integer :: n, nl, k, it(2)
+    real(dp) :: qr(6), vr(6), ar(6), msum(6), csum(6)
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, c(2), l2, h(2, 2), s6(6, 6)
+    if (sys%absang(l) == 0) then
+      call link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
+      return
+    end if
+    n = 1; nl = 6                  ! absolute angles: one element per segment (coupled_build)
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    phi = atan2(sn, cs)
+    qr = q(1:6); vr = v(1:6); ar = a(1:6)
+    do k = 0, n
+      it(k + 1) = th_index(n, k)
+      qr(it(k + 1)) = wrap(q(it(k + 1)) - phi)
+      vr(it(k + 1)) = v(it(k + 1)) - om
+      ar(it(k + 1)) = a(it(k + 1)) - al
+    end do
+    call link_eval_rel(sys, l, qr, vr, ar, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    sr = sum(r(it(1:n + 1)))
+    r(1:2) = r(1:2) + sr*g
+    r(3:4) = r(3:4) - sr*g
+    if (.not. want) return
+    c = q(3:4) - q(1:2)
+    l2 = c(1)**2 + c(2)**2
+    h(1, 1) = 2.0_dp*c(1)*c(2)/l2**2; h(1, 2) = (c(2)**2 - c(1)**2)/l2**2    ! d2 phi / dc2
+    h(2, 1) = h(1, 2); h(2, 2) = -h(1, 1)
+    call lm_block_get(lm, l, s6)
+    call angle_rate_terms(s6, c, v(3:4) - v(1:2), a(3:4) - a(1:2), g, om, h, ccv, ckt, msum, csum)
+    call angle_transform(s6, it(1:n + 1), [g(1), g(2), -g(1), -g(2)])
+    h = ckt*sr*h
+    s6(1:2, 1:2) = s6(1:2, 1:2) - h; s6(3:4, 3:4) = s6(3:4, 3:4) - h
+    s6(1:2, 3:4) = s6(1:2, 3:4) + h; s6(3:4, 1:2) = s6(3:4, 1:2) + h
+    call lm_block_put(lm, l, s6)
+  end subroutine link_eval
+
+  !> link_eval in chord-relative angles (the coupled model's segments).
+  subroutine link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(out) :: r(:), ekin, epot
+    real(dp), intent(out), optional :: msum(:), csum(:)   !< (nl) sums of the angle columns of M and C_v (if want)
+    type(link_mats), intent(inout) :: lm
+    integer :: n, nl, e
+    real(dp) :: cs, sn, ell, g(2), om, al0, al
+    n = sys%n_el(l); nl = 3*n + 3
+    r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
+    if (present(msum)) then
+      msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
+    end if
+    if (n == 1 .and. inertia_mode == INERTIA_CLOSED) then      ! one element: closed form
+      call element_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    else if (.not. want .and. inertia_mode == INERTIA_CLOSED) then   ! the residual alone
+      do e = 1, n
+        call element_inertia_residual(sys, l, e, q, v, a, r, ekin, epot)
+      end do
+    else
+      call gauss_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    end if
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    call rotary_inertias(sys, l, q, v, a, want, ccv, ell, g, om, al, r, lm, ekin, msum)
+    call axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
+    call bending_forces(sys, l, q, v, want, ccv, ckt, r, lm, epot, csum)
+  end subroutine link_eval_rel
+
+  !> Chord quantities of a link from its local q, v, a.
+  pure subroutine chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(out) :: cs, sn, ell, g(2), om, al0, al
+    real(dp) :: c(2), cd(2), cdd(2), l2
+    c = q(3:4) - q(1:2); cd = v(3:4) - v(1:2); cdd = a(3:4) - a(1:2)
+    l2 = c(1)**2 + c(2)**2
+    ell = sqrt(l2)
+    cs = c(1)/ell; sn = c(2)/ell
+    g = [-c(2), c(1)]/l2
+    om = g(1)*cd(1) + g(2)*cd(2)
+    al0 = -2.0_dp*(c(1)*cd(1) + c(2)*cd(2))*om/l2   ! part of alpha independent of the accelerations
+    al = al0 + g(1)*cdd(1) + g(2)*cdd(2)
+  end subroutine chord
+
+  !> Inertia and gravity of a one-element segment in closed form (docs/theory.md section 12.3),
+  !> local DOFs [xs, ys, xe, ye, th_0, th_1].  Its velocity r', acceleration r'' and the columns of
+  !> J = dr'/dq' (and of dr''/dv, dr''/dq) are fields X(xi) = sum_a phi_a(xi) X_a over phi = [1 - xi,
+  !> xi, N_0, N_1] (N_0, N_1 the transverse Hermite shapes of th_0, th_1; the elastic field is
+  !> w = N_0 th_0 + N_1 th_1 along e2), so every integral of mass_point is a form in the segment's
+  !> Gram matrix G (sys%gram, the phi part of gram6): the same residual, energies, S blocks and angle-column
+  !> sums as mass_point summed over the Gauss points and point masses, without a loop over points.
+  subroutine element_inertia(sys, l, q, v, a, want, cc, ck, r, lm, ekin, epot, msum, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), cc, ck
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), ekin, epot
+    real(dp), intent(inout), optional :: msum(:), csum(:)
+    type(link_mats), intent(inout) :: lm
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, e1(2), e2(2), w(4), wd(4), wdd(4), c(2), cdot(2), w0(2)
+    real(dp) :: gm(4, 4), acc(2, 4), vel(2, 4), jf(2, 4, 6), gj(2, 4, 6), bv(2, 4, 6), bf(2, 4, 6), blk(6, 6)
+    real(dp) :: acj(2, 4), ga(2, 4), gv(2, 4), s1, s6(6, 6)
+    integer :: i, j, b
+    gm = sys%gram(:, :, l)
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    e1 = [cs, sn]; e2 = [-sn, cs]
+    w = [0.0_dp, 0.0_dp, q(5), q(6)]; wd = [0.0_dp, 0.0_dp, v(5), v(6)]; wdd = [0.0_dp, 0.0_dp, a(5), a(6)]
+    vel(:, 1) = v(1:2); vel(:, 2) = v(3:4)
+    acc(:, 1) = a(1:2) - sys%grav; acc(:, 2) = a(3:4) - sys%grav        ! gravity: 1 = phi_1 + phi_2
+    do b = 3, 4
+      vel(:, b) = -om*w(b)*e1 + wd(b)*e2
+      acc(:, b) = -(al*w(b) + 2.0_dp*om*wd(b))*e1 + (wdd(b) - om*om*w(b))*e2
+    end do
+    ga = matmul(acc, gm); gv = matmul(vel, gm)     ! (G r'')_a and (G r')_a, 2 x 4
+    ekin = ekin + 0.5_dp*sum(gv*vel)
+    epot = epot - sum((gm(1, :) + gm(2, :))*[dot_product(sys%grav, q(1:2)), dot_product(sys%grav, q(3:4)), &
+                                             w(3)*dot_product(sys%grav, e2), w(4)*dot_product(sys%grav, e2)])
+    ! R_j = sum_a J_a,j . (G r'')_a over the nonzero columns of J (see jf below)
+    s1 = w(3)*dot_product(e1, ga(:, 3)) + w(4)*dot_product(e1, ga(:, 4))
+    r(1:2) = r(1:2) + ga(:, 1) + s1*g
+    r(3:4) = r(3:4) + ga(:, 2) - s1*g
+    r(5) = r(5) + dot_product(e2, ga(:, 3))
+    r(6) = r(6) + dot_product(e2, ga(:, 4))
+    if (.not. want) return
+    jf = 0.0_dp                               ! J = dr'/dq' by columns
+    do j = 1, 2
+      jf(j, 1, j) = 1.0_dp; jf(j, 2, 2 + j) = 1.0_dp
+      do b = 3, 4
+        jf(:, b, j) = w(b)*g(j)*e1
+        jf(:, b, 2 + j) = -w(b)*g(j)*e1
+      end do
+    end do
+    jf(:, 3, 5) = e2; jf(:, 4, 6) = e2
+    do j = 1, 6                               ! gj = G J (G symmetric)
+      do b = 1, 4
+        gj(:, b, j) = matmul(jf(:, :, j), gm(:, b))
+      end do
+    end do
+    c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
+    w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*cdot(1) + c(2)*cdot(2))*g)
+    bv = 0.0_dp                               ! dr''/dv by columns
+    do j = 1, 2
+      acj = 0.0_dp
+      do b = 3, 4
+        acj(:, b) = -w(b)*w0(j)*e1 + (-2.0_dp*om*w(b)*e2 - 2.0_dp*wd(b)*e1)*g(j)
+      end do
+      bv(:, :, j) = -acj; bv(:, :, 2 + j) = acj
+    end do
+    bv(:, 3, 5) = -2.0_dp*om*e1; bv(:, 4, 6) = -2.0_dp*om*e1
+    bf = jf + cc*bv                           ! + ck dr''/dq at fixed chord (the angle columns only)
+    bf(:, 3, 5) = bf(:, 3, 5) + ck*(-al*e1 - om*om*e2)
+    bf(:, 4, 6) = bf(:, 4, 6) + ck*(-al*e1 - om*om*e2)
+    do j = 1, 6
+      do i = 1, 6
+        blk(i, j) = sum(gj(:, :, i)*bf(:, :, j))
+      end do
+    end do
+    call lm_block_get(lm, l, s6)
+    call lm_block_put(lm, l, s6 + blk)
+    if (.not. present(msum)) return
+    do i = 1, 6
+      msum(i) = msum(i) + sum(gj(:, :, i)*(jf(:, :, 5) + jf(:, :, 6)))
+      csum(i) = csum(i) + sum(gj(:, :, i)*(bv(:, :, 5) + bv(:, :, 6)))
+    end do
+  end subroutine element_inertia
+
+  !> Residual, kinetic and gravity energy of the inertia of element e of a longer segment l in
+  !> closed form (what mass_point gives summed over the element's Gauss points and point masses):
+  !> over psi = [1 - xi, xi, H_v0, H_th0, H_v1, H_th1] every field of mass_point is sum_a psi_a X_a,
+  !> with (1 - w) = (1 - w_0) psi_1 + (1 - w_1) psi_2, w = w_0 psi_1 + w_1 psi_2 (w_0, w_1 the element's
+  !> node fractions) and R u = sum_a psi_a U_a (U_1 = p_0 e1, U_2 = p_1 e1, U_3 = v_0 e2, U_4 = th_0 e2,
+  !> U_5 = v_1 e2, U_6 = th_1 e2), so R_j = sum_a J_a,j . (G r'')_a with G = sys%gram6 (docs/theory.md
+  !> section 12.3).  Local DOFs of the segment as in link_eval_rel.
+  subroutine element_inertia_residual(sys, l, e, q, v, a, r, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l, e
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(inout) :: r(:), ekin, epot
+    integer, parameter :: basis(6) = [1, 3, 4, 2, 5, 6]      ! psi of the element DOFs [p, v, th, p, v, th]
+    integer :: idx(6), i, b
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, e1(2), e2(2), gm(6, 6), cst(6), cen(6), dir(2, 6)
+    real(dp) :: u(2, 6), ud(2, 6), udd(2, 6), rd(2, 6), rdd(2, 6), ga(2, 6), gv(2, 6), s1, w0, w1
+    gm = sys%gram6(:, :, sys%el_off(l) + e)
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    e1 = [cs, sn]; e2 = [-sn, cs]
+    w0 = sys%wn(e, l); w1 = sys%wn(e + 1, l)
+    cst = [1.0_dp - w0, 1.0_dp - w1, 0.0_dp, 0.0_dp, 0.0_dp, 0.0_dp]
+    cen = [w0, w1, 0.0_dp, 0.0_dp, 0.0_dp, 0.0_dp]
+    idx = elem_index(sys%n_el(l), e)
+    u = 0.0_dp; ud = 0.0_dp; udd = 0.0_dp
+    do i = 1, 6
+      dir(:, i) = merge(e1, e2, i == 1 .or. i == 4)
+      if (idx(i) == 0) cycle
+      b = basis(i)
+      u(:, b) = q(idx(i))*dir(:, i); ud(:, b) = v(idx(i))*dir(:, i); udd(:, b) = a(idx(i))*dir(:, i)
+    end do
+    do b = 1, 6           ! r' and r'' - g by basis function (Omega x = (-x_2, x_1))
+      rd(:, b) = cst(b)*v(1:2) + cen(b)*v(3:4) + om*[-u(2, b), u(1, b)] + ud(:, b)
+      rdd(:, b) = cst(b)*(a(1:2) - sys%grav) + cen(b)*(a(3:4) - sys%grav) + al*[-u(2, b), u(1, b)] &
+                  - om*om*u(:, b) + 2.0_dp*om*[-ud(2, b), ud(1, b)] + udd(:, b)
+    end do
+    ga = matmul(rdd, gm); gv = matmul(rd, gm)
+    ekin = ekin + 0.5_dp*sum(gv*rd)
+    do b = 1, 6           ! int r dm = sum_b r_b (G_b1 + G_b2): psi_1 + psi_2 = 1
+      epot = epot - (gm(b, 1) + gm(b, 2))*dot_product(sys%grav, cst(b)*q(1:2) + cen(b)*q(3:4) + u(:, b))
+    end do
+    s1 = sum(-u(2, :)*ga(1, :) + u(1, :)*ga(2, :))           ! sum_b (Omega U_b) . (G r'')_b
+    r(1:2) = r(1:2) + cst(1)*ga(:, 1) + cst(2)*ga(:, 2) - s1*g      ! cst, cen vanish past psi_2
+    r(3:4) = r(3:4) + cen(1)*ga(:, 1) + cen(2)*ga(:, 2) + s1*g
+    do i = 1, 6
+      if (idx(i) > 0) r(idx(i)) = r(idx(i)) + dot_product(dir(:, i), ga(:, basis(i)))
+    end do
+  end subroutine element_inertia_residual
+
+  !> Inertia and gravity of segment l by mass_point at each element's Gauss points and at the
+  !> point masses on the segment (local DOFs as link_eval_rel).
+  subroutine gauss_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), ekin, epot
+    real(dp), intent(inout), optional :: msum(:), csum(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: n, e, k, i
+    real(dp) :: len, rho_a, dw, le, xi
+    n = sys%n_el(l)
+    len = sys%prop(1, l); rho_a = sys%prop(2, l)
+    do e = 1, n          ! distributed mass
+      dw = sys%wn(e + 1, l) - sys%wn(e, l)
+      le = len*dw
+      do k = 1, 4
+        call mass_point(sys, l, q, v, a, e, gx(k), sys%wn(e, l) + gx(k)*dw, le, gw(k)*rho_a*le, want, ccv, ckt, r, &
+                        lm, ekin, epot, msum, csum)
+      end do
+    end do
+    do i = 1, sys%npm    ! point masses on this segment
+      if (sys%pm_seg(i) /= l) cycle
+      e = sys%pm_el(i)
+      xi = sys%pm_prop(1, i)
+      dw = sys%wn(e + 1, l) - sys%wn(e, l)
+      call mass_point(sys, l, q, v, a, e, xi, sys%wn(e, l) + xi*dw, len*dw, sys%pm_prop(2, i), want, &
+                      ccv, ckt, r, lm, ekin, epot, msum, csum)
+    end do
+  end subroutine gauss_inertia
+
+  !> Contribution of one mass point (weight dm at segment fraction w, element e of length le at xi) to the segment
+  !> residual and iteration matrix.  Adds dm * J^T (r'' - grav) to r and, if want, to segment l's
+  !> blocks of S (lm) dm J^T (J + cc dr''/dv + ck dr''/d(elastic q)) (the point's parts of M, C_v,
+  !> K_t); returns the kinetic energy 1/2 dm |r'|^2.  If want, msum and csum (local DOFs) get the
+  !> point's part of the sums over the element's angle columns th of M and of C_v (link_eval).
+  subroutine mass_point(sys, l, q, v, a, e, xi, w, le, dm, want, cc, ck, r, lm, ekin, epot, msum, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l, e
+    real(dp), intent(in) :: q(:), v(:), a(:), xi, w, le, dm, cc, ck
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), ekin, epot
+    real(dp), intent(inout), optional :: msum(:), csum(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: n, idx(6), i, j, nl, ncl, cl(10)
+    real(dp) :: jth(2), bth(2)
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, nm(2, 6), de(6), dv(6), da(6)
+    real(dp) :: ul(2), uld(2), uldd(2), rot(2, 2), ru(2), rou(2), roud(2), rd(2), rdd(2)
+    real(dp) :: jac(2, 10), bv(2, 10), bq(2, 10), ac(2, 2), w0(2), cdot(2), c(2), rn(2), bc(2), blk(10, 10)
+    n = sys%n_el(l); nl = 3*n + 3
+    idx = elem_index(n, e)
+    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    nm = shape_fn(xi, le)
+    do i = 1, 6
+      if (idx(i) > 0) then
+        de(i) = q(idx(i)); dv(i) = v(idx(i)); da(i) = a(idx(i))
+      else
+        de(i) = 0.0_dp; dv(i) = 0.0_dp; da(i) = 0.0_dp
+      end if
+    end do
+    ul = matmul(nm, de); uld = matmul(nm, dv); uldd = matmul(nm, da)
+    rot(1, 1) = cs; rot(2, 1) = sn; rot(1, 2) = -sn; rot(2, 2) = cs
+    ru = matmul(rot, ul)                     ! R u
+    rou = [-ru(2), ru(1)]                    ! R Omega u = Omega R u
+    roud = matmul(rot, [-uld(2), uld(1)])    ! R Omega u'
+    rd = (1.0_dp - w)*v(1:2) + w*v(3:4) + om*rou + matmul(rot, uld)
+    rdd = (1.0_dp - w)*a(1:2) + w*a(3:4) + al*rou - om*om*ru + 2.0_dp*om*roud + matmul(rot, uldd)
+    ekin = ekin + 0.5_dp*dm*(rd(1)**2 + rd(2)**2)
+    epot = epot - dm*dot_product(sys%grav, (1.0_dp - w)*q(1:2) + w*q(3:4) + ru)
+    ! J = dr'/dq', on the (at most 10) columns this point touches: the link ends and the element's DOFs
+    ncl = 4
+    cl(1:4) = [1, 2, 3, 4]
+    jac(:, 1:4) = 0.0_dp
+    jac(1, 1) = 1.0_dp - w; jac(2, 2) = 1.0_dp - w; jac(1, 3) = w; jac(2, 4) = w
+    do j = 1, 2
+      jac(:, j) = jac(:, j) - rou*g(j)
+      jac(:, 2 + j) = jac(:, 2 + j) + rou*g(j)
+    end do
+    do i = 1, 6
+      if (idx(i) == 0) cycle
+      ncl = ncl + 1
+      cl(ncl) = idx(i)
+      jac(:, ncl) = matmul(rot, nm(:, i))
+    end do
+    rdd = rdd - sys%grav
+    do j = 1, ncl
+      r(cl(j)) = r(cl(j)) + dm*(rdd(1)*jac(1, j) + rdd(2)*jac(2, j))
+    end do
+    if (.not. want) return
+    ! dr''/dv: chord velocity through omega and alpha0, elastic velocities through 2 omega R Omega N
+    c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
+    w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*cdot(1) + c(2)*cdot(2))*g)
+    do j = 1, 2
+      ac(:, j) = rou*w0(j) + (-2.0_dp*om*ru + 2.0_dp*roud)*g(j)
+    end do
+    bv(:, 1:2) = -ac; bv(:, 3:4) = ac
+    bq(:, 1:4) = 0.0_dp
+    do j = 5, ncl
+      rn = jac(:, j)                                   ! R N_i
+      bv(:, j) = 2.0_dp*om*[-rn(2), rn(1)]             ! 2 omega R Omega N_i
+      bq(:, j) = al*[-rn(2), rn(1)] - om*om*rn         ! at fixed chord
+    end do
+    do j = 1, ncl
+      bc = jac(:, j) + cc*bv(:, j) + ck*bq(:, j)
+      do i = 1, ncl
+        blk(i, j) = dm*(jac(1, i)*bc(1) + jac(2, i)*bc(2))
+      end do
+    end do
+    call lm_add_block(lm, l, ncl, cl, blk)
+    if (.not. present(msum)) return
+    jth = 0.0_dp; bth = 0.0_dp          ! the element's angle columns: idx(3) and idx(6)
+    j = 4
+    do i = 1, 6
+      if (idx(i) == 0) cycle
+      j = j + 1
+      if (i == 3 .or. i == 6) then
+        jth = jth + jac(:, j); bth = bth + bv(:, j)
+      end if
+    end do
+    do i = 1, ncl
+      msum(cl(i)) = msum(cl(i)) + dm*dot_product(jac(:, i), jth)
+      csum(cl(i)) = csum(cl(i)) + dm*dot_product(jac(:, i), bth)
+    end do
+  end subroutine mass_point
+
+  !> Rotary inertias turning with segment l (psi = phi + th_k at their node): residual, kinetic energy
+  !> and (if want) their blocks of S and angle-column sums; ell, g, om, al the chord quantities.
+  subroutine rotary_inertias(sys, l, q, v, a, want, ccv, ell, g, om, al, r, lm, ekin, msum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ell, g(2), om, al
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), ekin
+    real(dp), intent(inout), optional :: msum(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: i, j, k, cl5(5)
+    real(dp) :: c(2), w0(2), d5(5), blk(5, 5), psi_dd
+    do i = 1, sys%nri    ! rotary inertias turning with this link: psi = phi + th_k
+      if (sys%ri_seg(i) /= l) cycle
+      k = th_index(sys%n_el(l), sys%ri_node(i))
+      cl5 = [1, 2, 3, 4, k]                 ! d psi / d q is nonzero on these local DOFs only
+      d5 = [-g(1), -g(2), g(1), g(2), 1.0_dp]
+      psi_dd = al + a(k)
+      r(cl5) = r(cl5) + sys%ri_j(i)*psi_dd*d5
+      ekin = ekin + 0.5_dp*sys%ri_j(i)*(om + v(k))**2
+      if (want) then
+        do j = 1, 5
+          blk(:, j) = sys%ri_j(i)*d5(j)*d5
+        end do
+        ! velocity dependence of psi'' through alpha0: d alpha0 / d c' = w0
+        c = q(3:4) - q(1:2)
+        w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*(v(3) - v(1)) + c(2)*(v(4) - v(2)))*g)
+        do j = 1, 2
+          blk(:, j) = blk(:, j) - ccv*sys%ri_j(i)*w0(j)*d5
+          blk(:, 2 + j) = blk(:, 2 + j) + ccv*sys%ri_j(i)*w0(j)*d5
+        end do
+        call lm_add_block(lm, l, 5, cl5, blk)
+        if (present(msum)) msum(cl5) = msum(cl5) + sys%ri_j(i)*d5
+      end if
+    end do
+  end subroutine rotary_inertias
+
+  !> Axial strain energy of segment l, U = 1/2 EA L eps^2 [J], its residual and (if want) ckt times its
+  !> stiffness. eps = (|c| - L)/L, c = re - rs the chord [m], L the segment's length; for a shallow-arch
+  !> segment (sys%arch, one element) eps also holds the element's mean w'^2/2 from its chord-relative
+  !> end angles th = (th_0, th_1) [rad]: eps += th^T A th / 60, A = [4 -1; -1 4] (docs/theory.md 12.4).
+  !> Local DOFs: 1:4 = (xs, ys, xe, ye) [m], 5:6 = (th_0, th_1) for a one-element segment.
+  subroutine axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), ell, ckt
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), epot
+    type(link_mats), intent(inout) :: lm
+    real(dp) :: len, ea, c(2), u(2), eps, f, cc(2, 2), th(2), ath(2)
+    integer :: i, j
+    len = sys%prop(1, l); ea = sys%prop(3, l)
+    c = q(3:4) - q(1:2); u = c/ell
+    eps = (ell - len)/len
+    ath = 0.0_dp
+    if (sys%arch(l) == 1) then
+      th = q(5:6)
+      ath = [4.0_dp*th(1) - th(2), 4.0_dp*th(2) - th(1)]/30.0_dp     ! d eps / d th
+      eps = eps + 0.5_dp*dot_product(th, ath)
+    end if
+    f = ea*eps                               ! axial force [N]
+    r(1:2) = r(1:2) - f*u
+    r(3:4) = r(3:4) + f*u
+    if (sys%arch(l) == 1) r(5:6) = r(5:6) + f*len*ath
+    epot = epot + 0.5_dp*ea*len*eps**2
+    if (.not. want) return
+    cc(:, 1) = u*u(1); cc(:, 2) = u*u(2)
+    cc = ckt*(ea/len*cc - f/ell*cc)
+    cc(1, 1) = cc(1, 1) + ckt*f/ell; cc(2, 2) = cc(2, 2) + ckt*f/ell
+    lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) + cc; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) + cc
+    lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) - cc; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) - cc
+    if (sys%arch(l) == 0) return
+    do j = 1, 2
+      do i = 1, 2        ! d2U/d(re) d(th) = EA u ath^T, the start with the opposite sign
+        call lm_add(lm, l, 2 + i, 4 + j, ckt*ea*u(i)*ath(j))
+        call lm_add(lm, l, 4 + j, 2 + i, ckt*ea*u(i)*ath(j))
+        call lm_add(lm, l, i, 4 + j, -ckt*ea*u(i)*ath(j))
+        call lm_add(lm, l, 4 + j, i, -ckt*ea*u(i)*ath(j))
+      end do
+    end do
+    do j = 1, 2          ! d2U/dth2 = EA L ath ath^T + f L A / 30
+      do i = 1, 2
+        call lm_add(lm, l, 4 + i, 4 + j, ckt*(ea*len*ath(i)*ath(j) + f*len*merge(4.0_dp, -1.0_dp, i == j)/30.0_dp))
+      end do
+    end do
+  end subroutine axial_strain
+
+  !> Bending (the elements' local stiffness K) and Rayleigh damping of segment l, element by element
+  !> over its local DOFs: residual, strain energy and (if want) ckt K + ccv C in S, C's angle-column
+  !> sums in csum.
+  subroutine bending_forces(sys, l, q, v, want, ccv, ckt, r, lm, epot, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), epot
+    real(dp), intent(inout), optional :: csum(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: n, e, i, j, idx(6)
+    real(dp) :: de(6), dv(6), fe(6), ce(6, 6), val
+    logical :: damped
+    n = sys%n_el(l)
+    damped = sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp
+    do e = 1, n
+      idx = elem_index(n, e)
+      do i = 1, 6
+        if (idx(i) > 0) then
+          de(i) = q(idx(i)); dv(i) = v(idx(i))
+        else
+          de(i) = 0.0_dp; dv(i) = 0.0_dp
+        end if
+      end do
+      fe = 0.0_dp
+      do j = 1, 6              ! K de over the element's DOFs present here (th only in a one-element segment)
+        if (idx(j) > 0) fe = fe + sys%ke(:, j, sys%el_off(l) + e)*de(j)
+      end do
+      epot = epot + 0.5_dp*dot_product(de, fe)
+      if (damped) then
+        ce = sys%ray(1)*sys%me(:, :, sys%el_off(l) + e) + sys%ray(2)*sys%ke(:, :, sys%el_off(l) + e)
+        fe = fe + matmul(ce, dv)
+      end if
+      do i = 1, 6
+        if (idx(i) > 0) r(idx(i)) = r(idx(i)) + fe(i)
+      end do
+      if (want) then
+        do j = 1, 6
+          if (idx(j) == 0) cycle
+          do i = 1, 6
+            if (idx(i) == 0) cycle
+            val = ckt*sys%ke(i, j, sys%el_off(l) + e)
+            if (damped) val = val + ccv*ce(i, j)
+            call lm_add(lm, l, idx(i), idx(j), val)
+          end do
+        end do
+        if (present(csum) .and. damped) then
+          do i = 1, 6
+            if (idx(i) > 0) csum(idx(i)) = csum(idx(i)) + ce(i, 3) + ce(i, 6)
+          end do
+        end if
+      end if
+    end do
+  end subroutine bending_forces
+
+  !> The parts of S from the chord terms of the relative angle rates th' = psi' - omega(c, c') and
+  !> th'' = psi'' - alpha(c, c', c''), as columns of the end positions (before angle_transform):
+  !> S(:, rs) += msum (ccv w0 + ckt da) + csum ckt H c', S(:, re) -= the same, with w0 = d alpha0/dc',
+  !> da = d alpha/dc = H c'' + d alpha0/dc, H = d2 phi/dc2 and msum, csum the sums of the angle columns
+  !> of M and C_v (alpha0 = -2 (c.c') omega / |c|^2, the velocity part of alpha).
+  pure subroutine angle_rate_terms(s6, c, cd, cdd, g, om, h, ccv, ckt, msum, csum)
+    real(dp), intent(inout) :: s6(6, 6)
+    real(dp), intent(in) :: c(2), cd(2), cdd(2), g(2), om, h(2, 2), ccv, ckt, msum(:), csum(:)
+    real(dp) :: l2, sc, hc(2), w0(2), da(2), col(6)
+    integer :: j
+    l2 = c(1)**2 + c(2)**2
+    sc = c(1)*cd(1) + c(2)*cd(2)
+    hc = matmul(h, cd)
+    w0 = -(2.0_dp/l2)*(om*c + sc*g)
+    da = matmul(h, cdd) - 2.0_dp*(cd*om/l2 + sc*hc/l2 - 2.0_dp*sc*om*c/l2**2)
+    do j = 1, 2
+      col = msum(1:6)*(ccv*w0(j) + ckt*da(j)) + csum(1:6)*ckt*hc(j)
+      s6(:, j) = s6(:, j) + col
+      s6(:, 2 + j) = s6(:, 2 + j) - col
+    end do
+  end subroutine angle_rate_terms
+
+  !> S <- (I + E)^T S (I + E) on a one-element segment's block s6, E(th_k, 1:4) = e for its angle
+  !> DOFs th(:): the change from chord-relative to absolute node angles (see link_eval).
+  pure subroutine angle_transform(s6, th, e)
+    real(dp), intent(inout) :: s6(6, 6)
+    integer, intent(in) :: th(:)
+    real(dp), intent(in) :: e(4)
+    real(dp) :: sum_th(6)
+    integer :: j, k
+    sum_th = 0.0_dp
+    do k = 1, size(th)          ! S (I + E): columns 1:4 gain the angle columns times e
+      sum_th = sum_th + s6(:, th(k))
+    end do
+    do j = 1, 4
+      s6(:, j) = s6(:, j) + sum_th*e(j)
+    end do
+    sum_th = 0.0_dp
+    do k = 1, size(th)          ! (I + E)^T: rows 1:4 gain the angle rows times e
+      sum_th = sum_th + s6(th(k), :)
+    end do
+    do j = 1, 4
+      s6(j, :) = s6(j, :) + e(j)*sum_th
+    end do
+  end subroutine angle_transform
+
+end module flexmech_coupled_element

@@ -1,0 +1,95 @@
+!> Markers, constraint rows and force drives evaluated on the coupled system (flexmech_coupled_system):
+!> a marker's state from the all-DOF state, a row's value, rate, velocity part of its acceleration
+!> and gradient (the kinds of flexmech_markers), a force drive's generalized force (flexmech_drivelaw).
+module flexmech_coupled_rows
+  use flexmech_kinds, only: dp
+  use flexmech_drivelaw, only: force_law
+  use flexmech_markers, only: marker_state, segment_marker, body_marker, ground_marker, constraint_row, &
+                              CON_POINT, CON_ANGLE, CON_PROJECTION, MAXCOL
+  use flexmech_coupled_system, only: coupled_system, MK_GROUND, MK_NODE, MK_BODY, NPAR
+  implicit none
+  private
+  public :: get_marker, eval_row, drive_load, coupled_rows
+
+contains
+
+  !> State of marker m at the all-DOF state (q, v) (flexmech_markers).
+  pure subroutine get_marker(sys, m, q, v, ms)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: m
+    real(dp), intent(in) :: q(:), v(:)
+    type(marker_state), intent(out) :: ms
+    integer :: s, n, b
+    select case (sys%mk_kind(m))
+    case (MK_NODE)
+      s = sys%mk_idx(m); n = sys%n_el(s)
+      call segment_marker(q, v, sys%ld(1:3*n + 3, s), n, sys%mk_node(m), sys%wn(sys%mk_node(m) + 1, s), &
+                          sys%absang(s) /= 0, ms)
+    case (MK_BODY)
+      b = sys%mk_idx(m)
+      call body_marker(q(sys%rb_dof(:, b)), v(sys%rb_dof(:, b)), sys%rb_dof(:, b), sys%mk_pos(:, m), ms)
+    case default
+      call ground_marker(sys%mk_pos(:, m), ms)
+    end select
+  end subroutine get_marker
+
+  !> A row of kind `kind` (aux, direction d) between markers mka and mkb at (q, v): value g, rate gd,
+  !> velocity part acc0 of its second derivative, gradient grad over the all-DOF columns cols(1:nc)
+  !> (marker a's columns first: ma%n of them); the marker states ma, mb.
+  pure subroutine eval_row(sys, kind, aux, d, mka, mkb, q, v, g, gd, acc0, nc, cols, grad, ma, mb)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: kind, aux, mka, mkb
+    real(dp), intent(in) :: d(2), q(:), v(:)
+    real(dp), intent(out) :: g, gd, acc0, grad(2*MAXCOL)
+    integer, intent(out) :: nc, cols(2*MAXCOL)
+    type(marker_state), intent(out) :: ma, mb
+    call get_marker(sys, mka, q, v, ma)
+    call get_marker(sys, mkb, q, v, mb)
+    call constraint_row(kind, aux, d, ma, mb, g, gd, acc0, nc, cols, grad)
+  end subroutine eval_row
+
+  !> Coordinate theta of force drive i at (q, v) (its gradient over cols(1:nc), marker states) and the
+  !> law's generalized force tau(theta, t) [N m or N].
+  pure subroutine drive_load(sys, i, q, v, t, tau, theta, nc, cols, grad, ma, mb)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: i
+    real(dp), intent(in) :: q(:), v(:), t
+    real(dp), intent(out) :: tau, theta, grad(2*MAXCOL)
+    integer, intent(out) :: nc, cols(2*MAXCOL)
+    type(marker_state), intent(out) :: ma, mb
+    real(dp) :: gd, acc0
+    integer :: k, nk
+    call eval_row(sys, sys%dv(1, i), 0, sys%dv_dir(:, i), sys%dv(2, i), sys%dv(3, i), q, v, theta, gd, acc0, nc, &
+                  cols, grad, ma, mb)
+    k = sys%dv(4, i); nk = sys%dv(5, i)
+    if (nk > 0) then
+      tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(k:k + nk - 1), &
+                      sys%tab_c(:, k:k + nk - 1), theta, t)
+    else
+      tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(1:0), sys%tab_c(:, 1:0), &
+                      theta, t)
+    end if
+  end subroutine drive_load
+
+  !> Values g (nc, ns) of the constraint rows (not wrapped) and their gradients gq (nc, ndof, ns) over
+  !> all DOFs at each of ns configurations q(:, s) (velocities v enter the rates only, not returned).
+  subroutine coupled_rows(sys, q, v, g, gq)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:, :), v(:)
+    real(dp), intent(out) :: g(:, :), gq(:, :, :)
+    integer :: s, ic, j, ncl, cols(2*MAXCOL)
+    real(dp) :: gd, acc0, grad(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    gq = 0.0_dp
+    do s = 1, size(q, 2)
+      do ic = 1, sys%nc
+        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
+                      q(:, s), v, g(ic, s), gd, acc0, ncl, cols, grad, ma, mb)
+        do j = 1, ncl
+          gq(ic, cols(j), s) = gq(ic, cols(j), s) + grad(j)
+        end do
+      end do
+    end do
+  end subroutine coupled_rows
+
+end module flexmech_coupled_rows

@@ -1,0 +1,315 @@
+!> The iteration matrix S = M + cc C_v + ck K_t of the coupled and nonlinear models, stored by segment
+!> blocks (link_mats), and its factorization and solves: the whole free-DOF band (LAPACK) or the
+!> condensed form (every segment's interior DOFs eliminated onto the shared end positions;
+!> docs/theory.md section 11.3, "The solve").
+module flexmech_coupled_storage
+  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
+  use flexmech_kinds, only: dp
+  use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE
+  use flexmech_assembly, only: band_rows
+  use flexmech_coupled_system, only: coupled_system, elem_index
+  implicit none
+  private
+  public :: link_mats, lm_setup, lm_add, lm_add_block, lm_block_get, lm_block_put, lm_to_band, lm_factor, lm_solve
+
+  !> Iteration matrix S = M + cc C_v + ck K_t stored by segment blocks.  Local DOFs of segment l:
+  !> 1..4 the end positions ("boundary", B), 5..nl the elastic DOFs ("interior", I; ni_l = nl - 4),
+  !> numbered off(l)+1..off(l)+ni_l in the interior arrays.
+  !>   bb(4, 4, l)   S_BB block of the segment            bi(4, ni)  S_BI (rows: local 1..4)
+  !>   ib(ni, 4)     S_IB (columns: local 1..4)           ai(ldi, ni) S_II, LAPACK band storage with
+  !>                 kl = ku = kbi (row 2 kbi + 1 + i - j), factorized in place (ipi) by the condensed solve
+  !>   dg(nfree)     diagonal of the rigid bodies (their DOFs are boundary DOFs coupled to nothing else)
+  !> Condensed solve (cond = .true.: every interior DOF free and local to one segment):
+  !>   z = S_II^-1 S_IB per segment, Schur complement sb = S_BB - S_BI z over the nb free boundary DOFs
+  !>   (band kbb, LAPACK storage, ipb), workspaces yi(ni, nrhs), yb(nb, nrhs).
+  type :: link_mats
+    integer :: ni = 0, kbi = 0, ldi = 0, nb = 0, kbb = 0, ldb = 0, nrhs = 0
+    logical :: cond = .false.
+    integer, allocatable :: off(:), ifree(:), bfree(:, :), bglob(:), ipi(:), ipb(:)
+    real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :), dg(:)
+    !> assemble's work: a segment's all-DOF numbers and its local [R, q, v, a] (maxld; allocated once
+    !> by lm_setup, so that no evaluation allocates; never referenced through lm by link_eval)
+    integer, allocatable :: widx(:)
+    real(dp), allocatable :: wl(:, :)
+  end type link_mats
+
+contains
+
+  !> Allocate the segment-block storage of S (see link_mats) and, when every segment's elastic DOFs
+  !> are free and its own, the condensed solve's arrays for up to nrhs right-hand sides.
+  subroutine lm_setup(sys, nrhs, lm)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: nrhs
+    type(link_mats), intent(out) :: lm
+    integer :: l, n, nl, e, k, f, idx(6), lo, hi
+    integer, allocatable :: cnt(:), bnum(:)
+    logical, allocatable :: isb(:)
+    allocate (lm%off(sys%nseg), lm%bfree(4, sys%nseg), lm%widx(sys%maxld), lm%wl(sys%maxld, 4))
+    lm%ni = 0; lm%kbi = 0
+    do l = 1, sys%nseg
+      n = sys%n_el(l); nl = 3*n + 3
+      lm%off(l) = lm%ni
+      lm%ni = lm%ni + nl - 4
+      do e = 1, n           ! interior coupling is element by element: half band of the element DOFs
+        idx = elem_index(n, e)
+        lm%kbi = max(lm%kbi, maxval(idx) - minval(idx, mask=idx > 0))
+      end do
+    end do
+    lm%ldi = 3*lm%kbi + 1
+    lm%nrhs = max(1, nrhs)
+    allocate (lm%bb(4, 4, sys%nseg), lm%bi(4, lm%ni), lm%ib(lm%ni, 4), lm%ai(lm%ldi, lm%ni), lm%ifree(lm%ni))
+    allocate (cnt(sys%nfree), isb(sys%nfree), bnum(sys%nfree))
+    cnt = 0; isb = .false.
+    lm%cond = .true.
+    do l = 1, sys%nseg
+      nl = 3*sys%n_el(l) + 3
+      do k = 1, 4
+        f = sys%free_of(sys%ld(k, l))
+        if (f > 0) isb(f) = .true.
+      end do
+      do k = 5, nl
+        f = sys%free_of(sys%ld(k, l))
+        lm%ifree(lm%off(l) + k - 4) = f
+        if (f > 0) then
+          cnt(f) = cnt(f) + 1
+        else
+          lm%cond = .false.
+        end if
+      end do
+    end do
+    do l = 1, sys%nrb        ! rigid-body DOFs: boundary DOFs with a diagonal block
+      do k = 1, 3
+        f = sys%free_of(sys%rb_dof(k, l))
+        if (f > 0) isb(f) = .true.
+      end do
+    end do
+    allocate (lm%dg(sys%nfree))
+    lm%dg = 0.0_dp
+    ! condensation needs: interior DOFs free, in one segment only, never an end position; every free
+    ! DOF interior or boundary
+    if (any(cnt > 1) .or. any(cnt > 0 .and. isb) .or. any(cnt == 0 .and. .not. isb)) lm%cond = .false.
+    lm%nb = count(isb)
+    if (lm%nb == 0) lm%cond = .false.
+    bnum = 0
+    allocate (lm%bglob(lm%nb))
+    k = 0
+    do f = 1, sys%nfree      ! boundary DOFs in the order of the free numbering (its band carries over)
+      if (.not. isb(f)) cycle
+      k = k + 1
+      bnum(f) = k; lm%bglob(k) = f
+    end do
+    lm%kbb = 0
+    do l = 1, sys%nseg
+      lo = huge(1); hi = 0
+      do k = 1, 4
+        f = sys%free_of(sys%ld(k, l))
+        lm%bfree(k, l) = 0
+        if (f > 0) then
+          lm%bfree(k, l) = bnum(f)
+          lo = min(lo, bnum(f)); hi = max(hi, bnum(f))
+        end if
+      end do
+      if (hi > 0) lm%kbb = max(lm%kbb, hi - lo)
+    end do
+    lm%ldb = 3*lm%kbb + 1
+    if (lm%cond) then
+      allocate (lm%z(lm%ni, 4), lm%sb(lm%ldb, lm%nb), lm%ipi(lm%ni), lm%ipb(lm%nb), lm%yi(lm%ni, lm%nrhs), &
+                lm%yb(lm%nb, lm%nrhs))
+    end if
+  end subroutine lm_setup
+
+  !> S(i, j) += val for the local DOFs i, j of segment l (the entry must lie in the block structure).
+  pure subroutine lm_add(lm, l, i, j, val)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l, i, j
+    real(dp), intent(in) :: val
+    if (i <= 4) then
+      if (j <= 4) then
+        lm%bb(i, j, l) = lm%bb(i, j, l) + val
+      else
+        lm%bi(i, lm%off(l) + j - 4) = lm%bi(i, lm%off(l) + j - 4) + val
+      end if
+    else if (j <= 4) then
+      lm%ib(lm%off(l) + i - 4, j) = lm%ib(lm%off(l) + i - 4, j) + val
+    else
+      lm%ai(2*lm%kbi + 1 + i - j, lm%off(l) + j - 4) = lm%ai(2*lm%kbi + 1 + i - j, lm%off(l) + j - 4) + val
+    end if
+  end subroutine lm_add
+
+  !> S(cl(i), cl(j)) += blk(i, j), i, j = 1..ncl, local DOFs of segment l.
+  pure subroutine lm_add_block(lm, l, ncl, cl, blk)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l, ncl, cl(:)
+    real(dp), intent(in) :: blk(:, :)
+    integer :: i, j
+    do j = 1, ncl
+      do i = 1, ncl
+        call lm_add(lm, l, cl(i), cl(j), blk(i, j))
+      end do
+    end do
+  end subroutine lm_add_block
+
+  !> The 6 x 6 block of one-element segment l (local DOFs [xs ys xe ye th_0 th_1]) out of its
+  !> storage in lm, and back (lm_block_put), for dense work on it.
+  pure subroutine lm_block_get(lm, l, s6)
+    type(link_mats), intent(in) :: lm
+    integer, intent(in) :: l
+    real(dp), intent(out) :: s6(6, 6)
+    integer :: o, d, i, j
+    o = lm%off(l); d = 2*lm%kbi + 1
+    s6(1:4, 1:4) = lm%bb(:, :, l)
+    s6(1:4, 5:6) = lm%bi(1:4, o + 1:o + 2)
+    s6(5:6, 1:4) = lm%ib(o + 1:o + 2, 1:4)
+    do j = 5, 6
+      do i = 5, 6
+        s6(i, j) = lm%ai(d + i - j, o + j - 4)
+      end do
+    end do
+  end subroutine lm_block_get
+
+  pure subroutine lm_block_put(lm, l, s6)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l
+    real(dp), intent(in) :: s6(6, 6)
+    integer :: o, d, i, j
+    o = lm%off(l); d = 2*lm%kbi + 1
+    lm%bb(:, :, l) = s6(1:4, 1:4)
+    lm%bi(1:4, o + 1:o + 2) = s6(1:4, 5:6)
+    lm%ib(o + 1:o + 2, 1:4) = s6(5:6, 1:4)
+    do j = 5, 6
+      do i = 5, 6
+        lm%ai(d + i - j, o + j - 4) = s6(i, j)
+      end do
+    end do
+  end subroutine lm_block_put
+
+  !> Scatter the segment blocks into the band matrix ab (LAPACK storage, kl = ku = sys%kl) over the
+  !> free DOFs (and the rigid bodies' diagonal): the reference solve and coupled_dense.
+  subroutine lm_to_band(sys, lm, ab)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(in) :: lm
+    real(dp), intent(out) :: ab(:, :)
+    integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d
+    ab = 0.0_dp
+    d = sys%kl + sys%ku + 1
+    do l = 1, sys%nseg
+      nl = 3*sys%n_el(l) + 3; m = nl - 4; o = lm%off(l)
+      do j = 1, 4
+        fj = sys%free_of(sys%ld(j, l))
+        if (fj == 0) cycle
+        do i = 1, 4
+          fi = sys%free_of(sys%ld(i, l))
+          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bb(i, j, l)
+        end do
+        do ii = 1, m
+          fi = sys%free_of(sys%ld(4 + ii, l))
+          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ib(o + ii, j)
+        end do
+      end do
+      do jj = 1, m
+        fj = sys%free_of(sys%ld(4 + jj, l))
+        if (fj == 0) cycle
+        do i = 1, 4
+          fi = sys%free_of(sys%ld(i, l))
+          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bi(i, o + jj)
+        end do
+        do ii = max(1, jj - lm%kbi), min(m, jj + lm%kbi)
+          fi = sys%free_of(sys%ld(4 + ii, l))
+          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ai(2*lm%kbi + 1 + ii - jj, o + jj)
+        end do
+      end do
+    end do
+    do fi = 1, sys%nfree
+      ab(d, fi) = ab(d, fi) + lm%dg(fi)
+    end do
+  end subroutine lm_to_band
+
+  !> Condensed factorization: per segment S_II = LU (in place) and z = S_II^-1 S_IB; the Schur
+  !> complement sb = S_BB - S_BI z on the boundary DOFs, assembled and factorized (band kbb).
+  subroutine lm_factor(sys, lm, status)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer, intent(out) :: status
+    integer :: l, m, o, i, j, ii, bi, bj, info, d
+    real(dp) :: val
+    d = 2*lm%kbb + 1
+    lm%sb = 0.0_dp
+    do l = 1, sys%nseg
+      m = 3*sys%n_el(l) - 1; o = lm%off(l)
+      call dgbtrf(m, m, lm%kbi, lm%kbi, lm%ai(1, o + 1), lm%ldi, lm%ipi(o + 1), info)
+      status = lapack_status(info)
+      if (status /= STATUS_OK) return
+      lm%z(o + 1:o + m, :) = lm%ib(o + 1:o + m, :)
+      call dgbtrs('N', m, lm%kbi, lm%kbi, 4, lm%ai(1, o + 1), lm%ldi, lm%ipi(o + 1), lm%z(o + 1, 1), lm%ni, info)
+      do j = 1, 4
+        bj = lm%bfree(j, l)
+        if (bj == 0) cycle
+        do i = 1, 4
+          bi = lm%bfree(i, l)
+          if (bi == 0) cycle
+          val = lm%bb(i, j, l)
+          do ii = 1, m
+            val = val - lm%bi(i, o + ii)*lm%z(o + ii, j)
+          end do
+          lm%sb(d + bi - bj, bj) = lm%sb(d + bi - bj, bj) + val
+        end do
+      end do
+    end do
+    do bi = 1, lm%nb
+      lm%sb(d, bi) = lm%sb(d, bi) + lm%dg(lm%bglob(bi))
+    end do
+    call dgbtrf(lm%nb, lm%nb, lm%kbb, lm%kbb, lm%sb, lm%ldb, lm%ipb, info)
+    status = lapack_status(info)
+  end subroutine lm_factor
+
+  !> Solve S x = xx(:, k), k = 1..nrhs (nrhs <= lm%nrhs), with the condensed factorization, in place:
+  !> interior solves y = S_II^-1 r_I, boundary system sb x_B = r_B - S_BI y, back substitution
+  !> x_I = y - z x_B.
+  subroutine lm_solve(sys, lm, nrhs, xx, ldx, status)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: nrhs, ldx
+    real(dp), intent(inout) :: xx(ldx, *)
+    integer, intent(out) :: status
+    integer :: l, m, o, i, j, k, b, info
+    status = STATUS_OK
+    do k = 1, nrhs
+      do i = 1, lm%ni
+        lm%yi(i, k) = xx(lm%ifree(i), k)
+      end do
+      do i = 1, lm%nb
+        lm%yb(i, k) = xx(lm%bglob(i), k)
+      end do
+    end do
+    do l = 1, sys%nseg
+      m = 3*sys%n_el(l) - 1; o = lm%off(l)
+      call dgbtrs('N', m, lm%kbi, lm%kbi, nrhs, lm%ai(1, o + 1), lm%ldi, lm%ipi(o + 1), lm%yi(o + 1, 1), lm%ni, info)
+      do k = 1, nrhs
+        do i = 1, 4
+          b = lm%bfree(i, l)
+          if (b > 0) lm%yb(b, k) = lm%yb(b, k) - dot_product(lm%bi(i, o + 1:o + m), lm%yi(o + 1:o + m, k))
+        end do
+      end do
+    end do
+    call dgbtrs('N', lm%nb, lm%kbb, lm%kbb, nrhs, lm%sb, lm%ldb, lm%ipb, lm%yb, lm%nb, info)
+    do l = 1, sys%nseg
+      m = 3*sys%n_el(l) - 1; o = lm%off(l)
+      do k = 1, nrhs
+        do j = 1, 4
+          b = lm%bfree(j, l)
+          if (b > 0) lm%yi(o + 1:o + m, k) = lm%yi(o + 1:o + m, k) - lm%z(o + 1:o + m, j)*lm%yb(b, k)
+        end do
+      end do
+    end do
+    do k = 1, nrhs
+      do i = 1, lm%ni
+        xx(lm%ifree(i), k) = lm%yi(i, k)
+      end do
+      do i = 1, lm%nb
+        xx(lm%bglob(i), k) = lm%yb(i, k)
+      end do
+    end do
+    if (.not. ieee_is_finite(sum(abs(lm%yb(:, 1:nrhs))) + sum(abs(lm%yi(:, 1:nrhs))))) status = STATUS_NONFINITE
+  end subroutine lm_solve
+
+end module flexmech_coupled_storage
