@@ -13,7 +13,7 @@ module flexmech_coupled_element
   public :: link_eval, coupled_set_inertia, INERTIA_CLOSED, INERTIA_GAUSS
 
   !> Inertia in closed form over the elements' Gram matrices: INERTIA_CLOSED (default; one-element
-  !> segments element_inertia, the residual of longer ones element_inertia_residual) or INERTIA_GAUSS
+  !> segments element_inertia, the elements of longer ones long_element_inertia) or INERTIA_GAUSS
   !> (mass_point at the Gauss points throughout; the check of the closed form)
   integer, parameter :: INERTIA_CLOSED = 0, INERTIA_GAUSS = 1
   integer :: inertia_mode = INERTIA_CLOSED
@@ -94,9 +94,9 @@ contains
     end if
     if (n == 1 .and. inertia_mode == INERTIA_CLOSED) then      ! one element: closed form
       call element_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
-    else if (.not. want .and. inertia_mode == INERTIA_CLOSED) then   ! the residual alone
+    else if (inertia_mode == INERTIA_CLOSED .and. .not. present(msum)) then   ! element by element
       do e = 1, n
-        call element_inertia_residual(sys, l, e, q, v, a, r, ekin, epot)
+        call long_element_inertia(sys, l, e, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
       end do
     else
       call gauss_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
@@ -204,18 +204,21 @@ contains
     end do
   end subroutine element_inertia
 
-  !> Residual, kinetic and gravity energy of the inertia of element e of a longer segment l in
-  !> closed form (what mass_point gives summed over the element's Gauss points and point masses):
-  !> over psi = [1 - xi, xi, H_v0, H_th0, H_v1, H_th1] every field of mass_point is sum_a psi_a X_a,
-  !> with (1 - w) = (1 - w_0) psi_1 + (1 - w_1) psi_2, w = w_0 psi_1 + w_1 psi_2 (w_0, w_1 the element's
-  !> node fractions) and R u = sum_a psi_a U_a (U_1 = p_0 e1, U_2 = p_1 e1, U_3 = v_0 e2, U_4 = th_0 e2,
-  !> U_5 = v_1 e2, U_6 = th_1 e2), so R_j = sum_a J_a,j . (G r'')_a with G = sys%gram6 (docs/theory.md
+  !> Inertia of element e of a longer segment l in closed form (what mass_point gives summed over the
+  !> element's Gauss points and point masses): residual, kinetic and gravity energy and, if want, the
+  !> element's block of S = M + cc C_v + ck K_t.  Over psi = [1 - xi, xi, H_v0, H_th0, H_v1, H_th1]
+  !> every field of mass_point is sum_a psi_a X_a, with (1 - w) = (1 - w_0) psi_1 + (1 - w_1) psi_2,
+  !> w = w_0 psi_1 + w_1 psi_2 (w_0, w_1 the element's node fractions) and R u = sum_a psi_a U_a
+  !> (U_1 = p_0 e1, U_2 = p_1 e1, U_3 = v_0 e2, U_4 = th_0 e2, U_5 = v_1 e2, U_6 = th_1 e2), so
+  !> R_j = sum_a J_a,j . (G r'')_a and S_ij = sum_a J_a,i . (G B_j)_a with G = sys%gram6 (docs/theory.md
   !> section 12.3).  Local DOFs of the segment as in link_eval_rel.
-  subroutine element_inertia_residual(sys, l, e, q, v, a, r, ekin, epot)
+  subroutine long_element_inertia(sys, l, e, q, v, a, want, cc, ck, r, lm, ekin, epot)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l, e
-    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(in) :: q(:), v(:), a(:), cc, ck
+    logical, intent(in) :: want
     real(dp), intent(inout) :: r(:), ekin, epot
+    type(link_mats), intent(inout) :: lm
     integer, parameter :: basis(6) = [1, 3, 4, 2, 5, 6]      ! psi of the element DOFs [p, v, th, p, v, th]
     integer :: idx(6), i, b
     real(dp) :: cs, sn, ell, g(2), om, al0, al, e1(2), e2(2), gm(6, 6), cst(6), cen(6), dir(2, 6)
@@ -250,7 +253,62 @@ contains
     do i = 1, 6
       if (idx(i) > 0) r(idx(i)) = r(idx(i)) + dot_product(dir(:, i), ga(:, basis(i)))
     end do
-  end subroutine element_inertia_residual
+    if (want) call long_element_block(l, q, v, cc, ck, gm, idx, basis, dir, cst, cen, u, ud, &
+                                      ell, g, om, al, lm)
+  end subroutine long_element_inertia
+
+  !> The block of S of element e of a longer segment (long_element_inertia, whose fields it takes):
+  !> over the columns the element touches (the segment's end positions, then its DOFs idx > 0),
+  !> J = dr'/dq' and B = J + cc dr''/dv + ck dr''/dq (at fixed chord, as mass_point) by psi
+  !> coefficients X(2, 6, column), Z(2, 6, column); S_ij = sum_a X_a,i . (G Z_j)_a.  An elastic DOF's
+  !> columns have one psi coefficient (its own shape), which the sums skip to.
+  subroutine long_element_block(l, q, v, cc, ck, gm, idx, basis, dir, cst, cen, u, ud, ell, g, om, al, lm)
+    integer, intent(in) :: l, idx(6), basis(6)
+    real(dp), intent(in) :: q(:), v(:), cc, ck, gm(6, 6), dir(2, 6), cst(6), cen(6), u(2, 6), ud(2, 6)
+    real(dp), intent(in) :: ell, g(2), om, al
+    type(link_mats), intent(inout) :: lm
+    integer :: i, j, b, ncl, cl(10), bc(10), pos(10)
+    real(dp) :: x(2, 6, 4), z(2, 6, 4), zc(2, 10), gz(2, 6, 10), blk(10, 10), c(2), cd(2), w0v(2), ej(2), ou(2), yv(2), od(2)
+    c = q(3:4) - q(1:2); cd = v(3:4) - v(1:2)
+    w0v = -(2.0_dp/ell**2)*(om*c + (c(1)*cd(1) + c(2)*cd(2))*g)      ! d alpha0 / d c'
+    do j = 1, 2           ! the end-position columns: rs (j), re (2 + j)
+      ej = 0.0_dp; ej(j) = 1.0_dp
+      do b = 1, 6
+        ou = [-u(2, b), u(1, b)]
+        yv = ou*w0v(j) + (-2.0_dp*om*u(:, b) + 2.0_dp*[-ud(2, b), ud(1, b)])*g(j)
+        x(:, b, j) = cst(b)*ej - g(j)*ou
+        x(:, b, 2 + j) = cen(b)*ej + g(j)*ou
+        z(:, b, j) = x(:, b, j) - cc*yv
+        z(:, b, 2 + j) = x(:, b, 2 + j) + cc*yv
+      end do
+    end do
+    ncl = 4
+    cl(1:4) = [1, 2, 3, 4]
+    do i = 1, 6           ! the element's DOFs: J = R N_i, B adds 2 omega R Omega N_i and alpha R Omega N_i - omega^2 R N_i
+      if (idx(i) == 0) cycle
+      ncl = ncl + 1
+      cl(ncl) = idx(i); bc(ncl) = basis(i); pos(ncl) = i
+      od = [-dir(2, i), dir(1, i)]
+      zc(:, ncl) = dir(:, i) + (2.0_dp*cc*om + ck*al)*od - (ck*om*om)*dir(:, i)    ! its one coefficient
+    end do
+    do j = 1, 4
+      gz(:, :, j) = matmul(z(:, :, j), gm)
+    end do
+    do j = 5, ncl
+      do b = 1, 6
+        gz(:, b, j) = zc(:, j)*gm(bc(j), b)
+      end do
+    end do
+    do j = 1, ncl
+      do i = 1, 4
+        blk(i, j) = sum(x(:, :, i)*gz(:, :, j))
+      end do
+      do i = 5, ncl
+        blk(i, j) = dot_product(dir(:, pos(i)), gz(:, bc(i), j))
+      end do
+    end do
+    call lm_add_block(lm, l, ncl, cl, blk)
+  end subroutine long_element_block
 
   !> Inertia and gravity of segment l by mass_point at each element's Gauss points and at the
   !> point masses on the segment (local DOFs as link_eval_rel).

@@ -59,7 +59,7 @@ module flexmech_coupled_system
     !> (shallow arch, the nonlinear model, docs/theory.md section 12.4), 0: the chord stretch alone
     integer, allocatable :: arch(:)
     !> (6, 6, total elements) per element: G = int psi psi^T dm over psi = [1 - xi, xi, H_v0, H_th0,
-    !> H_v1, H_th1] (the shapes of shape_fn; distributed mass and point masses; element_inertia_residual)
+    !> H_v1, H_th1] (the shapes of shape_fn; distributed mass and point masses; long_element_inertia)
     real(dp), allocatable :: gram6(:, :, :)
     !> (4, 4, nseg) its phi = [1 - xi, xi, H_th0, H_th1] part for one-element segments, copied once
     !> (element_inertia reads it in the hot path), zero for the others

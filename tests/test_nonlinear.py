@@ -318,11 +318,13 @@ def test_newton_converges_at_256_elements_per_link_with_generalized_alpha(cases_
     assert newton["mean_per_step"] <= 4.0
 
 
-def test_closed_form_residual_of_longer_segments_equals_the_gauss_points(cases_dir):
-    """The coupled model's segments of several elements: the residual alone in closed form over each
-    element's Gram matrix (flexmech_coupled_element.f90: element_inertia_residual) against the Gauss-point
-    evaluation, at states of the seed four-bar (point masses), the manipulator (payload, hub), the
-    slider-crank, the plate six-bar and the quick-return: equal to 1e-13 of the inertia terms M a."""
+def test_closed_form_inertia_of_longer_segments_equals_the_gauss_points(cases_dir):
+    """The coupled model's segments of several elements: the residual and the blocks of M, C_v and K_t
+    in closed form over each element's Gram matrix (flexmech_coupled_element.f90: long_element_inertia)
+    against the Gauss-point evaluation, at states of the seed four-bar (point masses), the manipulator
+    (payload, hub), the slider-crank, the plate six-bar and the quick-return: the residual equal to
+    1e-13 of the inertia terms M a, the matrices to 1e-13 of their largest entries (K_t: of its inertial
+    part, K_t less the elastic stiffness, which both evaluations share)."""
     from flexmech_py import kernels
     from flexmech_py.simulate import Prepared
 
@@ -335,19 +337,26 @@ def test_closed_form_residual_of_longer_segments_equals_the_gauss_points(cases_d
         st = cm.last_run
         ispec, rspec = cm._spec(p.gravity, (0.0, 0.0))
         qs = np.asfortranarray(st["q"][:, None])
-        out = []
+        out, dense = [], []
         try:
             for mode in (1, 0):
                 assert kernels.cpl.cpl_set_inertia(mode) == 0
                 out.append(kernels.cpl.cpl_residuals(ispec, rspec, qs, st["v"], st["a"], 0.01)[0][:, 0])
+                dense.append(kernels.cpl.cpl_dense(cm.nfree, ispec, rspec, st["q"], st["v"], st["a"], 0.01)[1:4])
         finally:
             kernels.cpl.cpl_set_inertia(0)
         free = np.flatnonzero(cm.free_of > 0)
         free = free[np.argsort(cm.free_of[free])]
-        mm = kernels.cpl.cpl_dense(cm.nfree, ispec, rspec, st["q"], st["v"], st["a"], 0.01)[1]
+        mm = dense[1][0]
         scale = np.abs(mm @ st["a"][free]).max()
         assert max(cm.n_el) > 1
         assert np.abs(out[0] - out[1]).max() <= 1e-13 * scale, name
+        zero = np.zeros_like(st["v"])
+        k_at_rest = kernels.cpl.cpl_dense(cm.nfree, ispec, rspec, st["q"], zero, zero, 0.01)[3]
+        for k, (gauss, closed) in enumerate(zip(*dense)):
+            ref = gauss - k_at_rest if k == 2 else gauss        # K_t's inertial part vanishes at rest
+            assert np.abs(ref).max() > 0, (name, k)
+            assert np.abs(closed - gauss).max() <= 1e-13 * np.abs(ref).max(), (name, k)
 
 
 def test_closed_form_inertia_equals_the_gauss_points(cases_dir):
