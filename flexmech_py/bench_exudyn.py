@@ -148,10 +148,12 @@ def run_exudyn(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float
     sc, mbs, nodes, elems = build_exudyn(case, geometry, epl, masses)
     sensors = []    # the curvature at the coupler's and the follower's midspan: (element, local x)
     for li in (1, 2):
-        k = epl // 2
-        elem, x = (elems[li][k - 1], geometry[li][3] / epl) if epl % 2 == 0 else (elems[li][k], 0.5 * geometry[li][3] / epl)
-        sensors.append(mbs.AddSensor(SensorBody(bodyNumber=elem, localPosition=[x, 0.0, 0.0], storeInternal=True,
-                                                outputVariableType=exu.OutputVariableType.CurvatureLocal)))
+        k = epl // 2     # at a node (even epl) the mean of the two elements there, as flexmech reads it
+        places = ([(elems[li][k - 1], geometry[li][3] / epl), (elems[li][k], 0.0)] if epl % 2 == 0
+                  else [(elems[li][k], 0.5 * geometry[li][3] / epl)])
+        sensors.append([mbs.AddSensor(SensorBody(bodyNumber=elem, localPosition=[x, 0.0, 0.0], storeInternal=True,
+                                                 outputVariableType=exu.OutputVariableType.CurvatureLocal))
+                        for elem, x in places])
     sensors.append(mbs.AddSensor(SensorNode(nodeNumber=nodes[0][0], storeInternal=True,
                                             outputVariableType=exu.OutputVariableType.CoordinatesTotal)))
     mbs.Assemble()
@@ -168,9 +170,10 @@ def run_exudyn(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float
     c0 = time.thread_time()        # the calling thread's CPU, as flexmech's kernel time (Exudyn runs
     exu.SolveDynamic(mbs, ss)      # single-threaded here: parallel.numberOfThreads = 1 by default)
     cpu = time.thread_time() - c0
-    k1, k2, root = (mbs.GetSensorStoredData(s) for s in sensors)
-    return {"t": k1[:, 0], "strain_coupler_mid": k1[:, 1] * geometry[1][7],
-            "strain_follower_mid": k2[:, 1] * geometry[2][7], "cpu_s": cpu, "steps": nsteps,
+    k1, k2 = (np.mean([mbs.GetSensorStoredData(s)[:, 1] for s in group], axis=0) for group in sensors[:2])
+    root = mbs.GetSensorStoredData(sensors[2])
+    return {"t": root[:, 0], "strain_coupler_mid": k1 * geometry[1][7],
+            "strain_follower_mid": k2 * geometry[2][7], "cpu_s": cpu, "steps": nsteps,
             "crank_angle": np.unwrap(np.arctan2(root[:, 4], root[:, 3])) - geometry[0][2]}
 
 

@@ -50,7 +50,7 @@ module flexmech_coupled_system
   !> The system (layout of its flat description: coupled_build).
   type :: coupled_system
     integer :: nseg = 0, nrb = 0, ndof = 0, nfree = 0, maxn = 0, maxld = 0, kl = 0, ku = 0
-    integer :: npm = 0, nri = 0, nmk = 0, nc = 0, nd = 0, nh = 0, nth = 0
+    integer :: npm = 0, nri = 0, nmk = 0, nc = 0, nd = 0, nh = 0, nth = 0, ntab = 0
     integer, allocatable :: n_el(:), ld(:, :), free_of(:), el_off(:), rb_dof(:, :)
     !> (nseg) 1: the segment's th DOFs are absolute node angles psi_k, shared with the neighbouring
     !> segments of its link (the nonlinear model, docs/theory.md section 12.1), 0: angles from the chord
@@ -115,20 +115,45 @@ contains
     real(dp), intent(in) :: rspec(:)
     type(coupled_system), intent(out) :: sys
     integer, intent(out) :: status
-    integer :: o, s, e, i, nl, f, lo, hi, ntab, ns, ml, k
-    real(dp) :: le
     status = STATUS_BAD_INPUT
+    if (.not. sizes_read(ispec, rspec, sys)) return
+    call unpack_integers(ispec, sys)
+    call unpack_reals(rspec, sys)
+    if (.not. indices_valid(sys)) return
+    call element_matrices(sys)
+    sys%kl = band_half_width(sys)
+    sys%ku = sys%kl
+    status = STATUS_OK
+  end subroutine coupled_build
+
+  !> The header counts of ispec into sys; .false. when they are negative or do not match the lengths
+  !> of ispec and rspec.
+  logical function sizes_read(ispec, rspec, sys)
+    integer, intent(in) :: ispec(:)
+    real(dp), intent(in) :: rspec(:)
+    type(coupled_system), intent(inout) :: sys
+    integer :: ns, ml, ntab
+    sizes_read = .false.
     if (size(ispec) < COUPLED_NSPEC_HEADER) return
     if (any(ispec(1:COUPLED_NSPEC_HEADER) < 0)) return
     sys%nseg = ispec(1); sys%nrb = ispec(2); sys%ndof = ispec(3); sys%maxn = ispec(4); sys%npm = ispec(5)
     sys%nri = ispec(6); sys%nmk = ispec(7); sys%nc = ispec(8); sys%nd = ispec(9); sys%nh = ispec(10)
-    sys%nth = ispec(11); ntab = ispec(12)
+    sys%nth = ispec(11); sys%ntab = ispec(12); ntab = sys%ntab
     ns = sys%nseg; ml = 3*sys%maxn + 3; sys%maxld = ml
     if (ns < 1 .or. sys%maxn < 1 .or. sys%ndof < 1) return
     if (size(ispec) /= COUPLED_NSPEC_HEADER + ns*(1 + ml) + 3*sys%nrb + sys%ndof + 2*sys%npm + 2*sys%nri &
         + 3*sys%nmk + 4*sys%nc + 5*sys%nd + 2*ns) return
     if (size(rspec) /= ns*(4 + sys%maxn + 1) + 3*sys%nrb + 2*sys%npm + sys%nri + 2*sys%nmk + 2*sys%nc &
         + (2 + NPAR + 2*sys%nh + 3*sys%nth)*sys%nd + 5*ntab + 4) return
+    sizes_read = .true.
+  end function sizes_read
+
+  !> The integer blocks of ispec (layout: coupled_build) into sys, whose counts sizes_read has set.
+  subroutine unpack_integers(ispec, sys)
+    integer, intent(in) :: ispec(:)
+    type(coupled_system), intent(inout) :: sys
+    integer :: o, ns, ml
+    ns = sys%nseg; ml = sys%maxld
     o = COUPLED_NSPEC_HEADER
     sys%n_el = ispec(o + 1:o + ns); o = o + ns
     sys%ld = reshape(ispec(o + 1:o + ml*ns), [ml, ns]); o = o + ml*ns
@@ -145,6 +170,14 @@ contains
     sys%dv = reshape(ispec(o + 1:o + 5*sys%nd), [5, sys%nd]); o = o + 5*sys%nd
     sys%absang = ispec(o + 1:o + ns); o = o + ns
     sys%arch = ispec(o + 1:o + ns)
+  end subroutine unpack_integers
+
+  !> The real blocks of rspec (layout: coupled_build) into sys.
+  subroutine unpack_reals(rspec, sys)
+    real(dp), intent(in) :: rspec(:)
+    type(coupled_system), intent(inout) :: sys
+    integer :: o, ns, ntab
+    ns = sys%nseg; ntab = sys%ntab
     o = 0
     sys%prop = reshape(rspec(o + 1:o + 4*ns), [4, ns]); o = o + 4*ns
     sys%wn = reshape(rspec(o + 1:o + (sys%maxn + 1)*ns), [sys%maxn + 1, ns]); o = o + (sys%maxn + 1)*ns
@@ -160,7 +193,15 @@ contains
     sys%tab_t = rspec(o + 1:o + ntab); o = o + ntab
     sys%tab_c = reshape(rspec(o + 1:o + 4*ntab), [4, ntab]); o = o + 4*ntab
     sys%grav = rspec(o + 1:o + 2); sys%ray = rspec(o + 3:o + 4)
-    ! checks of indices and values
+  end subroutine unpack_reals
+
+  !> Every index in range (segments, elements, DOFs, bodies, markers, rows, drives, table knots) and
+  !> the values that must be positive; sets sys%nfree.
+  logical function indices_valid(sys)
+    type(coupled_system), intent(inout) :: sys
+    integer :: s, e, i, nl, ns, ntab
+    indices_valid = .false.
+    ns = sys%nseg; ntab = sys%ntab
     if (any(sys%n_el < 1) .or. any(sys%n_el > sys%maxn) .or. any(sys%free_of < 0)) return
     if (any(sys%absang < 0) .or. any(sys%absang > 1)) return
     if (any(sys%absang == 1 .and. sys%n_el /= 1)) return
@@ -210,7 +251,16 @@ contains
         if (sys%dv(4, i) < 1 .or. sys%dv(4, i) + sys%dv(5, i) - 1 > ntab .or. sys%dv(5, i) < 2) return
       end if
     end do
-    ! element matrices, element by element (segments may have elements of different lengths)
+    indices_valid = .true.
+  end function indices_valid
+
+  !> Per element: its offset, local mass and stiffness matrices and Gram matrix.
+  subroutine element_matrices(sys)
+    type(coupled_system), intent(inout) :: sys
+    integer :: s, e, k, ns
+    real(dp) :: le
+    ns = sys%nseg
+    ! element by element (segments may have elements of different lengths)
     allocate (sys%el_off(ns))
     sys%el_off(1) = 0
     do s = 2, ns
@@ -226,8 +276,14 @@ contains
         sys%ke(:, :, k) = beam_stiffness(sys%prop(3, s), sys%prop(4, s), le)
       end do
     end do
-    sys%kl = 0
-    do s = 1, ns
+  end subroutine element_matrices
+
+  !> Half bandwidth of the free-DOF matrix: the widest span of free-DOF numbers within one segment.
+  integer function band_half_width(sys)
+    type(coupled_system), intent(in) :: sys
+    integer :: s, i, nl, f, lo, hi, kl
+    kl = 0
+    do s = 1, sys%nseg
       nl = 3*sys%n_el(s) + 3
       lo = huge(1); hi = 0
       do i = 1, nl
@@ -236,11 +292,10 @@ contains
           lo = min(lo, f); hi = max(hi, f)
         end if
       end do
-      if (hi > 0) sys%kl = max(sys%kl, hi - lo)
+      if (hi > 0) kl = max(kl, hi - lo)
     end do
-    sys%ku = sys%kl
-    status = STATUS_OK
-  end subroutine coupled_build
+    band_half_width = kl
+  end function band_half_width
 
   !> The Gram matrix G = int psi psi^T dm of every element (see sys%gram6): the distributed mass by
   !> the 4-point Gauss rule (exact: degree 6) and the point masses; its phi part (sys%gram).

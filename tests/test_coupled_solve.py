@@ -53,3 +53,39 @@ def test_condensed_solve_equals_band_solve(cases_dir, name, extra, model):
 def test_set_solver_rejects_unknown_mode():
     assert kernels.cpl.cpl_set_solver(7) == 4
     assert kernels.cpl.cpl_set_solver(AUTO) == 0
+
+
+def test_kernel_rejects_a_corrupted_flat_description(cases_dir):
+    """coupled_build checks the flat description before it builds anything: a wrong length of
+    either array, an element count out of range, a marker or a DOF index out of range each give
+    status 4 (bad input) and no residual; the intact description builds (status 0)."""
+    from flexmech_py import kernels
+    from flexmech_py.simulate import Prepared
+
+    case = fm.load_case(cases_dir / "slider_crank.toml", overrides=["solver.t_end=0.001"])
+    p = Prepared(case, elements_per_link=2)
+    p.run("coupled")
+    cm = p.coupled["coupled"]
+    st = cm.last_run
+    ispec, rspec = cm._spec(p.gravity, (0.0, 0.0))
+    q = np.asfortranarray(st["q"][:, None])
+
+    def status(isp, rsp):
+        res, code = kernels.cpl.cpl_residuals(np.asarray(isp, dtype=np.int32), rsp, q, st["v"], st["a"], 0.0)
+        return code, res
+
+    code, res = status(ispec, rspec)
+    assert code == 0 and np.abs(res).max() > 0
+    header = 12                                   # COUPLED_NSPEC_HEADER
+    nseg, nrb, ndof, maxn = ispec[:4]
+    ld0 = header + nseg                            # first entry of ld
+    con0 = header + nseg * (1 + 3 * maxn + 3) + 3 * nrb + ndof + 2 * ispec[4] + 2 * ispec[5] + 3 * ispec[6]
+    bad = {"ispec one short": (ispec[:-1], rspec), "rspec one long": (ispec, np.append(rspec, 0.0)),
+           "no elements in a segment": (np.where(np.arange(ispec.size) == header, 0, ispec), rspec),
+           "DOF index past ndof": (np.where(np.arange(ispec.size) == ld0, ndof + 1, ispec), rspec),
+           "marker index past nmk": (np.where(np.arange(ispec.size) == con0 + 1, ispec[6] + 1, ispec), rspec)}
+    assert ispec[7] > 0                            # the slider-crank has constraint rows
+    for what, (isp, rsp) in bad.items():
+        code, res = status(isp, rsp)
+        assert code == 4, what
+        assert not res.any(), what
