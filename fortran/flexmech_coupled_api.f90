@@ -10,11 +10,13 @@ module flexmech_coupled_api
   use flexmech_coupled_rows, only: coupled_rows
   use flexmech_coupled_element, only: coupled_set_inertia
   use flexmech_coupled_assembly, only: coupled_dense, coupled_residual
-  use flexmech_coupled_run, only: coupled_run, coupled_set_newton, coupled_set_start, coupled_set_solver
+  use flexmech_coupled_run, only: coupled_run, coupled_set_newton, coupled_set_start, coupled_set_solver, &
+                                  coupled_set_multipliers
   use flexmech_coupled_post, only: coupled_post
   implicit none
   private
   public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_set_start, cpl_set_inertia, cpl_residuals, cpl_rows
+  public :: cpl_set_multipliers
 
 contains
 
@@ -74,6 +76,15 @@ contains
     integer, intent(out) :: status
     call coupled_set_solver(mode, status)
   end subroutine cpl_set_solver
+
+  !> How every later cpl_run reaches the constraint rows' multipliers when S is one band: -1 (default)
+  !> the cheaper by a flop estimate, 0 the dense Schur complement, 1 the band LU of the whole
+  !> saddle-point system (flexmech_saddle_band).  status 4 for another mode.
+  subroutine cpl_set_multipliers(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    call coupled_set_multipliers(mode, status)
+  end subroutine cpl_set_multipliers
 
   !> When every later cpl_run rebuilds the iteration matrix in a step: 0 once per step (modified
   !> Newton), 1 at every iteration (Newton), 2 (default) once and again when an iteration contracts

@@ -19,12 +19,14 @@ module flexmech_coupled_run
   use flexmech_coupled_rows, only: eval_row, drive_load
   use flexmech_coupled_storage, only: link_mats, lm_setup, lm_to_band, lm_factor, lm_solve
   use flexmech_coupled_assembly, only: assemble
+  use flexmech_saddle_band, only: saddle_system, saddle_setup, saddle_factor, saddle_solve, saddle_flops
   implicit none
   private
   public :: coupled_run, coupled_elastic_measure
   public :: coupled_set_newton, NEWTON_MODIFIED, NEWTON_FULL, NEWTON_AUTO
   public :: coupled_set_start, START_ACCELERATION, START_VELOCITY
   public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED
+  public :: coupled_set_multipliers, MULT_AUTO, MULT_SCHUR, MULT_SADDLE
 
   !> Linear solver of the iteration matrix in coupled_run (docs/theory.md section 11, "The solve"):
   !> SOLVER_CONDENSED eliminates every segment's elastic DOFs (a band of half width <= 5) onto the
@@ -35,6 +37,15 @@ module flexmech_coupled_run
   !> (the nonlinear model) the whole band is narrow and its one LAPACK call beats one per segment.
   integer, parameter :: SOLVER_AUTO = -1, SOLVER_BAND = 0, SOLVER_CONDENSED = 1
   integer :: solver_mode = SOLVER_AUTO
+  !> How a Newton step reaches the constraint rows' multipliers when S is factorized as one band
+  !> (docs/theory.md section 11.3): MULT_SCHUR by the dense Schur complement G' S^-1 G (m solves and
+  !> a dense LU per factorization: cheap for the few rows of a mechanism's joints), MULT_SADDLE by the
+  !> band LU of the whole saddle-point system with the multipliers interleaved (flexmech_saddle_band:
+  !> linear in the number of rows, for the nonlinear model's weld per interior node), MULT_AUTO
+  !> (default) the one of fewer flops by saddle_flops.  The condensed solve always uses the Schur
+  !> complement.
+  integer, parameter :: MULT_AUTO = -1, MULT_SCHUR = 0, MULT_SADDLE = 1
+  integer :: multiplier_mode = MULT_AUTO
   !> When coupled_run rebuilds and factorizes the iteration matrix within a step (docs/theory.md
   !> section 12.2): NEWTON_MODIFIED once per step (at the predictor), NEWTON_FULL at every iteration,
   !> NEWTON_AUTO (default) once per step and again whenever an iteration contracts the correction by
@@ -62,6 +73,14 @@ contains
     integer, intent(out) :: status
     call set_mode(mode, SOLVER_AUTO, SOLVER_CONDENSED, solver_mode, status)
   end subroutine coupled_set_solver
+
+  !> Select how coupled_run reaches the multipliers (MULT_AUTO, MULT_SCHUR or MULT_SADDLE;
+  !> status STATUS_BAD_INPUT otherwise).
+  subroutine coupled_set_multipliers(mode, status)
+    integer, intent(in) :: mode
+    integer, intent(out) :: status
+    call set_mode(mode, MULT_AUTO, MULT_SADDLE, multiplier_mode, status)
+  end subroutine coupled_set_multipliers
 
   !> Matrix refresh policy of every later coupled_run (NEWTON_*); status STATUS_BAD_INPUT otherwise.
   subroutine coupled_set_newton(mode, status)
@@ -162,8 +181,9 @@ contains
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, frame, info, itmax_frame, nf, nc, kat
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
-    logical :: converged, refactor, use_cond, refresh, second
+    logical :: converged, refactor, use_cond, refresh, second, use_saddle
     type(link_mats) :: lm
+    type(saddle_system) :: sd
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
     nsteps = size(cval, 3) - 1
     nf = sys%nfree
@@ -247,6 +267,7 @@ contains
     !> gradients' nonzero pattern.
     subroutine setup_work()
       integer :: i
+      real(dp) :: fl(2)
       call lm_setup(sys, nc, lm)
       use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
                                 (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
@@ -266,6 +287,12 @@ contains
         if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
       end do
       call gradient_pattern()
+      use_saddle = .false.
+      if (nc > 0 .and. .not. use_cond .and. multiplier_mode /= MULT_SCHUR) then
+        call saddle_setup(nf, nc, sys%kl, ngnz, gnz, sd)
+        fl = saddle_flops(nf, nc, sys%kl, sd%ka)
+        use_saddle = multiplier_mode == MULT_SADDLE .or. fl(2) < fl(1)
+      end if
     end subroutine setup_work
 
     !> The Newton iterations of step n (predictor qs, vs set): converged, it and the state at the
@@ -326,9 +353,20 @@ contains
       integer :: i
       rf = -res(freeidx)
       newton(1) = norm2(rf)
-      call band_solve_rhs(rf)
-      if (status /= STATUS_OK) return
-      if (nc > 0) then   ! Schur complement on the multipliers
+      if (use_saddle) then   ! [S G; G' 0] [da; dlam] = [-R; -shift] as one band
+        dlam(1:nc) = -shift
+        call saddle_solve(sd, rf, dlam(1:nc), status)
+        if (status /= STATUS_OK) return
+        if (.not. ieee_is_finite(sum(abs(rf)) + sum(abs(dlam(1:nc))))) then
+          status = STATUS_NONFINITE
+          return
+        end if
+        lam(1:nc) = lam(1:nc) + dlam(1:nc)
+      else
+        call band_solve_rhs(rf)
+        if (status /= STATUS_OK) return
+      end if
+      if (nc > 0 .and. .not. use_saddle) then   ! Schur complement on the multipliers
         do i = 1, nc
           dlam(i) = gdot(i, rf) + shift(i)
         end do
@@ -508,7 +546,10 @@ contains
           if (f > 0) gt(f, ic) = gt(f, ic) + grad(j)
         end do
       end do
-      if (nc > 0 .and. refactor) then
+      if (nc > 0 .and. refactor .and. use_saddle) then
+        call saddle_factor(sd, ab, gt, ngnz, gnz, status)
+        refactor = .false.
+      else if (nc > 0 .and. refactor) then
         x(:, 1:nc) = gt(:, 1:nc)
         if (use_cond) then
           call lm_solve(sys, lm, nc, x, nf, status)
@@ -532,6 +573,8 @@ contains
       newton(4) = newton(4) + 1.0_dp
       if (use_cond) then
         call lm_factor(sys, lm, status)
+      else if (use_saddle) then      ! S joins G in the saddle band once the gradients are known
+        call lm_to_band(sys, lm, ab)
       else
         call lm_to_band(sys, lm, ab)
         call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
