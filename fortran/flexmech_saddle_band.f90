@@ -1,9 +1,9 @@
 !> The saddle-point system of a constrained Newton step,
 !>   [S  G] [x]   [b]
 !>   [G' 0] [y] = [c] ,
-!> solved as one band matrix in which every multiplier y_i is numbered right after the last free DOF
-!> its constraint row touches, factorized by LAPACK's band LU with partial pivoting (the zero block
-!> needs the pivoting).  For many local rows (the nonlinear model's welds between consecutive
+!> solved as one band matrix in which every multiplier y_i is numbered in the middle of the free DOFs
+!> its constraint row touches (after the DOF halfway between the first and the last), factorized
+!> by LAPACK's band LU with partial pivoting (the zero block needs the pivoting).  For many local rows (the nonlinear model's welds between consecutive
 !> elements) its cost grows linearly with their number; eliminating the multipliers by their dense
 !> Schur complement G' S^-1 G grows with the cube (docs/theory.md section 11.3, "The solve").
 !> S: n x n over the free DOFs in LAPACK factor layout with half width kl (entry (i, j) at row
@@ -27,8 +27,9 @@ module flexmech_saddle_band
 
 contains
 
-  !> The ordering (multiplier i after the largest free DOF of its pattern; one that touches none
-  !> first) and the half width ka of the ordered matrix; allocates the band.
+  !> The ordering (multiplier i after the free DOF halfway between the smallest and the largest of its
+  !> pattern, which halves its reach against placing it after the last; one that touches none first)
+  !> and the half width ka of the ordered matrix; allocates the band.
   subroutine saddle_setup(n, m, kl, ngnz, gnz, sd)
     integer, intent(in) :: n, m, kl, ngnz(:), gnz(:, :)
     type(saddle_system), intent(out) :: sd
@@ -37,7 +38,7 @@ contains
     allocate (sd%pos(n + m))
     do i = 1, m
       key(i) = 0
-      if (ngnz(i) > 0) key(i) = maxval(gnz(1:ngnz(i), i))
+      if (ngnz(i) > 0) key(i) = (minval(gnz(1:ngnz(i), i)) + maxval(gnz(1:ngnz(i), i)))/2
     end do
     count = 0
     do i = 1, m
