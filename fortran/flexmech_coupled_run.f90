@@ -345,38 +345,20 @@ contains
       end do
     end subroutine newton_iterations
 
-    !> One Newton correction at the assembled residual: solve S da = -R with the multipliers' Schur
-    !> complement, whose right-hand side is G S^-1 (-R) + shift (shift (nc): the rows' residual in the
-    !> units of G a), update a and lam; newton(1:3) = [|R|, |da|, |a|].
+    !> One Newton correction at the assembled residual: solve S da + G dlam = -R, G' da = -shift
+    !> (shift (nc): the rows' residual in the units of G' a) by the saddle band or the multipliers'
+    !> Schur complement, update a and lam; newton(1:3) = [|R|, |da|, |a|].
     subroutine correction(shift)
       real(dp), intent(in) :: shift(:)
       integer :: i
       rf = -res(freeidx)
       newton(1) = norm2(rf)
-      if (use_saddle) then   ! [S G; G' 0] [da; dlam] = [-R; -shift] as one band
-        dlam(1:nc) = -shift
-        call saddle_solve(sd, rf, dlam(1:nc), status)
-        if (status /= STATUS_OK) return
-        if (.not. ieee_is_finite(sum(abs(rf)) + sum(abs(dlam(1:nc))))) then
-          status = STATUS_NONFINITE
-          return
-        end if
-        lam(1:nc) = lam(1:nc) + dlam(1:nc)
+      if (use_saddle) then
+        call saddle_correction(shift)
       else
-        call band_solve_rhs(rf)
-        if (status /= STATUS_OK) return
+        call schur_correction(shift)
       end if
-      if (nc > 0 .and. .not. use_saddle) then   ! Schur complement on the multipliers
-        do i = 1, nc
-          dlam(i) = gdot(i, rf) + shift(i)
-        end do
-        call small_solve(dlam)
-        if (status /= STATUS_OK) return
-        do i = 1, nc
-          rf = rf - x(:, i)*dlam(i)
-        end do
-        lam(1:nc) = lam(1:nc) + dlam(1:nc)
-      end if
+      if (status /= STATUS_OK) return
       a_norm = 0.0_dp
       do i = 1, nf         ! a loop: a(freeidx) = a(freeidx) + rf would copy through the heap
         a(freeidx(i)) = a(freeidx(i)) + rf(i)
@@ -385,6 +367,37 @@ contains
       da_norm = sqrt(sum(rf**2)); a_norm = sqrt(a_norm)
       newton(2:3) = [da_norm, a_norm]
     end subroutine correction
+
+    !> rf = -R on entry, da on return, lam updated: [S G; G' 0] [da; dlam] = [-R; -shift] as one band.
+    subroutine saddle_correction(shift)
+      real(dp), intent(in) :: shift(:)
+      dlam(1:nc) = -shift
+      call saddle_solve(sd, rf, dlam(1:nc), status)
+      if (status /= STATUS_OK) return
+      if (.not. ieee_is_finite(sum(abs(rf)) + sum(abs(dlam(1:nc))))) then
+        status = STATUS_NONFINITE
+        return
+      end if
+      lam(1:nc) = lam(1:nc) + dlam(1:nc)
+    end subroutine saddle_correction
+
+    !> The same by S^-1 and the multipliers' Schur complement: da = S^-1 (-R) - X dlam with
+    !> (G' X) dlam = G' S^-1 (-R) + shift.
+    subroutine schur_correction(shift)
+      real(dp), intent(in) :: shift(:)
+      integer :: i
+      call band_solve_rhs(rf)
+      if (status /= STATUS_OK .or. nc == 0) return
+      do i = 1, nc
+        dlam(i) = gdot(i, rf) + shift(i)
+      end do
+      call small_solve(dlam)
+      if (status /= STATUS_OK) return
+      do i = 1, nc
+        rf = rf - x(:, i)*dlam(i)
+      end do
+      lam(1:nc) = lam(1:nc) + dlam(1:nc)
+    end subroutine schur_correction
 
     !> Accept the iterate: the correction within tol of the accelerations (or the position correction
     !> below 1e-2 tol of the mechanism size), or stagnated at the round-off level of the residual (no
