@@ -3,9 +3,10 @@
 !>   [G' 0] [y] = [c] ,
 !> solved as one band matrix in which every multiplier y_i is numbered in the middle of the free DOFs
 !> its constraint row touches (after the DOF halfway between the first and the last), factorized
-!> by LAPACK's band LU with partial pivoting (the zero block needs the pivoting).  For many local rows (the nonlinear model's welds between consecutive
-!> elements) its cost grows linearly with their number; eliminating the multipliers by their dense
-!> Schur complement G' S^-1 G grows with the cube (docs/theory.md section 11.3, "The solve").
+!> by LAPACK's band LU with partial pivoting (the zero block needs the pivoting).  For many local
+!> rows (the nonlinear model's welds between consecutive elements) its cost grows linearly with
+!> their number; eliminating the multipliers by their dense Schur complement G' S^-1 G grows with
+!> the cube (docs/theory.md section 11.3, "The solve").
 !> S: n x n over the free DOFs in LAPACK factor layout with half width kl (entry (i, j) at row
 !> 2 kl + 1 + i - j); G: (n, m) constraint gradients by free DOF, nonzero on the patterns
 !> gnz(1:ngnz(i), i) only.
