@@ -399,6 +399,33 @@ def bench_side_by_side(seed: Path, quick: bool, progress) -> list[dict]:
     return rows
 
 
+#: the manipulator side by side: (elements per link, t_end [s]) in full and quick mode
+SIDE_BY_SIDE_MANIPULATOR = {False: (8, 0.25), True: (4, 0.005)}
+
+
+def bench_side_by_side_manipulator(cases: Path, quick: bool, progress) -> list[dict]:
+    """The seed manipulator in flexmech (nonlinear) and in Exudyn, dt = 1.25e-5 s, generalized-alpha
+    0.8, frames at every step; [] when Exudyn is not installed (bench_side_by_side says so)."""
+    from . import bench_exudyn
+
+    if bench_exudyn.unavailable() is not None:
+        return []
+    epl, t_end = SIDE_BY_SIDE_MANIPULATOR[quick]
+    r = bench_exudyn.manipulator_side_by_side(cases / "manipulator_bricout.toml", epl=epl, t_end=t_end,
+                                              repeats=SIDE_BY_SIDE_REPEATS[quick])
+    row = {"model": "nonlinear", "elements_per_link": epl, "steps": int(round(t_end / 1.25e-5)),
+           "flexmech_cpu_s": r["flexmech_cpu_s"], "exudyn_cpu_s": r["exudyn_cpu_s"], "speedup": r["speedup"],
+           "repeats": len(r["flexmech_cpu_s_all"])}
+    for fc, d in r["strain_difference"].items():
+        for k, v in d.items():
+            row[f"{k.replace('_mid', '')}_diff_{int(fc)}hz"] = v
+    progress(f"  manipulator, {epl} el/link: flexmech {r['flexmech_cpu_s']:.3g} s, Exudyn {r['exudyn_cpu_s']:.3g} s CPU "
+             f"({r['speedup']:.2f}x); midspan strains low-passed at 300 Hz differ by "
+             f"{100 * r['strain_difference'][300.0]['strain_link1_mid']:.2g} % (link 1), "
+             f"{100 * r['strain_difference'][300.0]['strain_link2_mid']:.2g} % (link 2) of flexmech's peak")
+    return [row]
+
+
 def _write_csv(path: Path, rows: list[dict]) -> None:
     with open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
@@ -480,8 +507,9 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
     solves = bench_solves(seed, quick, progress)
     progress("memory of long runs (subprocesses)")
     memory = bench_memory(cases, quick)
-    progress("side by side with Exudyn (seed four-bar)")
+    progress("side by side with Exudyn (seed four-bar, seed manipulator)")
     exudyn = bench_side_by_side(seed, quick, progress)
+    exudyn_manipulator = bench_side_by_side_manipulator(cases, quick, progress)
 
     summary = []
     notes = {"python_startup": "python -c pass", "import": "import flexmech_py.cli (start-up subtracted)",
@@ -522,6 +550,9 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
     for r in exudyn:
         summary.append({"metric": f"exudyn.{r['model']}.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
                         "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed four-bar, {r['steps']} steps of 1.25e-5 s"})
+    for r in exudyn_manipulator:
+        summary.append({"metric": f"exudyn.manipulator.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
+                        "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed manipulator, {r['steps']} steps of 1.25e-5 s"})
     summary.append({"metric": "bench_wall", "value": time.perf_counter() - t_all, "unit": "s", "note": "quick" if quick else "full"})
 
     paths = [out / "bench_ladder.csv", out / "bench_solves.csv", out / "bench_summary.csv", out / "bench_seed.csv"]
@@ -532,11 +563,15 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
     if exudyn:
         paths.append(out / "bench_exudyn.csv")
         _write_csv(paths[-1], exudyn)
+    if exudyn_manipulator:
+        paths.append(out / "bench_exudyn_manipulator.csv")
+        _write_csv(paths[-1], exudyn_manipulator)
     png = _plot(out / "bench.png", ladder, solves)
     if png is not None:
         paths.append(png)
     return {"startup": startup, "seeds": seeds, "peak": peak, "ladder": ladder, "reference": ref, "solves": solves,
-            "memory": memory, "exudyn": exudyn, "summary": summary, "paths": paths}
+            "memory": memory, "exudyn": exudyn, "exudyn_manipulator": exudyn_manipulator, "summary": summary,
+            "paths": paths}
 
 
 def table(rows: list[dict], keys) -> str:
@@ -567,6 +602,10 @@ def report(res: dict) -> str:
                                  "newton_per_step", "strain_coupler_diff", "strain_follower_diff", "first_revolution_s",
                                  "strain_coupler_diff_rev", "strain_follower_diff_rev"])
            if res.get("exudyn") else "  (not run: Exudyn is not installed)",
+           *(["", "side by side with Exudyn (seed manipulator, frames at every step; strain differences of the "
+                  "low-passed signals, relative to flexmech's peak)",
+              table(res["exudyn_manipulator"], list(res["exudyn_manipulator"][0]))]
+             if res.get("exudyn_manipulator") else []),
            "", "summary", table(res["summary"], ["metric", "value", "unit", "note"])]
     return "\n".join(out)
 

@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-__all__ = ["unavailable", "side_by_side", "SEED_TORQUE"]
+__all__ = ["unavailable", "side_by_side", "manipulator_side_by_side", "SEED_TORQUE"]
 
 SEED_TORQUE = (1.0, 0.5)       # N m: tau = a + b sin(alpha) (cases/fourbar_hac.toml, [drive])
 
@@ -43,17 +43,15 @@ def _seed_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float, nod
                                            "solver.error_estimate='none'", f"mesh.elements_per_link={epl}"])
 
 
-def run_flexmech(case, model: str = "nonlinear") -> dict:
-    """flexmech's run (nonlinear, or the coupled model of seed Section 3): frames every 10th step, CPU
-    of the kernel [s]."""
+def run_flexmech(case, model: str = "nonlinear", columns=("strain_coupler_mid", "strain_follower_mid", "crank_angle")) -> dict:
+    """flexmech's run (nonlinear, or the coupled model of seed Section 3): the output ``columns`` at
+    the case's frames, CPU of the kernel [s]."""
     from .simulate import Prepared
 
     p = Prepared(case)
     p._checked = True
     r = p.run(model)
-    return {"t": r.t, "strain_coupler_mid": r.columns["strain_coupler_mid"],
-            "strain_follower_mid": r.columns["strain_follower_mid"], "cpu_s": p.last_cpu["kernel_cpu_s"],
-            "crank_angle": r.columns["crank_angle"],
+    return {"t": r.t, **{k: r.columns[k] for k in columns}, "cpu_s": p.last_cpu["kernel_cpu_s"],
             "newton": r.extra["coupled"]["newton"], "rigid": p.rm}
 
 
@@ -230,3 +228,147 @@ def side_by_side(case_path, epl: int = 16, dt: float = 1.25e-5, t_end: float = 0
             "flexmech_cpu_s": fx["cpu_s"], "exudyn_cpu_s": ex["cpu_s"], "speedup": ex["cpu_s"] / fx["cpu_s"],
             "flexmech_cpu_s_all": fx_cpu, "exudyn_cpu_s_all": ex_cpu, "newton": fx["newton"],
             "strain_difference": diff, "flexmech": fx, "exudyn": ex}
+
+
+# --------------------------------------------------------------------------------- the manipulator
+def _manipulator_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float):
+    """The seed manipulator with its midspan strains as outputs and a frame at every step: its step
+    torques ring up to tens of kHz, which frames every 10th step would fold into the low band."""
+    from .case import load_case
+
+    return load_case(case_path, overrides=[
+        f"solver.dt={dt!r}", f"solver.t_end={t_end!r}", "solver.output_every=1", "solver.node_angles='shared'",
+        "solver.integrator='generalized-alpha'", f"solver.rho_inf={rho_inf!r}", "solver.error_estimate='none'",
+        f"mesh.elements_per_link={epl}", "outputs.strain_link1_mid={kind='strain', link='link1', at=0.5}",
+        "outputs.strain_link2_mid={kind='strain', link='link2', at=0.5}"])
+
+
+def build_exudyn_manipulator(case, geometry, epl: int):
+    """The Exudyn system of a two-link serial arm with constant joint torques (the seed manipulator),
+    not yet assembled: (system container, mbs, elements per link).  Base and elbow are pins
+    (coordinate constraints); a torque acts on the cable's tangent through a rigid marker
+    (``MarkerBodyRigid`` + ``LoadTorqueVector``), its reaction on the inboard link's end; the mass and
+    rotary inertia at link 1's end are one rigid body welded to it (``ObjectJointGeneric``), the mass
+    at link 2's end a mass point."""
+    import exudyn as exu
+    from exudyn.itemInterface import (CoordinateConstraint, LoadTorqueVector, MarkerBodyRigid, MarkerNodeCoordinate,
+                                      NodePoint2D, NodePoint2DSlope1, NodePointGround, NodeRigidBody2D,
+                                      ObjectANCFCable2D, ObjectJointGeneric, ObjectMassPoint2D, ObjectRigidBody2D)
+
+    masses = {(pm["at"]): pm["mass"] for pm in case["point_masses"]}
+    hubs = {ri["at"]: ri["inertia"] for ri in case["rotary_inertias"]}
+    torques = {d["joint"]: d["constant"] for d in case["drives"]}
+    if (len(geometry) != 2 or set(torques) != {"base", "joint_2"} or set(hubs) - {"link1.end"}
+            or set(masses) - {"link1.end", "link2.end"} or any(set(d) - {"joint", "law", "constant"} for d in case["drives"])):
+        raise ValueError("the Exudyn side by side models a two-link arm with constant torques at base and joint_2, "
+                         "masses at the link ends and a rotary inertia at link 1's end only")
+    sc = exu.SystemContainer()
+    mbs = sc.AddSystem()
+    ground = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
+    nodes, elems = [], []
+    for x0, y0, ang, length, rho_a, ea, ei, _ in geometry:
+        c, s = np.cos(ang), np.sin(ang)
+        ns = [mbs.AddNode(NodePoint2DSlope1(referenceCoordinates=[x0 + k * length / epl * c, y0 + k * length / epl * s,
+                                                                  c, s])) for k in range(epl + 1)]
+        elems.append([mbs.AddObject(ObjectANCFCable2D(nodeNumbers=[ns[k], ns[k + 1]], length=length / epl,
+                                                      massPerLength=rho_a, bendingStiffness=ei, axialStiffness=ea))
+                      for k in range(epl)])
+        nodes.append(ns)
+
+    def coord(n, i):
+        return mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=n, coordinate=i))
+
+    for i in (0, 1):            # base pin, elbow pin
+        mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(ground, 0), coord(nodes[0][0], i)]))
+        mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(nodes[0][-1], i), coord(nodes[1][0], i)]))
+
+    def rigid_marker(li, end):
+        return mbs.AddMarker(MarkerBodyRigid(bodyNumber=elems[li][-1 if end else 0],
+                                             localPosition=[geometry[li][3] / epl if end else 0.0, 0.0, 0.0]))
+
+    ref = mbs.GetNodeParameter(nodes[0][-1], "referenceCoordinates")
+    hub = mbs.AddObject(ObjectRigidBody2D(nodeNumber=mbs.AddNode(NodeRigidBody2D(
+        referenceCoordinates=[ref[0], ref[1], geometry[0][2]])), mass=masses.get("link1.end", 0.0),
+        inertia=hubs.get("link1.end", 0.0)))
+    hub_marker = mbs.AddMarker(MarkerBodyRigid(bodyNumber=hub, localPosition=[0.0, 0.0, 0.0]))
+    mbs.AddObject(ObjectJointGeneric(markerNumbers=[rigid_marker(0, True), hub_marker], constrainedAxes=[1, 1, 0, 0, 0, 1]))
+    if masses.get("link2.end", 0.0) > 0.0:
+        ref = mbs.GetNodeParameter(nodes[1][-1], "referenceCoordinates")
+        pm = mbs.AddNode(NodePoint2D(referenceCoordinates=[ref[0], ref[1]]))
+        mbs.AddObject(ObjectMassPoint2D(mass=masses["link2.end"], nodeNumber=pm))
+        for i in (0, 1):
+            mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(nodes[1][-1], i), coord(pm, i)]))
+    mbs.AddLoad(LoadTorqueVector(markerNumber=rigid_marker(0, False), loadVector=[0.0, 0.0, torques["base"]]))
+    mbs.AddLoad(LoadTorqueVector(markerNumber=rigid_marker(1, False), loadVector=[0.0, 0.0, torques["joint_2"]]))
+    mbs.AddLoad(LoadTorqueVector(markerNumber=hub_marker, loadVector=[0.0, 0.0, -torques["joint_2"]]))
+    return sc, mbs, elems
+
+
+def run_exudyn_manipulator(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float) -> dict:
+    """Exudyn's run of the manipulator: midspan curvatures of both links (the mean of the two elements
+    at the midspan node for even epl) at every step, CPU time of the solve."""
+    import exudyn as exu
+    from exudyn.itemInterface import SensorBody
+
+    nsteps = int(round(t_end / dt))
+    sc, mbs, elems = build_exudyn_manipulator(case, geometry, epl)
+    groups = []
+    for li in (0, 1):
+        k = epl // 2
+        places = ([(elems[li][k - 1], geometry[li][3] / epl), (elems[li][k], 0.0)] if epl % 2 == 0
+                  else [(elems[li][k], 0.5 * geometry[li][3] / epl)])
+        groups.append([mbs.AddSensor(SensorBody(bodyNumber=e, localPosition=[x, 0.0, 0.0], storeInternal=True,
+                                                outputVariableType=exu.OutputVariableType.CurvatureLocal))
+                       for e, x in places])
+    mbs.Assemble()
+    ss = exu.SimulationSettings()
+    ti = ss.timeIntegration
+    ti.numberOfSteps, ti.endTime, ti.verboseMode = nsteps, t_end, 0
+    ti.generalizedAlpha.spectralRadius = rho_inf
+    ti.newton.relativeTolerance = 1e-8
+    ss.solution.file.write = False
+    ss.solution.sensors.writePeriod = dt
+    ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
+    c0 = time.thread_time()
+    exu.SolveDynamic(mbs, ss)
+    cpu = time.thread_time() - c0
+    data = [[mbs.GetSensorStoredData(s) for s in g] for g in groups]
+    out = {"t": data[0][0][:, 0], "cpu_s": cpu}
+    for li, g in enumerate(data):
+        out[f"strain_link{li + 1}_mid"] = np.mean([d[:, 1] for d in g], axis=0) * geometry[li][7]
+    return out
+
+
+def low_pass(t, y, cutoff_hz: float):
+    """4th-order Butterworth low-pass, forward and backward (no phase shift), of y sampled at t."""
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(4, cutoff_hz / (0.5 / (t[1] - t[0])))
+    return filtfilt(b, a, y)
+
+
+def manipulator_side_by_side(case_path, epl: int = 8, dt: float = 1.25e-5, t_end: float = 0.25,
+                             rho_inf: float = 0.8, cutoffs=(300.0, 1000.0), repeats: int = 1) -> dict:
+    """The seed manipulator in flexmech (nonlinear, shared node angles) and in Exudyn: CPU times, their
+    ratio, and per cutoff [Hz] the largest difference of the low-passed midspan strains relative to
+    flexmech's low-passed peak (``strain_difference[cutoff][name]``)."""
+    why = unavailable()
+    if why is not None:
+        return {"skipped": why}
+    case = _manipulator_case(case_path, epl, dt, t_end, rho_inf)
+    fx_cpu, ex_cpu = [], []
+    for _ in range(max(1, repeats)):
+        fx = run_flexmech(case, "nonlinear", ("strain_link1_mid", "strain_link2_mid"))
+        ex = run_exudyn_manipulator(case, _link_geometry(case, fx["rigid"]), epl, dt, t_end, rho_inf)
+        fx_cpu.append(fx["cpu_s"]); ex_cpu.append(ex["cpu_s"])
+    diff = {}
+    for fc in cutoffs:
+        diff[fc] = {}
+        for k in ("strain_link1_mid", "strain_link2_mid"):
+            a = low_pass(fx["t"], fx[k], fc)
+            b = low_pass(fx["t"], np.interp(fx["t"], ex["t"], ex[k]), fc)
+            diff[fc][k] = float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
+    return {"elements_per_link": epl, "dt": dt, "t_end": t_end, "rho_inf": rho_inf,
+            "flexmech_cpu_s": min(fx_cpu), "exudyn_cpu_s": min(ex_cpu), "speedup": min(ex_cpu) / min(fx_cpu),
+            "flexmech_cpu_s_all": fx_cpu, "exudyn_cpu_s_all": ex_cpu, "strain_difference": diff,
+            "flexmech": fx, "exudyn": ex}
