@@ -11,6 +11,12 @@ coordinate constraints between the end nodes' positions (Exudyn) and shared posi
 (flexmech).  Both give the midspan bending strains (curvature x the half depth), compared over the
 run, and the CPU time of the time integration (model building not counted on either side).
 
+The seed manipulator (cases/manipulator_bricout.toml) likewise (:func:`manipulator_side_by_side`):
+step torques at the base and the elbow through rigid markers on the cables, the elbow mass and hub
+inertia as one rigid body welded to link 1's end, the payload a mass point, frames at every step
+(its torques ring up to tens of kHz; decimated frames would fold that into the low band), strains
+compared after a low-pass.
+
 Exudyn is an optional benchmark dependency: :func:`unavailable` says why the section is skipped.
 """
 
