@@ -72,12 +72,11 @@ def _link_geometry(case, rm) -> list[tuple]:
     return out
 
 
-def build_exudyn(case, geometry, epl: int, masses):
-    """The Exudyn system of the seed four-bar, not yet assembled: (system container, mbs, nodes per
-    link, elements per link).  Every joint is a pin between link ends or a link end and the ground."""
+def _cable_links(geometry, epl: int):
+    """A new Exudyn system with every link of ``geometry`` as epl ANCF cable elements on straight
+    nodes: (system container, mbs, ground node, nodes per link, elements per link)."""
     import exudyn as exu
-    from exudyn.itemInterface import (CoordinateConstraint, LoadCoordinate, MarkerNodeCoordinate, NodePoint2D,
-                                      NodePoint2DSlope1, NodePointGround, ObjectANCFCable2D, ObjectMassPoint2D)
+    from exudyn.itemInterface import NodePoint2DSlope1, NodePointGround, ObjectANCFCable2D
 
     sc = exu.SystemContainer()
     mbs = sc.AddSystem()
@@ -87,35 +86,118 @@ def build_exudyn(case, geometry, epl: int, masses):
         c, s = np.cos(ang), np.sin(ang)
         ns = [mbs.AddNode(NodePoint2DSlope1(referenceCoordinates=[x0 + k * length / epl * c, y0 + k * length / epl * s,
                                                                   c, s])) for k in range(epl + 1)]
-        es = [mbs.AddObject(ObjectANCFCable2D(nodeNumbers=[ns[k], ns[k + 1]], length=length / epl,
-                                              massPerLength=rho_a, bendingStiffness=ei,
-                                              axialStiffness=ea)) for k in range(epl)]
+        elems.append([mbs.AddObject(ObjectANCFCable2D(nodeNumbers=[ns[k], ns[k + 1]], length=length / epl,
+                                                      massPerLength=rho_a, bendingStiffness=ei, axialStiffness=ea))
+                      for k in range(epl)])
         nodes.append(ns)
-        elems.append(es)
+    return sc, mbs, ground, nodes, elems
 
-    def coord(n, i):
-        return mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=n, coordinate=i))
 
-    def tie(na, nb):          # equal position displacements (same reference position)
-        for i in (0, 1):
-            mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(na, i), coord(nb, i)]))
+def _coord(mbs, node, i):
+    """A marker on coordinate i of a node."""
+    from exudyn.itemInterface import MarkerNodeCoordinate
 
+    return mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=node, coordinate=i))
+
+
+def _tie(mbs, na, nb):
+    """Equal position displacements of two nodes (of the same reference position): a pin."""
+    from exudyn.itemInterface import CoordinateConstraint
+
+    for i in (0, 1):
+        mbs.AddObject(CoordinateConstraint(markerNumbers=[_coord(mbs, na, i), _coord(mbs, nb, i)]))
+
+
+def _ground(mbs, ground, node):
+    """The node's position held at its reference (a pin to the ground)."""
+    from exudyn.itemInterface import CoordinateConstraint
+
+    for i in (0, 1):
+        mbs.AddObject(CoordinateConstraint(markerNumbers=[_coord(mbs, ground, 0), _coord(mbs, node, i)]))
+
+
+def _mass_point(mbs, node, mass):
+    """A point mass pinned to a node."""
+    from exudyn.itemInterface import NodePoint2D, ObjectMassPoint2D
+
+    ref = mbs.GetNodeParameter(node, "referenceCoordinates")
+    pm = mbs.AddNode(NodePoint2D(referenceCoordinates=[ref[0], ref[1]]))
+    mbs.AddObject(ObjectMassPoint2D(mass=mass, nodeNumber=pm))
+    _tie(mbs, node, pm)
+
+
+def _midspan_sensors(mbs, elems, geometry, epl: int, links) -> list:
+    """Per link in links, the curvature sensors at its midspan: at a node (even epl) the two elements
+    there, whose mean is what flexmech reads at a node; else the middle of the middle element."""
+    import exudyn as exu
+    from exudyn.itemInterface import SensorBody
+
+    groups = []
+    for li in links:
+        k = epl // 2
+        places = ([(elems[li][k - 1], geometry[li][3] / epl), (elems[li][k], 0.0)] if epl % 2 == 0
+                  else [(elems[li][k], 0.5 * geometry[li][3] / epl)])
+        groups.append([mbs.AddSensor(SensorBody(bodyNumber=e, localPosition=[x, 0.0, 0.0], storeInternal=True,
+                                                outputVariableType=exu.OutputVariableType.CurvatureLocal))
+                       for e, x in places])
+    return groups
+
+
+def _midspan_strain(mbs, group, half_depth):
+    """The strain [-] of one _midspan_sensors group: mean curvature x the half depth."""
+    return np.mean([mbs.GetSensorStoredData(s)[:, 1] for s in group], axis=0) * half_depth
+
+
+def _solve(mbs, nsteps: int, t_end: float, rho_inf: float, write_period: float) -> float:
+    """Assemble and integrate (generalized-alpha, Newton tolerance 1e-8, sparse solver, sensors every
+    write_period [s]); the calling thread's CPU time of the integration [s] (Exudyn runs
+    single-threaded here: parallel.numberOfThreads = 1 by default), as flexmech's kernel time."""
+    import exudyn as exu
+
+    mbs.Assemble()
+    ss = exu.SimulationSettings()
+    ti = ss.timeIntegration
+    ti.numberOfSteps, ti.endTime, ti.verboseMode = nsteps, t_end, 0
+    ti.generalizedAlpha.spectralRadius = rho_inf
+    ti.newton.relativeTolerance = 1e-8
+    ss.solution.file.write = False
+    ss.solution.sensors.writePeriod = write_period
+    ss.show.statistics = False
+    ss.show.computationTime = False
+    ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
+    c0 = time.thread_time()
+    exu.SolveDynamic(mbs, ss)
+    return time.thread_time() - c0
+
+
+def _smallest_times(repeats: int, run_pair):
+    """run_pair() -> (flexmech result, Exudyn result) repeats times, alternating; the last results with
+    each side's smallest CPU time, and all the times ([flexmech], [Exudyn])."""
+    fx_cpu, ex_cpu = [], []
+    for _ in range(max(1, repeats)):
+        fx, ex = run_pair()
+        fx_cpu.append(fx["cpu_s"]); ex_cpu.append(ex["cpu_s"])
+    fx["cpu_s"], ex["cpu_s"] = min(fx_cpu), min(ex_cpu)
+    return fx, ex, fx_cpu, ex_cpu
+
+
+def build_exudyn(case, geometry, epl: int, masses):
+    """The Exudyn system of the seed four-bar, not yet assembled: (system container, mbs, nodes per
+    link, elements per link).  Every joint is a pin between link ends or a link end and the ground."""
+    import exudyn as exu
+    from exudyn.itemInterface import LoadCoordinate
+
+    sc, mbs, ground, nodes, elems = _cable_links(geometry, epl)
     mech = case.mechanism
     for j in mech.joints:     # pins at link ends: tied to the ground or to each other
         ends = [None if pr.body is None else nodes[mech.link_index(pr.body.name)][0 if pr.point == "start" else -1]
                 for pr in mech.joint_points(j)]
         if None in ends:
-            n = ends[0] if ends[1] is None else ends[1]
-            for i in (0, 1):
-                mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(ground, 0), coord(n, i)]))
+            _ground(mbs, ground, ends[0] if ends[1] is None else ends[1])
         else:
-            tie(*ends)
+            _tie(mbs, *ends)
     for (li, end), mass in masses:
-        n = nodes[li][-1 if end else 0]
-        ref = mbs.GetNodeParameter(n, "referenceCoordinates")
-        pm = mbs.AddNode(NodePoint2D(referenceCoordinates=[ref[0], ref[1]]))
-        mbs.AddObject(ObjectMassPoint2D(mass=mass, nodeNumber=pm))
-        tie(n, pm)
+        _mass_point(mbs, nodes[li][-1 if end else 0], mass)
 
     root = nodes[0][0]
     ang0 = geometry[0][2]
@@ -137,8 +219,8 @@ def build_exudyn(case, geometry, epl: int, masses):
         tau, sx, sy, n2 = torque(t)
         return tau * sx / n2
 
-    mbs.AddLoad(LoadCoordinate(markerNumber=coord(root, 2), load=0.0, loadUserFunction=load_sx))
-    mbs.AddLoad(LoadCoordinate(markerNumber=coord(root, 3), load=0.0, loadUserFunction=load_sy))
+    mbs.AddLoad(LoadCoordinate(markerNumber=_coord(mbs, root, 2), load=0.0, loadUserFunction=load_sx))
+    mbs.AddLoad(LoadCoordinate(markerNumber=_coord(mbs, root, 3), load=0.0, loadUserFunction=load_sy))
     return sc, mbs, nodes, elems
 
 
@@ -146,38 +228,17 @@ def run_exudyn(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float
     """Exudyn's run: the midspan curvatures and the crank's root-node coordinates recorded every 10th
     step by Exudyn's own sensors (as flexmech writes every 10th frame), and the CPU time of the solve."""
     import exudyn as exu
-    from exudyn.itemInterface import SensorBody, SensorNode
+    from exudyn.itemInterface import SensorNode
 
     nsteps = int(round(t_end / dt))
     sc, mbs, nodes, elems = build_exudyn(case, geometry, epl, masses)
-    sensors = []    # the curvature at the coupler's and the follower's midspan: (element, local x)
-    for li in (1, 2):
-        k = epl // 2     # at a node (even epl) the mean of the two elements there, as flexmech reads it
-        places = ([(elems[li][k - 1], geometry[li][3] / epl), (elems[li][k], 0.0)] if epl % 2 == 0
-                  else [(elems[li][k], 0.5 * geometry[li][3] / epl)])
-        sensors.append([mbs.AddSensor(SensorBody(bodyNumber=elem, localPosition=[x, 0.0, 0.0], storeInternal=True,
-                                                 outputVariableType=exu.OutputVariableType.CurvatureLocal))
-                        for elem, x in places])
-    sensors.append(mbs.AddSensor(SensorNode(nodeNumber=nodes[0][0], storeInternal=True,
-                                            outputVariableType=exu.OutputVariableType.CoordinatesTotal)))
-    mbs.Assemble()
-    ss = exu.SimulationSettings()
-    ti = ss.timeIntegration
-    ti.numberOfSteps, ti.endTime, ti.verboseMode = nsteps, t_end, 0
-    ti.generalizedAlpha.spectralRadius = rho_inf
-    ti.newton.relativeTolerance = 1e-8
-    ss.solution.file.write = False
-    ss.solution.sensors.writePeriod = 10 * dt
-    ss.show.statistics = False
-    ss.show.computationTime = False
-    ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
-    c0 = time.thread_time()        # the calling thread's CPU, as flexmech's kernel time (Exudyn runs
-    exu.SolveDynamic(mbs, ss)      # single-threaded here: parallel.numberOfThreads = 1 by default)
-    cpu = time.thread_time() - c0
-    k1, k2 = (np.mean([mbs.GetSensorStoredData(s)[:, 1] for s in group], axis=0) for group in sensors[:2])
-    root = mbs.GetSensorStoredData(sensors[2])
-    return {"t": root[:, 0], "strain_coupler_mid": k1 * geometry[1][7],
-            "strain_follower_mid": k2 * geometry[2][7], "cpu_s": cpu, "steps": nsteps,
+    coupler, follower = _midspan_sensors(mbs, elems, geometry, epl, (1, 2))
+    root_sensor = mbs.AddSensor(SensorNode(nodeNumber=nodes[0][0], storeInternal=True,
+                                           outputVariableType=exu.OutputVariableType.CoordinatesTotal))
+    cpu = _solve(mbs, nsteps, t_end, rho_inf, 10 * dt)
+    root = mbs.GetSensorStoredData(root_sensor)
+    return {"t": root[:, 0], "strain_coupler_mid": _midspan_strain(mbs, coupler, geometry[1][7]),
+            "strain_follower_mid": _midspan_strain(mbs, follower, geometry[2][7]), "cpu_s": cpu, "steps": nsteps,
             "crank_angle": np.unwrap(np.arctan2(root[:, 4], root[:, 3])) - geometry[0][2]}
 
 
@@ -191,14 +252,18 @@ def _seed_masses(case) -> list:
     return out
 
 
+def _relative_difference(a, b) -> float:
+    """max |a - b| relative to max |a| (flexmech's peak)."""
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
+
+
 def compare(fx: dict, ex: dict, t_max: float) -> dict:
     """Largest difference of the midspan strains over t <= t_max, relative to flexmech's peak."""
     out = {}
     for k in ("strain_coupler_mid", "strain_follower_mid"):
         t = fx["t"][fx["t"] <= t_max]
         a = fx[k][: t.size]
-        b = np.interp(t, ex["t"], ex[k])
-        out[k] = float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
+        out[k] = _relative_difference(a, np.interp(t, ex["t"], ex[k]))
     return out
 
 
@@ -219,13 +284,12 @@ def side_by_side(case_path, epl: int = 16, dt: float = 1.25e-5, t_end: float = 0
     if why is not None:
         return {"skipped": why}
     case = _seed_case(case_path, epl, dt, t_end, rho_inf)
-    fx_cpu, ex_cpu = [], []
-    for _ in range(max(1, repeats)):
+
+    def run_pair():
         fx = run_flexmech(case, model)
-        geometry = _link_geometry(case, fx["rigid"])
-        ex = run_exudyn(case, geometry, epl, dt, t_end, rho_inf, _seed_masses(case))
-        fx_cpu.append(fx["cpu_s"]); ex_cpu.append(ex["cpu_s"])
-    fx["cpu_s"], ex["cpu_s"] = min(fx_cpu), min(ex_cpu)
+        return fx, run_exudyn(case, _link_geometry(case, fx["rigid"]), epl, dt, t_end, rho_inf, _seed_masses(case))
+
+    fx, ex, fx_cpu, ex_cpu = _smallest_times(repeats, run_pair)
     diff = compare(fx, ex, t_end if t_compare is None else t_compare)
     rev = first_revolution(fx)
     return {"model": model, "elements_per_link": epl, "dt": dt, "t_end": t_end, "rho_inf": rho_inf,
@@ -256,37 +320,19 @@ def build_exudyn_manipulator(case, geometry, epl: int):
     (``MarkerBodyRigid`` + ``LoadTorqueVector``), its reaction on the inboard link's end; the mass and
     rotary inertia at link 1's end are one rigid body welded to it (``ObjectJointGeneric``), the mass
     at link 2's end a mass point."""
-    import exudyn as exu
-    from exudyn.itemInterface import (CoordinateConstraint, LoadTorqueVector, MarkerBodyRigid, MarkerNodeCoordinate,
-                                      NodePoint2D, NodePoint2DSlope1, NodePointGround, NodeRigidBody2D,
-                                      ObjectANCFCable2D, ObjectJointGeneric, ObjectMassPoint2D, ObjectRigidBody2D)
+    from exudyn.itemInterface import (LoadTorqueVector, MarkerBodyRigid, NodeRigidBody2D, ObjectJointGeneric,
+                                      ObjectRigidBody2D)
 
-    masses = {(pm["at"]): pm["mass"] for pm in case["point_masses"]}
+    masses = {pm["at"]: pm["mass"] for pm in case["point_masses"]}
     hubs = {ri["at"]: ri["inertia"] for ri in case["rotary_inertias"]}
     torques = {d["joint"]: d["constant"] for d in case["drives"]}
     if (len(geometry) != 2 or set(torques) != {"base", "joint_2"} or set(hubs) - {"link1.end"}
             or set(masses) - {"link1.end", "link2.end"} or any(set(d) - {"joint", "law", "constant"} for d in case["drives"])):
         raise ValueError("the Exudyn side by side models a two-link arm with constant torques at base and joint_2, "
                          "masses at the link ends and a rotary inertia at link 1's end only")
-    sc = exu.SystemContainer()
-    mbs = sc.AddSystem()
-    ground = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
-    nodes, elems = [], []
-    for x0, y0, ang, length, rho_a, ea, ei, _ in geometry:
-        c, s = np.cos(ang), np.sin(ang)
-        ns = [mbs.AddNode(NodePoint2DSlope1(referenceCoordinates=[x0 + k * length / epl * c, y0 + k * length / epl * s,
-                                                                  c, s])) for k in range(epl + 1)]
-        elems.append([mbs.AddObject(ObjectANCFCable2D(nodeNumbers=[ns[k], ns[k + 1]], length=length / epl,
-                                                      massPerLength=rho_a, bendingStiffness=ei, axialStiffness=ea))
-                      for k in range(epl)])
-        nodes.append(ns)
-
-    def coord(n, i):
-        return mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=n, coordinate=i))
-
-    for i in (0, 1):            # base pin, elbow pin
-        mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(ground, 0), coord(nodes[0][0], i)]))
-        mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(nodes[0][-1], i), coord(nodes[1][0], i)]))
+    sc, mbs, ground, nodes, elems = _cable_links(geometry, epl)
+    _ground(mbs, ground, nodes[0][0])            # base pin
+    _tie(mbs, nodes[0][-1], nodes[1][0])         # elbow pin
 
     def rigid_marker(li, end):
         return mbs.AddMarker(MarkerBodyRigid(bodyNumber=elems[li][-1 if end else 0],
@@ -299,11 +345,7 @@ def build_exudyn_manipulator(case, geometry, epl: int):
     hub_marker = mbs.AddMarker(MarkerBodyRigid(bodyNumber=hub, localPosition=[0.0, 0.0, 0.0]))
     mbs.AddObject(ObjectJointGeneric(markerNumbers=[rigid_marker(0, True), hub_marker], constrainedAxes=[1, 1, 0, 0, 0, 1]))
     if masses.get("link2.end", 0.0) > 0.0:
-        ref = mbs.GetNodeParameter(nodes[1][-1], "referenceCoordinates")
-        pm = mbs.AddNode(NodePoint2D(referenceCoordinates=[ref[0], ref[1]]))
-        mbs.AddObject(ObjectMassPoint2D(mass=masses["link2.end"], nodeNumber=pm))
-        for i in (0, 1):
-            mbs.AddObject(CoordinateConstraint(markerNumbers=[coord(nodes[1][-1], i), coord(pm, i)]))
+        _mass_point(mbs, nodes[1][-1], masses["link2.end"])
     mbs.AddLoad(LoadTorqueVector(markerNumber=rigid_marker(0, False), loadVector=[0.0, 0.0, torques["base"]]))
     mbs.AddLoad(LoadTorqueVector(markerNumber=rigid_marker(1, False), loadVector=[0.0, 0.0, torques["joint_2"]]))
     mbs.AddLoad(LoadTorqueVector(markerNumber=hub_marker, loadVector=[0.0, 0.0, -torques["joint_2"]]))
@@ -313,35 +355,13 @@ def build_exudyn_manipulator(case, geometry, epl: int):
 def run_exudyn_manipulator(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float) -> dict:
     """Exudyn's run of the manipulator: midspan curvatures of both links (the mean of the two elements
     at the midspan node for even epl) at every step, CPU time of the solve."""
-    import exudyn as exu
-    from exudyn.itemInterface import SensorBody
-
     nsteps = int(round(t_end / dt))
     sc, mbs, elems = build_exudyn_manipulator(case, geometry, epl)
-    groups = []
-    for li in (0, 1):
-        k = epl // 2
-        places = ([(elems[li][k - 1], geometry[li][3] / epl), (elems[li][k], 0.0)] if epl % 2 == 0
-                  else [(elems[li][k], 0.5 * geometry[li][3] / epl)])
-        groups.append([mbs.AddSensor(SensorBody(bodyNumber=e, localPosition=[x, 0.0, 0.0], storeInternal=True,
-                                                outputVariableType=exu.OutputVariableType.CurvatureLocal))
-                       for e, x in places])
-    mbs.Assemble()
-    ss = exu.SimulationSettings()
-    ti = ss.timeIntegration
-    ti.numberOfSteps, ti.endTime, ti.verboseMode = nsteps, t_end, 0
-    ti.generalizedAlpha.spectralRadius = rho_inf
-    ti.newton.relativeTolerance = 1e-8
-    ss.solution.file.write = False
-    ss.solution.sensors.writePeriod = dt
-    ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
-    c0 = time.thread_time()
-    exu.SolveDynamic(mbs, ss)
-    cpu = time.thread_time() - c0
-    data = [[mbs.GetSensorStoredData(s) for s in g] for g in groups]
-    out = {"t": data[0][0][:, 0], "cpu_s": cpu}
-    for li, g in enumerate(data):
-        out[f"strain_link{li + 1}_mid"] = np.mean([d[:, 1] for d in g], axis=0) * geometry[li][7]
+    groups = _midspan_sensors(mbs, elems, geometry, epl, (0, 1))
+    cpu = _solve(mbs, nsteps, t_end, rho_inf, dt)
+    out = {"t": mbs.GetSensorStoredData(groups[0][0])[:, 0], "cpu_s": cpu}
+    for li, group in enumerate(groups):
+        out[f"strain_link{li + 1}_mid"] = _midspan_strain(mbs, group, geometry[li][7])
     return out
 
 
@@ -362,19 +382,19 @@ def manipulator_side_by_side(case_path, epl: int = 8, dt: float = 1.25e-5, t_end
     if why is not None:
         return {"skipped": why}
     case = _manipulator_case(case_path, epl, dt, t_end, rho_inf)
-    fx_cpu, ex_cpu = [], []
-    for _ in range(max(1, repeats)):
+
+    def run_pair():
         fx = run_flexmech(case, "nonlinear", ("strain_link1_mid", "strain_link2_mid"))
-        ex = run_exudyn_manipulator(case, _link_geometry(case, fx["rigid"]), epl, dt, t_end, rho_inf)
-        fx_cpu.append(fx["cpu_s"]); ex_cpu.append(ex["cpu_s"])
+        return fx, run_exudyn_manipulator(case, _link_geometry(case, fx["rigid"]), epl, dt, t_end, rho_inf)
+
+    fx, ex, fx_cpu, ex_cpu = _smallest_times(repeats, run_pair)
     diff = {}
     for fc in cutoffs:
         diff[fc] = {}
         for k in ("strain_link1_mid", "strain_link2_mid"):
-            a = low_pass(fx["t"], fx[k], fc)
-            b = low_pass(fx["t"], np.interp(fx["t"], ex["t"], ex[k]), fc)
-            diff[fc][k] = float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
+            diff[fc][k] = _relative_difference(low_pass(fx["t"], fx[k], fc),
+                                               low_pass(fx["t"], np.interp(fx["t"], ex["t"], ex[k]), fc))
     return {"elements_per_link": epl, "dt": dt, "t_end": t_end, "rho_inf": rho_inf,
-            "flexmech_cpu_s": min(fx_cpu), "exudyn_cpu_s": min(ex_cpu), "speedup": min(ex_cpu) / min(fx_cpu),
+            "flexmech_cpu_s": fx["cpu_s"], "exudyn_cpu_s": ex["cpu_s"], "speedup": ex["cpu_s"] / fx["cpu_s"],
             "flexmech_cpu_s_all": fx_cpu, "exudyn_cpu_s_all": ex_cpu, "strain_difference": diff,
             "flexmech": fx, "exudyn": ex}

@@ -23,7 +23,7 @@ module flexmech_api
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status
   use flexmech_beam, only: beam_mass, beam_stiffness, beam_gyroscopic, beam_centrifugal, &
                            beam_hac_coupling, beam_curvature, vec_to_local, beam_geometric
-  use flexmech_assembly, only: band_rows, band_to_dense
+  use flexmech_assembly, only: band_rows, band_to_dense, half_bandwidth
   use flexmech_ked, only: ked_system
   use flexmech_newmark, only: newmark_run, consistent_acceleration, initial_axial_forces
   implicit none
@@ -100,18 +100,7 @@ contains
     integer, intent(in) :: ndof, nel
     integer, intent(in) :: free_of(ndof), el_dof(6, nel)
     integer, intent(out) :: kb
-    integer :: e, i, lo, hi, f
-    kb = 0
-    do e = 1, nel
-      lo = huge(1); hi = 0
-      do i = 1, 6
-        f = free_of(el_dof(i, e))
-        if (f > 0) then
-          lo = min(lo, f); hi = max(hi, f)
-        end if
-      end do
-      if (hi > 0) kb = max(kb, hi - lo)
-    end do
+    kb = half_bandwidth(reshape(free_of(reshape(el_dof, [6*nel])), [6, nel]))
   end subroutine ked_bandwidth
 
   !> Run the superposition KED model with the generalized-alpha family (alpha_m, alpha_f, beta, gamma;

@@ -586,12 +586,12 @@ contains
       newton(4) = newton(4) + 1.0_dp
       if (use_cond) then
         call lm_factor(sys, lm, status)
-      else if (use_saddle) then      ! S joins G in the saddle band once the gradients are known
-        call lm_to_band(sys, lm, ab)
       else
         call lm_to_band(sys, lm, ab)
-        call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
-        status = lapack_status(info)
+        if (.not. use_saddle) then   ! (the saddle band takes S in once the gradients are known)
+          call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
+          status = lapack_status(info)
+        end if
       end if
       refactor = .true.
     end subroutine factor

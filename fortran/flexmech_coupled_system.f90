@@ -31,6 +31,7 @@ module flexmech_coupled_system
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
   use flexmech_beam, only: beam_mass, beam_stiffness
   use flexmech_markers, only: CON_POINT, CON_ANGLE, CON_PROJECTION
+  use flexmech_assembly, only: half_bandwidth
   implicit none
   private
   public :: coupled_system, coupled_build, set_mode, wrap, elem_index, shape_fn, th_index
@@ -278,23 +279,17 @@ contains
     end do
   end subroutine element_matrices
 
-  !> Half bandwidth of the free-DOF matrix: the widest span of free-DOF numbers within one segment.
+  !> Half bandwidth of the free-DOF matrix: the widest span of free-DOF numbers within one segment
+  !> (flexmech_assembly: half_bandwidth over the segments' local vectors).
   integer function band_half_width(sys)
     type(coupled_system), intent(in) :: sys
-    integer :: s, i, nl, f, lo, hi, kl
-    kl = 0
+    integer :: idx(sys%maxld, sys%nseg), s, nl
+    idx = 0
     do s = 1, sys%nseg
       nl = 3*sys%n_el(s) + 3
-      lo = huge(1); hi = 0
-      do i = 1, nl
-        f = sys%free_of(sys%ld(i, s))
-        if (f > 0) then
-          lo = min(lo, f); hi = max(hi, f)
-        end if
-      end do
-      if (hi > 0) kl = max(kl, hi - lo)
+      idx(1:nl, s) = sys%free_of(sys%ld(1:nl, s))
     end do
-    band_half_width = kl
+    band_half_width = half_bandwidth(idx)
   end function band_half_width
 
   !> The Gram matrix G = int psi psi^T dm of every element (see sys%gram6): the distributed mass by
