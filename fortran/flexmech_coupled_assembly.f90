@@ -8,10 +8,10 @@ module flexmech_coupled_assembly
   use flexmech_coupled_system, only: coupled_system
   use flexmech_coupled_rows, only: drive_load
   use flexmech_coupled_storage, only: link_mats, lm_setup, lm_to_band
-  use flexmech_coupled_element, only: link_eval
+  use flexmech_coupled_element, only: link_eval, segment_residual
   implicit none
   private
-  public :: assemble, coupled_dense, coupled_residual
+  public :: assemble, assemble_residual, coupled_dense, coupled_residual
 
 contains
 
@@ -25,7 +25,7 @@ contains
     logical, intent(in) :: want
     real(dp), intent(out) :: res(:), energy(2)
     type(link_mats), intent(inout) :: lm
-    integer :: l, nl, i, j
+    integer :: l, nl
     real(dp) :: ek, ep
     res = 0.0_dp
     energy = 0.0_dp
@@ -34,21 +34,62 @@ contains
     end if
     do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3
-      do i = 1, nl          ! explicit loops: vector-subscripted sections copy through the heap
-        j = sys%ld(i, l)
-        lm%widx(i) = j
-        lm%wl(i, 2) = q(j); lm%wl(i, 3) = v(j); lm%wl(i, 4) = a(j)
-      end do
+      call gather(sys, l, nl, q, v, a, lm)
       call link_eval(sys, l, lm%wl(1:nl, 2), lm%wl(1:nl, 3), lm%wl(1:nl, 4), want, cc, ck, lm%wl(:, 1), lm, ek, ep)
-      do i = 1, nl
-        j = lm%widx(i)
-        res(j) = res(j) + lm%wl(i, 1)
-      end do
+      call scatter(nl, lm, res)
       energy = energy + [ek, ep]
     end do
     call bodies_eval(sys, q, v, a, want, res, lm, energy)
     call drive_loads(sys, q, v, t, res)
   end subroutine assemble
+
+  !> The global residual R alone (assemble's, without energies or matrix): the Newton iterations
+  !> that keep the factorized matrix, and coupled_residual.
+  subroutine assemble_residual(sys, q, v, a, t, res, lm)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), a(:), t
+    real(dp), intent(out) :: res(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: l, nl
+    real(dp) :: energy(2)
+    res = 0.0_dp
+    energy = 0.0_dp
+    do l = 1, sys%nseg
+      nl = 3*sys%n_el(l) + 3
+      call gather(sys, l, nl, q, v, a, lm)
+      call segment_residual(sys, l, lm%wl(1:nl, 2), lm%wl(1:nl, 3), lm%wl(1:nl, 4), lm%wl(:, 1), lm)
+      call scatter(nl, lm, res)
+    end do
+    call bodies_eval(sys, q, v, a, .false., res, lm, energy)
+    call drive_loads(sys, q, v, t, res)
+  end subroutine assemble_residual
+
+  !> Segment l's local q, v, a (lm%wl(:, 2:4)) and all-DOF numbers (lm%widx) out of the all-DOF
+  !> vectors (explicit loops: vector-subscripted sections copy through the heap).
+  pure subroutine gather(sys, l, nl, q, v, a, lm)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l, nl
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    type(link_mats), intent(inout) :: lm
+    integer :: i, j
+    do i = 1, nl
+      j = sys%ld(i, l)
+      lm%widx(i) = j
+      lm%wl(i, 2) = q(j); lm%wl(i, 3) = v(j); lm%wl(i, 4) = a(j)
+    end do
+  end subroutine gather
+
+  !> res += the segment's local residual lm%wl(1:nl, 1) at its all-DOF numbers.
+  pure subroutine scatter(nl, lm, res)
+    integer, intent(in) :: nl
+    type(link_mats), intent(in) :: lm
+    real(dp), intent(inout) :: res(:)
+    integer :: i, j
+    do i = 1, nl
+      j = lm%widx(i)
+      res(j) = res(j) + lm%wl(i, 1)
+    end do
+  end subroutine scatter
 
   !> Rigid bodies: residual m (a_C - grav), J alpha; S gets diag(m, m, J_S) (J_S > 0 also for a body
   !> of zero inertia whose angle a constraint holds); energies 1/2 m |v_C|^2 + 1/2 J omega^2, -m grav.r_C.
@@ -120,11 +161,10 @@ contains
     real(dp), intent(in) :: q(:, :), v(:), a(:), t
     real(dp), intent(out) :: res(:, :)
     type(link_mats) :: lm
-    real(dp) :: energy(2)
     integer :: s
     call lm_setup(sys, 1, lm)
     do s = 1, size(q, 2)
-      call assemble(sys, q(:, s), v, a, t, .false., 0.0_dp, 0.0_dp, res(:, s), lm, energy)
+      call assemble_residual(sys, q(:, s), v, a, t, res(:, s), lm)
     end do
   end subroutine coupled_residual
 

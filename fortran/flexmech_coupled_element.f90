@@ -8,12 +8,13 @@ module flexmech_coupled_element
   use flexmech_lapack, only: STATUS_OK
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap, elem_index, shape_fn, th_index, gx, gw
   use flexmech_coupled_storage, only: link_mats, lm_add, lm_add_block, lm_block_get, lm_block_put
+  use flexmech_coupled_corot, only: one_element_residual, one_element_eval, absolute_block
   implicit none
   private
-  public :: link_eval, coupled_set_inertia, INERTIA_CLOSED, INERTIA_GAUSS
+  public :: link_eval, segment_residual, coupled_set_inertia, INERTIA_CLOSED, INERTIA_GAUSS
 
   !> Inertia in closed form over the elements' Gram matrices: INERTIA_CLOSED (default; one-element
-  !> segments element_inertia, the elements of longer ones long_element_inertia) or INERTIA_GAUSS
+  !> segments in one pass by flexmech_coupled_corot, the elements of longer ones long_element_inertia) or INERTIA_GAUSS
   !> (mass_point at the Gauss points throughout; the check of the closed form)
   integer, parameter :: INERTIA_CLOSED = 0, INERTIA_GAUSS = 1
   integer :: inertia_mode = INERTIA_CLOSED
@@ -43,7 +44,12 @@ contains
     type(link_mats), intent(inout) :: lm
     integer :: n, nl, k, it(2)
     real(dp) :: qr(6), vr(6), ar(6), msum(6), csum(6)
-    real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, c(2), l2, h(2, 2), s6(6, 6)
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, s6(6, 6)
+    if (sys%n_el(l) == 1 .and. inertia_mode == INERTIA_CLOSED) then   ! one element: one pass
+      call one_element_eval(sys, l, q, v, a, want, ccv, ckt, r, s6, ekin, epot)
+      if (want) call lm_block_put(lm, l, s6)
+      return
+    end if
     if (sys%absang(l) == 0) then
       call link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
       return
@@ -63,18 +69,27 @@ contains
     r(1:2) = r(1:2) + sr*g
     r(3:4) = r(3:4) - sr*g
     if (.not. want) return
-    c = q(3:4) - q(1:2)
-    l2 = c(1)**2 + c(2)**2
-    h(1, 1) = 2.0_dp*c(1)*c(2)/l2**2; h(1, 2) = (c(2)**2 - c(1)**2)/l2**2    ! d2 phi / dc2
-    h(2, 1) = h(1, 2); h(2, 2) = -h(1, 1)
     call lm_block_get(lm, l, s6)
-    call angle_rate_terms(s6, c, v(3:4) - v(1:2), a(3:4) - a(1:2), g, om, h, ccv, ckt, msum, csum)
-    call angle_transform(s6, it(1:n + 1), [g(1), g(2), -g(1), -g(2)])
-    h = ckt*sr*h
-    s6(1:2, 1:2) = s6(1:2, 1:2) - h; s6(3:4, 3:4) = s6(3:4, 3:4) - h
-    s6(1:2, 3:4) = s6(1:2, 3:4) + h; s6(3:4, 1:2) = s6(3:4, 1:2) + h
+    call absolute_block(s6, q(3:4) - q(1:2), v(3:4) - v(1:2), a(3:4) - a(1:2), sr, ccv, ckt, msum, csum)
     call lm_block_put(lm, l, s6)
   end subroutine link_eval
+
+  !> The residual alone of segment l (local vector r of length 3 n_el + 3; link_eval's, without
+  !> energies or matrix): the Newton iterations that keep the factorized matrix.  A one-element
+  !> segment with closed-form inertia goes through one_element_residual, the others through link_eval.
+  subroutine segment_residual(sys, l, q, v, a, r, lm)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(out) :: r(:)
+    type(link_mats), intent(inout) :: lm
+    real(dp) :: ekin, epot
+    if (sys%n_el(l) == 1 .and. inertia_mode == INERTIA_CLOSED) then
+      call one_element_residual(sys, l, q, v, a, r)
+    else
+      call link_eval(sys, l, q, v, a, .false., 0.0_dp, 0.0_dp, r, lm, ekin, epot)
+    end if
+  end subroutine segment_residual
 
   !> link_eval in chord-relative angles (the coupled model's segments).
   subroutine link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
@@ -92,9 +107,7 @@ contains
     if (present(msum)) then
       msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
     end if
-    if (n == 1 .and. inertia_mode == INERTIA_CLOSED) then      ! one element: closed form
-      call element_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
-    else if (inertia_mode == INERTIA_CLOSED .and. .not. present(msum)) then   ! element by element
+    if (inertia_mode == INERTIA_CLOSED .and. .not. present(msum)) then   ! element by element
       do e = 1, n
         call long_element_inertia(sys, l, e, q, v, a, want, ccv, ckt, r, lm, ekin, epot)
       end do
@@ -121,88 +134,6 @@ contains
     al0 = -2.0_dp*(c(1)*cd(1) + c(2)*cd(2))*om/l2   ! part of alpha independent of the accelerations
     al = al0 + g(1)*cdd(1) + g(2)*cdd(2)
   end subroutine chord
-
-  !> Inertia and gravity of a one-element segment in closed form (docs/theory.md section 12.3),
-  !> local DOFs [xs, ys, xe, ye, th_0, th_1].  Its velocity r', acceleration r'' and the columns of
-  !> J = dr'/dq' (and of dr''/dv, dr''/dq) are fields X(xi) = sum_a phi_a(xi) X_a over phi = [1 - xi,
-  !> xi, N_0, N_1] (N_0, N_1 the transverse Hermite shapes of th_0, th_1; the elastic field is
-  !> w = N_0 th_0 + N_1 th_1 along e2), so every integral of mass_point is a form in the segment's
-  !> Gram matrix G (sys%gram, the phi part of gram6): the same residual, energies, S blocks and angle-column
-  !> sums as mass_point summed over the Gauss points and point masses, without a loop over points.
-  subroutine element_inertia(sys, l, q, v, a, want, cc, ck, r, lm, ekin, epot, msum, csum)
-    type(coupled_system), intent(in) :: sys
-    integer, intent(in) :: l
-    real(dp), intent(in) :: q(:), v(:), a(:), cc, ck
-    logical, intent(in) :: want
-    real(dp), intent(inout) :: r(:), ekin, epot
-    real(dp), intent(inout), optional :: msum(:), csum(:)
-    type(link_mats), intent(inout) :: lm
-    real(dp) :: cs, sn, ell, g(2), om, al0, al, e1(2), e2(2), w(4), wd(4), wdd(4), c(2), cdot(2), w0(2)
-    real(dp) :: gm(4, 4), acc(2, 4), vel(2, 4), jf(2, 4, 6), gj(2, 4, 6), bv(2, 4, 6), bf(2, 4, 6), blk(6, 6)
-    real(dp) :: acj(2, 4), ga(2, 4), gv(2, 4), s1, s6(6, 6)
-    integer :: i, j, b
-    gm = sys%gram(:, :, l)
-    call chord(q, v, a, cs, sn, ell, g, om, al0, al)
-    e1 = [cs, sn]; e2 = [-sn, cs]
-    w = [0.0_dp, 0.0_dp, q(5), q(6)]; wd = [0.0_dp, 0.0_dp, v(5), v(6)]; wdd = [0.0_dp, 0.0_dp, a(5), a(6)]
-    vel(:, 1) = v(1:2); vel(:, 2) = v(3:4)
-    acc(:, 1) = a(1:2) - sys%grav; acc(:, 2) = a(3:4) - sys%grav        ! gravity: 1 = phi_1 + phi_2
-    do b = 3, 4
-      vel(:, b) = -om*w(b)*e1 + wd(b)*e2
-      acc(:, b) = -(al*w(b) + 2.0_dp*om*wd(b))*e1 + (wdd(b) - om*om*w(b))*e2
-    end do
-    ga = matmul(acc, gm); gv = matmul(vel, gm)     ! (G r'')_a and (G r')_a, 2 x 4
-    ekin = ekin + 0.5_dp*sum(gv*vel)
-    epot = epot - sum((gm(1, :) + gm(2, :))*[dot_product(sys%grav, q(1:2)), dot_product(sys%grav, q(3:4)), &
-                                             w(3)*dot_product(sys%grav, e2), w(4)*dot_product(sys%grav, e2)])
-    ! R_j = sum_a J_a,j . (G r'')_a over the nonzero columns of J (see jf below)
-    s1 = w(3)*dot_product(e1, ga(:, 3)) + w(4)*dot_product(e1, ga(:, 4))
-    r(1:2) = r(1:2) + ga(:, 1) + s1*g
-    r(3:4) = r(3:4) + ga(:, 2) - s1*g
-    r(5) = r(5) + dot_product(e2, ga(:, 3))
-    r(6) = r(6) + dot_product(e2, ga(:, 4))
-    if (.not. want) return
-    jf = 0.0_dp                               ! J = dr'/dq' by columns
-    do j = 1, 2
-      jf(j, 1, j) = 1.0_dp; jf(j, 2, 2 + j) = 1.0_dp
-      do b = 3, 4
-        jf(:, b, j) = w(b)*g(j)*e1
-        jf(:, b, 2 + j) = -w(b)*g(j)*e1
-      end do
-    end do
-    jf(:, 3, 5) = e2; jf(:, 4, 6) = e2
-    do j = 1, 6                               ! gj = G J (G symmetric)
-      do b = 1, 4
-        gj(:, b, j) = matmul(jf(:, :, j), gm(:, b))
-      end do
-    end do
-    c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
-    w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*cdot(1) + c(2)*cdot(2))*g)
-    bv = 0.0_dp                               ! dr''/dv by columns
-    do j = 1, 2
-      acj = 0.0_dp
-      do b = 3, 4
-        acj(:, b) = -w(b)*w0(j)*e1 + (-2.0_dp*om*w(b)*e2 - 2.0_dp*wd(b)*e1)*g(j)
-      end do
-      bv(:, :, j) = -acj; bv(:, :, 2 + j) = acj
-    end do
-    bv(:, 3, 5) = -2.0_dp*om*e1; bv(:, 4, 6) = -2.0_dp*om*e1
-    bf = jf + cc*bv                           ! + ck dr''/dq at fixed chord (the angle columns only)
-    bf(:, 3, 5) = bf(:, 3, 5) + ck*(-al*e1 - om*om*e2)
-    bf(:, 4, 6) = bf(:, 4, 6) + ck*(-al*e1 - om*om*e2)
-    do j = 1, 6
-      do i = 1, 6
-        blk(i, j) = sum(gj(:, :, i)*bf(:, :, j))
-      end do
-    end do
-    call lm_block_get(lm, l, s6)
-    call lm_block_put(lm, l, s6 + blk)
-    if (.not. present(msum)) return
-    do i = 1, 6
-      msum(i) = msum(i) + sum(gj(:, :, i)*(jf(:, :, 5) + jf(:, :, 6)))
-      csum(i) = csum(i) + sum(gj(:, :, i)*(bv(:, :, 5) + bv(:, :, 6)))
-    end do
-  end subroutine element_inertia
 
   !> Inertia of element e of a longer segment l in closed form (what mass_point gives summed over the
   !> element's Gauss points and point masses): residual, kinetic and gravity energy and, if want, the
@@ -579,50 +510,5 @@ contains
     end do
   end subroutine bending_forces
 
-  !> The parts of S from the chord terms of the relative angle rates th' = psi' - omega(c, c') and
-  !> th'' = psi'' - alpha(c, c', c''), as columns of the end positions (before angle_transform):
-  !> S(:, rs) += msum (ccv w0 + ckt da) + csum ckt H c', S(:, re) -= the same, with w0 = d alpha0/dc',
-  !> da = d alpha/dc = H c'' + d alpha0/dc, H = d2 phi/dc2 and msum, csum the sums of the angle columns
-  !> of M and C_v (alpha0 = -2 (c.c') omega / |c|^2, the velocity part of alpha).
-  pure subroutine angle_rate_terms(s6, c, cd, cdd, g, om, h, ccv, ckt, msum, csum)
-    real(dp), intent(inout) :: s6(6, 6)
-    real(dp), intent(in) :: c(2), cd(2), cdd(2), g(2), om, h(2, 2), ccv, ckt, msum(:), csum(:)
-    real(dp) :: l2, sc, hc(2), w0(2), da(2), col(6)
-    integer :: j
-    l2 = c(1)**2 + c(2)**2
-    sc = c(1)*cd(1) + c(2)*cd(2)
-    hc = matmul(h, cd)
-    w0 = -(2.0_dp/l2)*(om*c + sc*g)
-    da = matmul(h, cdd) - 2.0_dp*(cd*om/l2 + sc*hc/l2 - 2.0_dp*sc*om*c/l2**2)
-    do j = 1, 2
-      col = msum(1:6)*(ccv*w0(j) + ckt*da(j)) + csum(1:6)*ckt*hc(j)
-      s6(:, j) = s6(:, j) + col
-      s6(:, 2 + j) = s6(:, 2 + j) - col
-    end do
-  end subroutine angle_rate_terms
-
-  !> S <- (I + E)^T S (I + E) on a one-element segment's block s6, E(th_k, 1:4) = e for its angle
-  !> DOFs th(:): the change from chord-relative to absolute node angles (see link_eval).
-  pure subroutine angle_transform(s6, th, e)
-    real(dp), intent(inout) :: s6(6, 6)
-    integer, intent(in) :: th(:)
-    real(dp), intent(in) :: e(4)
-    real(dp) :: sum_th(6)
-    integer :: j, k
-    sum_th = 0.0_dp
-    do k = 1, size(th)          ! S (I + E): columns 1:4 gain the angle columns times e
-      sum_th = sum_th + s6(:, th(k))
-    end do
-    do j = 1, 4
-      s6(:, j) = s6(:, j) + sum_th*e(j)
-    end do
-    sum_th = 0.0_dp
-    do k = 1, size(th)          ! (I + E)^T: rows 1:4 gain the angle rows times e
-      sum_th = sum_th + s6(th(k), :)
-    end do
-    do j = 1, 4
-      s6(j, :) = s6(j, :) + e(j)*sum_th
-    end do
-  end subroutine angle_transform
 
 end module flexmech_coupled_element

@@ -18,7 +18,7 @@ module flexmech_coupled_run
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap
   use flexmech_coupled_rows, only: eval_row, drive_load
   use flexmech_coupled_storage, only: link_mats, lm_setup, lm_to_band, lm_factor, lm_solve
-  use flexmech_coupled_assembly, only: assemble
+  use flexmech_coupled_assembly, only: assemble, assemble_residual
   use flexmech_saddle_band, only: saddle_system, saddle_setup, saddle_factor, saddle_solve, saddle_flops
   implicit none
   private
@@ -310,7 +310,11 @@ contains
       do it = 1, merge(2*maxit, maxit, start_mode /= START_ACCELERATION)
         q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
         v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
-        call assemble(sys, q, v, a, t, refresh, gammap*dt, betap*dt*dt, res, lm, energy)
+        if (refresh) then
+          call assemble(sys, q, v, a, t, .true., gammap*dt, betap*dt*dt, res, lm, energy)
+        else
+          call assemble_residual(sys, q, v, a, t, res, lm)
+        end if
         if (refresh) then
           call factor()
           if (status /= STATUS_OK) exit

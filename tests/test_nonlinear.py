@@ -359,35 +359,44 @@ def test_closed_form_inertia_of_longer_segments_equals_the_gauss_points(cases_di
             assert np.abs(closed - gauss).max() <= 1e-13 * np.abs(ref).max(), (name, k)
 
 
-def test_closed_form_inertia_equals_the_gauss_points(cases_dir):
-    """The one-element inertia in closed form (theory.md 12.3) against the Gauss-point evaluation of
-    the same integrals, at a state of the seed four-bar (point masses on elements), the manipulator
-    (payload, hub) and the slider-crank: M, C_v, K_t and the energies equal to 1e-13, the residual
-    to 1e-13 of its inertia terms M a (its own size is a cancellation of larger terms)."""
+@pytest.mark.parametrize("angles", ["shared", "relative"])
+def test_closed_form_inertia_equals_the_gauss_points(cases_dir, angles):
+    """One-element segments in one pass (flexmech_coupled_corot.f90; theory.md 12.3) against the
+    general path's Gauss-point evaluation of the same integrals, at a state of the seed four-bar
+    (point masses on elements), the manipulator (payload, hub; with Rayleigh damping here) and the
+    slider-crank, with absolute (shared) and chord-relative node angles: M, C_v, K_t and the energies
+    equal to 1e-13, the residual to 1e-13 of its inertia terms M a (its own size is a cancellation of
+    larger terms), and the residual alone (cpl_residuals, the Newton iterations' path) equal to it."""
     from flexmech_py import kernels
     from flexmech_py.simulate import Prepared
 
-    for name, epl in (("fourbar_hac", 4), ("manipulator_bricout", 3), ("slider_crank", 2)):
+    for name, epl, ray in (("fourbar_hac", 4, (0.0, 0.0)), ("manipulator_bricout", 3, (2.0, 1e-4)),
+                           ("slider_crank", 2, (0.0, 0.0))):
         case = fm.load_case(cases_dir / f"{name}.toml", overrides=["solver.t_end=0.01", "solver.error_estimate='none'",
-                                                                   "solver.node_angles='shared'"])
+                                                                   f"solver.node_angles='{angles}'"])
         p = Prepared(case, elements_per_link=epl)
         p.run("nonlinear")
         cm = p.coupled["nonlinear"]
         st = cm.last_run
-        ispec, rspec = cm._spec(p.gravity, (0.0, 0.0), kernel=True)
-        nf = int(cm.shared.free_of.max())
-        out = []
+        ispec, rspec = cm._spec(p.gravity, ray, kernel=True)
+        lay = cm.shared if angles == "shared" else cm
+        nf = int(lay.free_of.max())
+        out, alone = [], []
         try:
             for mode in (1, 0):
                 assert kernels.cpl.cpl_set_inertia(mode) == 0
                 out.append(kernels.cpl.cpl_dense(nf, ispec, rspec, st["q"], st["v"], st["a"], 0.01))
+                alone.append(kernels.cpl.cpl_residuals(ispec, rspec, np.asfortranarray(st["q"][:, None]),
+                                                       st["v"], st["a"], 0.01)[0][:, 0])
         finally:
             kernels.cpl.cpl_set_inertia(0)
-        free = np.flatnonzero(cm.shared.free_of > 0)
-        free = free[np.argsort(cm.shared.free_of[free])]
+        free = np.flatnonzero(lay.free_of > 0)
+        free = free[np.argsort(lay.free_of[free])]
         for i in (1, 2, 3, 4):
             x, y = out[0][i], out[1][i]
             assert np.abs(x - y).max() <= 1e-13 * max(np.abs(x).max(), 1e-300), (name, i)
         scale = np.abs(out[0][1] @ st["a"][free]).max()
         assert np.abs(out[0][0][free] - out[1][0][free]).max() <= 1e-13 * scale, name
+        assert np.abs(alone[1][free] - out[1][0][free]).max() <= 1e-13 * scale, name
+        assert np.abs(alone[0][free] - alone[1][free]).max() <= 1e-13 * scale, name
     assert kernels.cpl.cpl_set_inertia(3) != 0

@@ -1,0 +1,404 @@
+!> One-element segments of the coupled and nonlinear models (the nonlinear model's co-rotational
+!> elements; the coupled model at one element per link) in one pass: residual, energies and the
+!> segment's 6 x 6 block of the iteration matrix S = M + ccv C_v + ckt K_t from the chord frame,
+!> the element's Gram matrix and its constants, without the general path's segment-block storage
+!> (flexmech_coupled_element: link_eval, which calls here for these segments; its Gauss-point path
+!> is the check of this one).  docs/theory.md sections 12.1, 12.3 and 12.4.
+!>
+!> Local DOFs of the segment: [xs, ys, xe, ye, th_0, th_1]: end positions [m], then the end angles
+!> [rad]: absolute node angles psi_k when sys%absang(l) = 1 (evaluated in the chord-relative angles
+!> th_k = psi_k - phi and carried back, see one_element_eval), else already chord-relative.
+!> The element's field along e2 is w = N_0 th_0 + N_1 th_1 (Hermite shapes); inertia over
+!> phi = [1 - xi, xi, N_0, N_1] and the Gram matrix G = int phi phi^T dm (sys%gram).
+module flexmech_coupled_corot
+  use flexmech_kinds, only: dp
+  use flexmech_coupled_system, only: coupled_system, wrap
+  implicit none
+  private
+  public :: one_element_residual, one_element_eval, absolute_block
+
+  !> The chord frame of a segment and its chord-relative end angles: c = re - rs [m] and its rates,
+  !> l2 = |c|^2, ell = |c|, e1 = c/ell, e2 = Omega e1, g = Omega c/l2 (d phi/d re), omega = g.c',
+  !> alpha0 = -2 (c.c') omega/l2 (the velocity part of alpha = phi''), th, th', th'' [rad, rad/s, rad/s^2].
+  type :: chord_frame
+    real(dp) :: c(2), cd(2), cdd(2), l2, ell, e1(2), e2(2), g(2), om, al0, al, th(2), thd(2), thdd(2)
+  end type chord_frame
+
+contains
+
+  !> Residual r (6) [N, N m] of one-element segment l at its local q, v, a (no energies, no matrix):
+  !> the Newton iterations that keep the factorized matrix.
+  pure subroutine one_element_residual(sys, l, q, v, a, r)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(out) :: r(:)
+    type(chord_frame) :: fr
+    real(dp) :: ga(2, 4), f, ath(2)
+    fr = frame_of(sys, l, q, v, a)
+    call inertia_residual(sys, l, fr, a, r, ga)
+    call rotary_residual(sys, l, fr, r)
+    call axial_residual(sys, l, fr, r, f, ath)
+    call bending_residual(sys, l, fr, r)
+    if (sys%absang(l) == 1) call absolute_rows(fr, r)
+  end subroutine one_element_residual
+
+  !> Residual r (6), energies [J] (kinetic; strain + gravity) and, if want, the segment's block s6
+  !> (6 x 6) of S = M + ccv C_v + ckt K_t.  With absolute node angles the block of the chord-relative
+  !> angles is carried back by T = d th / d(rs, re, psi) (docs/theory.md 12.1):
+  !>   S = T^T S_rel T + (the chord terms of th', th'') - ckt (R_th0 + R_th1) d2phi/d(rs, re)2.
+  pure subroutine one_element_eval(sys, l, q, v, a, want, ccv, ckt, r, s6, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(out) :: r(:), s6(6, 6), ekin, epot
+    type(chord_frame) :: fr
+    real(dp) :: ga(2, 4), f, ath(2), msum(6), csum(6), sr
+    fr = frame_of(sys, l, q, v, a)
+    call inertia_residual(sys, l, fr, a, r, ga)
+    call rotary_residual(sys, l, fr, r)
+    call axial_residual(sys, l, fr, r, f, ath)
+    call bending_residual(sys, l, fr, r)
+    call energies(sys, l, fr, q, v, f, ekin, epot)
+    sr = r(5) + r(6)
+    if (sys%absang(l) == 1) call absolute_rows(fr, r)
+    if (.not. want) return
+    msum = 0.0_dp; csum = 0.0_dp
+    call inertia_block(sys, l, fr, ccv, ckt, s6, msum, csum)
+    call rotary_block(sys, l, fr, ccv, s6, msum)
+    call axial_block(sys, l, fr, ckt, f, ath, s6)
+    call bending_block(sys, l, ccv, ckt, s6, csum)
+    if (sys%absang(l) == 1) call absolute_block(s6, fr%c, fr%cd, fr%cdd, sr, ccv, ckt, msum, csum)
+  end subroutine one_element_eval
+
+  !> A one-element segment's block s6 of S in chord-relative angles carried to absolute node angles
+  !> (docs/theory.md 12.1): the chord terms of th', th'' (angle_rate_terms), T^T S T (angle_transform)
+  !> and the geometric stiffness - ckt sr d2phi/d(rs, re)2 of the end moments turning with the chord;
+  !> c, cd, cdd the chord and its rates [m, m/s, m/s^2], sr = R_th0 + R_th1 the relative angles'
+  !> residual [N m], msum, csum the sums of the angle columns of M and C_v.
+  pure subroutine absolute_block(s6, c, cd, cdd, sr, ccv, ckt, msum, csum)
+    real(dp), intent(inout) :: s6(6, 6)
+    real(dp), intent(in) :: c(2), cd(2), cdd(2), sr, ccv, ckt, msum(6), csum(6)
+    real(dp) :: l2, g(2), h(2, 2)
+    l2 = c(1)**2 + c(2)**2
+    g = [-c(2), c(1)]/l2
+    h(1, 1) = 2.0_dp*c(1)*c(2)/l2**2; h(1, 2) = (c(2)**2 - c(1)**2)/l2**2    ! d2 phi / dc2
+    h(2, 1) = h(1, 2); h(2, 2) = -h(1, 1)
+    call angle_rate_terms(s6, c, cd, cdd, g, g(1)*cd(1) + g(2)*cd(2), h, ccv, ckt, msum, csum)
+    call angle_transform(s6, [5, 6], [g(1), g(2), -g(1), -g(2)])
+    h = ckt*sr*h
+    s6(1:2, 1:2) = s6(1:2, 1:2) - h; s6(3:4, 3:4) = s6(3:4, 3:4) - h
+    s6(1:2, 3:4) = s6(1:2, 3:4) + h; s6(3:4, 1:2) = s6(3:4, 1:2) + h
+  end subroutine absolute_block
+
+  !> The chord frame of segment l and its chord-relative end angles at the local q, v, a.
+  pure function frame_of(sys, l, q, v, a) result(fr)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    type(chord_frame) :: fr
+    real(dp) :: phi
+    fr%c = q(3:4) - q(1:2); fr%cd = v(3:4) - v(1:2); fr%cdd = a(3:4) - a(1:2)
+    fr%l2 = fr%c(1)**2 + fr%c(2)**2; fr%ell = sqrt(fr%l2)
+    fr%e1 = fr%c/fr%ell; fr%e2 = [-fr%e1(2), fr%e1(1)]
+    fr%g = [-fr%c(2), fr%c(1)]/fr%l2
+    fr%om = fr%g(1)*fr%cd(1) + fr%g(2)*fr%cd(2)
+    fr%al0 = -2.0_dp*(fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%om/fr%l2
+    fr%al = fr%al0 + fr%g(1)*fr%cdd(1) + fr%g(2)*fr%cdd(2)
+    fr%th = q(5:6); fr%thd = v(5:6); fr%thdd = a(5:6)
+    if (sys%absang(l) == 1) then
+      phi = atan2(fr%e1(2), fr%e1(1))
+      fr%th = [wrap(fr%th(1) - phi), wrap(fr%th(2) - phi)]
+      fr%thd = fr%thd - fr%om; fr%thdd = fr%thdd - fr%al
+    end if
+  end function frame_of
+
+  !> Inertia and gravity: R_j = sum_a J_a,j . (G (r'' - grav))_a with r'' = sum_a phi_a A_a,
+  !> A = [rs'', re'', -(alpha th_k + 2 omega th_k') e1 + (th_k'' - omega^2 th_k) e2]; ga = G A.
+  pure subroutine inertia_residual(sys, l, fr, a, r, ga)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(in) :: a(:)
+    real(dp), intent(out) :: r(:), ga(2, 4)
+    real(dp) :: acc(2, 4), s1
+    integer :: b
+    acc(:, 1) = a(1:2) - sys%grav; acc(:, 2) = a(3:4) - sys%grav      ! gravity: 1 = phi_1 + phi_2
+    do b = 1, 2
+      acc(:, 2 + b) = -(fr%al*fr%th(b) + 2.0_dp*fr%om*fr%thd(b))*fr%e1 + (fr%thdd(b) - fr%om**2*fr%th(b))*fr%e2
+    end do
+    ga = matmul(acc, sys%gram(:, :, l))
+    s1 = fr%th(1)*dot_product(fr%e1, ga(:, 3)) + fr%th(2)*dot_product(fr%e1, ga(:, 4))
+    r(1:2) = ga(:, 1) + s1*fr%g; r(3:4) = ga(:, 2) - s1*fr%g
+    r(5) = dot_product(fr%e2, ga(:, 3)); r(6) = dot_product(fr%e2, ga(:, 4))
+  end subroutine inertia_residual
+
+  !> Rotary inertias J [kg m^2] at the segment's nodes, turning with psi = phi + th_k: J psi'' d psi/dq.
+  pure subroutine rotary_residual(sys, l, fr, r)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(inout) :: r(:)
+    real(dp) :: m
+    integer :: i, k
+    do i = 1, sys%nri
+      if (sys%ri_seg(i) /= l) cycle
+      k = sys%ri_node(i)
+      m = sys%ri_j(i)*(fr%al + fr%thdd(k + 1))
+      r(1:2) = r(1:2) - m*fr%g; r(3:4) = r(3:4) + m*fr%g; r(5 + k) = r(5 + k) + m
+    end do
+  end subroutine rotary_residual
+
+  !> Axial force f = EA eps [N], eps = (ell - L)/L (+ th^T A th/60 for a shallow arch, A = [4 -1; -1 4],
+  !> ath = d eps/d th): -f e1 at the start, +f e1 at the end, f L ath on the angles (arch).
+  pure subroutine axial_residual(sys, l, fr, r, f, ath)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(inout) :: r(:)
+    real(dp), intent(out) :: f, ath(2)
+    real(dp) :: len, eps
+    len = sys%prop(1, l)
+    eps = (fr%ell - len)/len
+    ath = 0.0_dp
+    if (sys%arch(l) == 1) then
+      ath = [4.0_dp*fr%th(1) - fr%th(2), 4.0_dp*fr%th(2) - fr%th(1)]/30.0_dp
+      eps = eps + 0.5_dp*dot_product(fr%th, ath)
+    end if
+    f = sys%prop(3, l)*eps
+    r(1:2) = r(1:2) - f*fr%e1; r(3:4) = r(3:4) + f*fr%e1
+    if (sys%arch(l) == 1) r(5:6) = r(5:6) + f*len*ath
+  end subroutine axial_residual
+
+  !> Bending K_th th and Rayleigh damping C_th th' over the angle part of the element matrices.
+  pure subroutine bending_residual(sys, l, fr, r)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(inout) :: r(:)
+    real(dp) :: kth(2, 2)
+    integer :: el
+    el = sys%el_off(l) + 1
+    kth = sys%ke([3, 6], [3, 6], el)
+    r(5:6) = r(5:6) + matmul(kth, fr%th)
+    if (damped(sys)) r(5:6) = r(5:6) + matmul(damping_th(sys, el), fr%thd)
+  end subroutine bending_residual
+
+  pure logical function damped(sys)
+    type(coupled_system), intent(in) :: sys
+    damped = sys%ray(1) /= 0.0_dp .or. sys%ray(2) /= 0.0_dp
+  end function damped
+
+  !> The angle part of the element's Rayleigh damping a0 M + a1 K.
+  pure function damping_th(sys, el) result(cth)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: el
+    real(dp) :: cth(2, 2)
+    cth = sys%ray(1)*sys%me([3, 6], [3, 6], el) + sys%ray(2)*sys%ke([3, 6], [3, 6], el)
+  end function damping_th
+
+  !> Absolute node angles: th_k = psi_k - phi(rs, re), so the ends' rows gain (R_th0 + R_th1) d th/d(rs, re).
+  pure subroutine absolute_rows(fr, r)
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(inout) :: r(:)
+    real(dp) :: sr
+    sr = r(5) + r(6)
+    r(1:2) = r(1:2) + sr*fr%g; r(3:4) = r(3:4) - sr*fr%g
+  end subroutine absolute_rows
+
+  !> Kinetic energy 1/2 int |r'|^2 dm + rotary, potential: strain (axial force f, bending) - int grav.r dm.
+  pure subroutine energies(sys, l, fr, q, v, f, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(in) :: q(:), v(:), f
+    real(dp), intent(out) :: ekin, epot
+    real(dp) :: vel(2, 4), gm(4, 4), gs
+    integer :: b, i, k
+    gm = sys%gram(:, :, l)
+    vel(:, 1) = v(1:2); vel(:, 2) = v(3:4)
+    do b = 1, 2
+      vel(:, 2 + b) = -fr%om*fr%th(b)*fr%e1 + fr%thd(b)*fr%e2
+    end do
+    ekin = 0.5_dp*sum(matmul(vel, gm)*vel)
+    do i = 1, sys%nri
+      if (sys%ri_seg(i) /= l) cycle
+      k = sys%ri_node(i)
+      ekin = ekin + 0.5_dp*sys%ri_j(i)*(fr%om + fr%thd(k + 1))**2
+    end do
+    gs = dot_product(sys%grav, fr%e2)
+    epot = -sum((gm(1, :) + gm(2, :))*[dot_product(sys%grav, q(1:2)), dot_product(sys%grav, q(3:4)), &
+                                       fr%th(1)*gs, fr%th(2)*gs])
+    epot = epot + 0.5_dp*f**2*sys%prop(1, l)/sys%prop(3, l) &
+           + 0.5_dp*dot_product(fr%th, matmul(sys%ke([3, 6], [3, 6], sys%el_off(l) + 1), fr%th))
+  end subroutine energies
+
+  !> Inertia part of S: S_ij = sum_a J_a,i . (G B_j)_a with J = dr'/dq' and B = J + ccv dr''/dv +
+  !> ckt dr''/dq (at fixed chord) by their phi coefficients (2, 4, column); msum, csum get the sums of
+  !> the angle columns of M and C_v (the chord terms of absolute angles).
+  pure subroutine inertia_block(sys, l, fr, cc, ck, s6, msum, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(in) :: cc, ck
+    real(dp), intent(out) :: s6(6, 6)
+    real(dp), intent(inout) :: msum(6), csum(6)
+    real(dp) :: jf(2, 4, 6), gj(2, 4, 6), bv(2, 4, 6), bf(2, 4, 6), acj(2, 4), w0(2), gm(4, 4)
+    integer :: i, j, b
+    gm = sys%gram(:, :, l)
+    jf = 0.0_dp                               ! J = dr'/dq' by columns
+    do j = 1, 2
+      jf(j, 1, j) = 1.0_dp; jf(j, 2, 2 + j) = 1.0_dp
+      do b = 3, 4
+        jf(:, b, j) = fr%th(b - 2)*fr%g(j)*fr%e1
+        jf(:, b, 2 + j) = -fr%th(b - 2)*fr%g(j)*fr%e1
+      end do
+    end do
+    jf(:, 3, 5) = fr%e2; jf(:, 4, 6) = fr%e2
+    do j = 1, 6                               ! gj = G J (G symmetric)
+      gj(:, :, j) = matmul(jf(:, :, j), gm)
+    end do
+    w0 = -(2.0_dp/fr%l2)*(fr%om*fr%c + (fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%g)   ! d alpha0 / d c'
+    bv = 0.0_dp                               ! dr''/dv by columns
+    do j = 1, 2
+      acj = 0.0_dp
+      do b = 3, 4
+        acj(:, b) = -fr%th(b - 2)*w0(j)*fr%e1 + (-2.0_dp*fr%om*fr%th(b - 2)*fr%e2 - 2.0_dp*fr%thd(b - 2)*fr%e1)*fr%g(j)
+      end do
+      bv(:, :, j) = -acj; bv(:, :, 2 + j) = acj
+    end do
+    bv(:, 3, 5) = -2.0_dp*fr%om*fr%e1; bv(:, 4, 6) = -2.0_dp*fr%om*fr%e1
+    bf = jf + cc*bv                           ! + ck dr''/dq at fixed chord (the angle columns only)
+    bf(:, 3, 5) = bf(:, 3, 5) + ck*(-fr%al*fr%e1 - fr%om**2*fr%e2)
+    bf(:, 4, 6) = bf(:, 4, 6) + ck*(-fr%al*fr%e1 - fr%om**2*fr%e2)
+    do j = 1, 6
+      do i = 1, 6
+        s6(i, j) = sum(gj(:, :, i)*bf(:, :, j))
+      end do
+    end do
+    if (sys%absang(l) == 0) return
+    do i = 1, 6
+      msum(i) = msum(i) + sum(gj(:, :, i)*(jf(:, :, 5) + jf(:, :, 6)))
+      csum(i) = csum(i) + sum(gj(:, :, i)*(bv(:, :, 5) + bv(:, :, 6)))
+    end do
+  end subroutine inertia_block
+
+  !> Rotary inertias' part of S: J d d^T with d = d psi/dq = [-g, g, 1 at th_k], and the velocity
+  !> dependence of psi'' through alpha0 (ccv J d w0^T on the end columns); msum gets J d.
+  pure subroutine rotary_block(sys, l, fr, ccv, s6, msum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(in) :: ccv
+    real(dp), intent(inout) :: s6(6, 6), msum(6)
+    real(dp) :: d(6), w0(2)
+    integer :: i, j
+    w0 = -(2.0_dp/fr%l2)*(fr%om*fr%c + (fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%g)
+    do i = 1, sys%nri
+      if (sys%ri_seg(i) /= l) cycle
+      d = [-fr%g(1), -fr%g(2), fr%g(1), fr%g(2), 0.0_dp, 0.0_dp]
+      d(5 + sys%ri_node(i)) = 1.0_dp
+      do j = 1, 6
+        s6(:, j) = s6(:, j) + sys%ri_j(i)*d(j)*d
+      end do
+      do j = 1, 2
+        s6(:, j) = s6(:, j) - ccv*sys%ri_j(i)*w0(j)*d
+        s6(:, 2 + j) = s6(:, 2 + j) + ccv*sys%ri_j(i)*w0(j)*d
+      end do
+      if (sys%absang(l) == 1) msum = msum + sys%ri_j(i)*d
+    end do
+  end subroutine rotary_block
+
+  !> Axial stiffness ckt d2U/dq2: (EA/L) u u^T + (f/ell)(I - u u^T) between the ends (u = e1) and,
+  !> for a shallow arch, EA u ath^T between the ends and the angles and EA L ath ath^T + f L A/30.
+  pure subroutine axial_block(sys, l, fr, ckt, f, ath, s6)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(in) :: ckt, f, ath(2)
+    real(dp), intent(inout) :: s6(6, 6)
+    real(dp) :: len, ea, cc(2, 2), ua(2, 2)
+    integer :: j
+    len = sys%prop(1, l); ea = sys%prop(3, l)
+    do j = 1, 2
+      cc(:, j) = fr%e1*fr%e1(j)
+    end do
+    cc = ckt*(ea/len - f/fr%ell)*cc
+    cc(1, 1) = cc(1, 1) + ckt*f/fr%ell; cc(2, 2) = cc(2, 2) + ckt*f/fr%ell
+    s6(1:2, 1:2) = s6(1:2, 1:2) + cc; s6(3:4, 3:4) = s6(3:4, 3:4) + cc
+    s6(1:2, 3:4) = s6(1:2, 3:4) - cc; s6(3:4, 1:2) = s6(3:4, 1:2) - cc
+    if (sys%arch(l) == 0) return
+    do j = 1, 2
+      ua(:, j) = ckt*ea*fr%e1*ath(j)
+    end do
+    s6(3:4, 5:6) = s6(3:4, 5:6) + ua; s6(5:6, 3:4) = s6(5:6, 3:4) + transpose(ua)
+    s6(1:2, 5:6) = s6(1:2, 5:6) - ua; s6(5:6, 1:2) = s6(5:6, 1:2) - transpose(ua)
+    do j = 1, 2
+      s6(5:6, 4 + j) = s6(5:6, 4 + j) + ckt*(ea*len*ath*ath(j) + f*len*merge([4.0_dp, -1.0_dp], [-1.0_dp, 4.0_dp], j == 1)/30.0_dp)
+    end do
+  end subroutine axial_block
+
+  !> Bending and damping: ckt K_th + ccv C_th on the angles; csum gets C_th's angle-column sums.
+  pure subroutine bending_block(sys, l, ccv, ckt, s6, csum)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: ccv, ckt
+    real(dp), intent(inout) :: s6(6, 6), csum(6)
+    real(dp) :: cth(2, 2)
+    integer :: el
+    el = sys%el_off(l) + 1
+    s6(5:6, 5:6) = s6(5:6, 5:6) + ckt*sys%ke([3, 6], [3, 6], el)
+    if (.not. damped(sys)) return
+    cth = damping_th(sys, el)
+    s6(5:6, 5:6) = s6(5:6, 5:6) + ccv*cth
+    if (sys%absang(l) == 1) csum(5:6) = csum(5:6) + cth(:, 1) + cth(:, 2)
+  end subroutine bending_block
+
+  !> The parts of S from the chord terms of the relative angle rates th' = psi' - omega(c, c') and
+  !> th'' = psi'' - alpha(c, c', c''), as columns of the end positions (before angle_transform):
+  !> S(:, rs) += msum (ccv w0 + ckt da) + csum ckt H c', S(:, re) -= the same, with w0 = d alpha0/dc',
+  !> da = d alpha/dc = H c'' + d alpha0/dc, H = d2phi/dc2 and msum, csum the sums of the angle columns
+  !> of M and C_v (alpha0 = -2 (c.c') omega / |c|^2, the velocity part of alpha).
+  pure subroutine angle_rate_terms(s6, c, cd, cdd, g, om, h, ccv, ckt, msum, csum)
+    real(dp), intent(inout) :: s6(6, 6)
+    real(dp), intent(in) :: c(2), cd(2), cdd(2), g(2), om, h(2, 2), ccv, ckt, msum(:), csum(:)
+    real(dp) :: l2, sc, hc(2), w0(2), da(2), col(6)
+    integer :: j
+    l2 = c(1)**2 + c(2)**2
+    sc = c(1)*cd(1) + c(2)*cd(2)
+    hc = matmul(h, cd)
+    w0 = -(2.0_dp/l2)*(om*c + sc*g)
+    da = matmul(h, cdd) - 2.0_dp*(cd*om/l2 + sc*hc/l2 - 2.0_dp*sc*om*c/l2**2)
+    do j = 1, 2
+      col = msum(1:6)*(ccv*w0(j) + ckt*da(j)) + csum(1:6)*ckt*hc(j)
+      s6(:, j) = s6(:, j) + col
+      s6(:, 2 + j) = s6(:, 2 + j) - col
+    end do
+  end subroutine angle_rate_terms
+
+  !> S <- (I + E)^T S (I + E) on a one-element segment's block s6, E(th_k, 1:4) = e for its angle
+  !> DOFs th(:): the change from chord-relative to absolute node angles (see one_element_eval).
+  pure subroutine angle_transform(s6, th, e)
+    real(dp), intent(inout) :: s6(6, 6)
+    integer, intent(in) :: th(:)
+    real(dp), intent(in) :: e(4)
+    real(dp) :: sum_th(6)
+    integer :: j, k
+    sum_th = 0.0_dp
+    do k = 1, size(th)          ! S (I + E): columns 1:4 gain the angle columns times e
+      sum_th = sum_th + s6(:, th(k))
+    end do
+    do j = 1, 4
+      s6(:, j) = s6(:, j) + sum_th*e(j)
+    end do
+    sum_th = 0.0_dp
+    do k = 1, size(th)          ! (I + E)^T: rows 1:4 gain the angle rows times e
+      sum_th = sum_th + s6(th(k), :)
+    end do
+    do j = 1, 4
+      s6(j, :) = s6(j, :) + e(j)*sum_th
+    end do
+  end subroutine angle_transform
+
+end module flexmech_coupled_corot
