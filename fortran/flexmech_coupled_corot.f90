@@ -122,16 +122,14 @@ contains
     type(chord_frame), intent(in) :: fr
     real(dp), intent(in) :: a(:)
     real(dp), intent(out) :: r(:), ga(2, 4)
-    real(dp) :: acc(2, 4), s1
+    real(dp) :: acc(2, 4)
     integer :: b
     acc(:, 1) = a(1:2) - sys%grav; acc(:, 2) = a(3:4) - sys%grav      ! gravity: 1 = phi_1 + phi_2
     do b = 1, 2
       acc(:, 2 + b) = -(fr%al*fr%th(b) + 2.0_dp*fr%om*fr%thd(b))*fr%e1 + (fr%thdd(b) - fr%om**2*fr%th(b))*fr%e2
     end do
     ga = matmul(acc, sys%gram(:, :, l))
-    s1 = fr%th(1)*dot_product(fr%e1, ga(:, 3)) + fr%th(2)*dot_product(fr%e1, ga(:, 4))
-    r(1:2) = ga(:, 1) + s1*fr%g; r(3:4) = ga(:, 2) - s1*fr%g
-    r(5) = dot_product(fr%e2, ga(:, 3)); r(6) = dot_product(fr%e2, ga(:, 4))
+    r(1:6) = jt_times(ga, fr)
   end subroutine inertia_residual
 
   !> Rotary inertias J [kg m^2] at the segment's nodes, turning with psi = phi + th_k: J psi'' d psi/dq.
@@ -234,9 +232,9 @@ contains
            + 0.5_dp*dot_product(fr%th, matmul(sys%ke([3, 6], [3, 6], sys%el_off(l) + 1), fr%th))
   end subroutine energies
 
-  !> Inertia part of S: S_ij = sum_a J_a,i . (G B_j)_a with J = dr'/dq' and B = J + ccv dr''/dv +
-  !> ckt dr''/dq (at fixed chord) by their phi coefficients (2, 4, column); msum, csum get the sums of
-  !> the angle columns of M and C_v (the chord terms of absolute angles).
+  !> Inertia part of S: S_ij = sum_a J_a,i . (G B_j)_a with J = dr'/dq' and B = J + cc dr''/dv +
+  !> ck dr''/dq (at fixed chord), column by column from B_j's phi coefficients (2, 4) (jt_times);
+  !> msum, csum get the sums of the angle columns of M and C_v (the chord terms of absolute angles).
   pure subroutine inertia_block(sys, l, fr, cc, ck, s6, msum, csum)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
@@ -244,45 +242,46 @@ contains
     real(dp), intent(in) :: cc, ck
     real(dp), intent(out) :: s6(6, 6)
     real(dp), intent(inout) :: msum(6), csum(6)
-    real(dp) :: jf(2, 4, 6), gj(2, 4, 6), bv(2, 4, 6), bf(2, 4, 6), acj(2, 4), w0(2), gm(4, 4)
-    integer :: i, j, b
+    real(dp) :: gm(4, 4), w0(2), jc(2, 2), ac(2, 2), f(2, 4), rot(2)
+    integer :: j, b
     gm = sys%gram(:, :, l)
-    jf = 0.0_dp                               ! J = dr'/dq' by columns
-    do j = 1, 2
-      jf(j, 1, j) = 1.0_dp; jf(j, 2, 2 + j) = 1.0_dp
-      do b = 3, 4
-        jf(:, b, j) = fr%th(b - 2)*fr%g(j)*fr%e1
-        jf(:, b, 2 + j) = -fr%th(b - 2)*fr%g(j)*fr%e1
-      end do
-    end do
-    jf(:, 3, 5) = fr%e2; jf(:, 4, 6) = fr%e2
-    do j = 1, 6                               ! gj = G J (G symmetric)
-      gj(:, :, j) = matmul(jf(:, :, j), gm)
-    end do
     w0 = -(2.0_dp/fr%l2)*(fr%om*fr%c + (fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%g)   ! d alpha0 / d c'
-    bv = 0.0_dp                               ! dr''/dv by columns
-    do j = 1, 2
-      acj = 0.0_dp
-      do b = 3, 4
-        acj(:, b) = -fr%th(b - 2)*w0(j)*fr%e1 + (-2.0_dp*fr%om*fr%th(b - 2)*fr%e2 - 2.0_dp*fr%thd(b - 2)*fr%e1)*fr%g(j)
+    do j = 1, 2           ! the end-position columns rs_j, re_j
+      do b = 1, 2         ! J's and dr''/dc'_j's coefficients of N_b (b = 1, 2: th_0, th_1)
+        jc(:, b) = fr%th(b)*fr%g(j)*fr%e1
+        ac(:, b) = -fr%th(b)*w0(j)*fr%e1 + (-2.0_dp*fr%om*fr%th(b)*fr%e2 - 2.0_dp*fr%thd(b)*fr%e1)*fr%g(j)
       end do
-      bv(:, :, j) = -acj; bv(:, :, 2 + j) = acj
+      f = 0.0_dp; f(j, 1) = 1.0_dp; f(:, 3:4) = jc - cc*ac
+      s6(:, j) = jt_times(matmul(f, gm), fr)
+      f = 0.0_dp; f(j, 2) = 1.0_dp; f(:, 3:4) = -jc + cc*ac
+      s6(:, 2 + j) = jt_times(matmul(f, gm), fr)
     end do
-    bv(:, 3, 5) = -2.0_dp*fr%om*fr%e1; bv(:, 4, 6) = -2.0_dp*fr%om*fr%e1
-    bf = jf + cc*bv                           ! + ck dr''/dq at fixed chord (the angle columns only)
-    bf(:, 3, 5) = bf(:, 3, 5) + ck*(-fr%al*fr%e1 - fr%om**2*fr%e2)
-    bf(:, 4, 6) = bf(:, 4, 6) + ck*(-fr%al*fr%e1 - fr%om**2*fr%e2)
-    do j = 1, 6
-      do i = 1, 6
-        s6(i, j) = sum(gj(:, :, i)*bf(:, :, j))
+    rot = fr%e2 - (2.0_dp*cc*fr%om + ck*fr%al)*fr%e1 - (ck*fr%om**2)*fr%e2   ! the angle columns' one coefficient
+    do b = 1, 2
+      do j = 1, 4
+        f(:, j) = rot*gm(2 + b, j)
       end do
+      s6(:, 4 + b) = jt_times(f, fr)
     end do
     if (sys%absang(l) == 0) return
-    do i = 1, 6
-      msum(i) = msum(i) + sum(gj(:, :, i)*(jf(:, :, 5) + jf(:, :, 6)))
-      csum(i) = csum(i) + sum(gj(:, :, i)*(bv(:, :, 5) + bv(:, :, 6)))
-    end do
+    f = 0.0_dp; f(:, 3) = fr%e2; f(:, 4) = fr%e2                      ! J's angle columns summed
+    msum = msum + jt_times(matmul(f, gm), fr)
+    f = 0.0_dp; f(:, 3) = -2.0_dp*fr%om*fr%e1; f(:, 4) = f(:, 3)     ! dr''/dv's angle columns summed
+    csum = csum + jt_times(matmul(f, gm), fr)
   end subroutine inertia_block
+
+  !> J^T applied to a field's phi coefficients x (2, 4): (J^T x)_i = sum_a J_a,i . x_a over the local
+  !> DOFs, J = dr'/dq' (J_1 = I, J_2 = 0 on rs and the reverse on re, plus th_k g_j e1 on N_k;
+  !> e2 N_k on th_k).
+  pure function jt_times(x, fr) result(col)
+    real(dp), intent(in) :: x(2, 4)
+    type(chord_frame), intent(in) :: fr
+    real(dp) :: col(6), s
+    s = fr%th(1)*dot_product(fr%e1, x(:, 3)) + fr%th(2)*dot_product(fr%e1, x(:, 4))
+    col(1:2) = x(:, 1) + s*fr%g
+    col(3:4) = x(:, 2) - s*fr%g
+    col(5) = dot_product(fr%e2, x(:, 3)); col(6) = dot_product(fr%e2, x(:, 4))
+  end function jt_times
 
   !> Rotary inertias' part of S: J d d^T with d = d psi/dq = [-g, g, 1 at th_k], and the velocity
   !> dependence of psi'' through alpha0 (ccv J d w0^T on the end columns); msum gets J d.

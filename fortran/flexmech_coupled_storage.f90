@@ -26,6 +26,7 @@ module flexmech_coupled_storage
     integer :: ni = 0, kbi = 0, ldi = 0, nb = 0, kbb = 0, ldb = 0, nrhs = 0
     logical :: cond = .false.
     integer, allocatable :: off(:), ifree(:), bfree(:, :), bglob(:), ipi(:), ipb(:)
+    integer, allocatable :: fl(:, :)     !< (maxld, nseg) free-DOF number of each local DOF (0: fixed)
     real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :), dg(:)
     !> assemble's work: a segment's all-DOF numbers and its local [R, q, v, a] (maxld; allocated once
     !> by lm_setup, so that no evaluation allocates; never referenced through lm by link_eval)
@@ -45,9 +46,12 @@ contains
     integer, allocatable :: cnt(:), bnum(:)
     logical, allocatable :: isb(:)
     allocate (lm%off(sys%nseg), lm%bfree(4, sys%nseg), lm%widx(sys%maxld), lm%wl(sys%maxld, 4))
+    allocate (lm%fl(sys%maxld, sys%nseg))
+    lm%fl = 0
     lm%ni = 0; lm%kbi = 0
     do l = 1, sys%nseg
       n = sys%n_el(l); nl = 3*n + 3
+      lm%fl(1:nl, l) = sys%free_of(sys%ld(1:nl, l))
       lm%off(l) = lm%ni
       lm%ni = lm%ni + nl - 4
       do e = 1, n           ! interior coupling is element by element: half band of the element DOFs
@@ -195,26 +199,26 @@ contains
     do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3; m = nl - 4; o = lm%off(l)
       do j = 1, 4
-        fj = sys%free_of(sys%ld(j, l))
+        fj = lm%fl(j, l)
         if (fj == 0) cycle
         do i = 1, 4
-          fi = sys%free_of(sys%ld(i, l))
+          fi = lm%fl(i, l)
           if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bb(i, j, l)
         end do
         do ii = 1, m
-          fi = sys%free_of(sys%ld(4 + ii, l))
+          fi = lm%fl(4 + ii, l)
           if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ib(o + ii, j)
         end do
       end do
       do jj = 1, m
-        fj = sys%free_of(sys%ld(4 + jj, l))
+        fj = lm%fl(4 + jj, l)
         if (fj == 0) cycle
         do i = 1, 4
-          fi = sys%free_of(sys%ld(i, l))
+          fi = lm%fl(i, l)
           if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bi(i, o + jj)
         end do
         do ii = max(1, jj - lm%kbi), min(m, jj + lm%kbi)
-          fi = sys%free_of(sys%ld(4 + ii, l))
+          fi = lm%fl(4 + ii, l)
           if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ai(2*lm%kbi + 1 + ii - jj, o + jj)
         end do
       end do
