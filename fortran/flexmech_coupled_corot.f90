@@ -242,7 +242,7 @@ contains
     real(dp), intent(in) :: cc, ck
     real(dp), intent(out) :: s6(6, 6)
     real(dp), intent(inout) :: msum(6), csum(6)
-    real(dp) :: gm(4, 4), w0(2), jc(2, 2), ac(2, 2), f(2, 4), rot(2)
+    real(dp) :: gm(4, 4), w0(2), jc(2, 2), ac(2, 2), rot(2)
     integer :: j, b
     gm = sys%gram(:, :, l)
     w0 = -(2.0_dp/fr%l2)*(fr%om*fr%c + (fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%g)   ! d alpha0 / d c'
@@ -251,24 +251,29 @@ contains
         jc(:, b) = fr%th(b)*fr%g(j)*fr%e1
         ac(:, b) = -fr%th(b)*w0(j)*fr%e1 + (-2.0_dp*fr%om*fr%th(b)*fr%e2 - 2.0_dp*fr%thd(b)*fr%e1)*fr%g(j)
       end do
-      f = 0.0_dp; f(j, 1) = 1.0_dp; f(:, 3:4) = jc - cc*ac
-      s6(:, j) = jt_times(matmul(f, gm), fr)
-      f = 0.0_dp; f(j, 2) = 1.0_dp; f(:, 3:4) = -jc + cc*ac
-      s6(:, 2 + j) = jt_times(matmul(f, gm), fr)
+      s6(:, j) = jt_times(x_gram(j, 1, jc(:, 1) - cc*ac(:, 1), jc(:, 2) - cc*ac(:, 2), gm), fr)
+      s6(:, 2 + j) = jt_times(x_gram(j, 2, cc*ac(:, 1) - jc(:, 1), cc*ac(:, 2) - jc(:, 2), gm), fr)
     end do
     rot = fr%e2 - (2.0_dp*cc*fr%om + ck*fr%al)*fr%e1 - (ck*fr%om**2)*fr%e2   ! the angle columns' one coefficient
-    do b = 1, 2
-      do j = 1, 4
-        f(:, j) = rot*gm(2 + b, j)
-      end do
-      s6(:, 4 + b) = jt_times(f, fr)
-    end do
+    s6(:, 5) = jt_times(x_gram(0, 0, rot, [0.0_dp, 0.0_dp], gm), fr)
+    s6(:, 6) = jt_times(x_gram(0, 0, [0.0_dp, 0.0_dp], rot, gm), fr)
     if (sys%absang(l) == 0) return
-    f = 0.0_dp; f(:, 3) = fr%e2; f(:, 4) = fr%e2                      ! J's angle columns summed
-    msum = msum + jt_times(matmul(f, gm), fr)
-    f = 0.0_dp; f(:, 3) = -2.0_dp*fr%om*fr%e1; f(:, 4) = f(:, 3)     ! dr''/dv's angle columns summed
-    csum = csum + jt_times(matmul(f, gm), fr)
+    msum = msum + jt_times(x_gram(0, 0, fr%e2, fr%e2, gm), fr)          ! J's angle columns summed
+    csum = csum + jt_times(x_gram(0, 0, -2.0_dp*fr%om*fr%e1, -2.0_dp*fr%om*fr%e1, gm), fr)   ! dr''/dv's
   end subroutine inertia_block
+
+  !> X G for the phi coefficients X (2, 4) of a column: e_j at phi_ub (ub = 1, 2; 0: none), x3 and x4
+  !> at N_0 and N_1 (G symmetric; the zero coefficients skipped).
+  pure function x_gram(j, ub, x3, x4, gm) result(y)
+    integer, intent(in) :: j, ub
+    real(dp), intent(in) :: x3(2), x4(2), gm(4, 4)
+    real(dp) :: y(2, 4)
+    integer :: k
+    do k = 1, 4
+      y(:, k) = x3*gm(3, k) + x4*gm(4, k)
+    end do
+    if (ub > 0) y(j, :) = y(j, :) + gm(ub, :)
+  end function x_gram
 
   !> J^T applied to a field's phi coefficients x (2, 4): (J^T x)_i = sum_a J_a,i . x_a over the local
   !> DOFs, J = dr'/dq' (J_1 = I, J_2 = 0 on rs and the reverse on re, plus th_k g_j e1 on N_k;
