@@ -22,6 +22,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -491,21 +492,36 @@ class _Frames:
         self.cols = {n: y[keep] for n, y in self.cols.items()}
 
 
+#: most frames of the run at 2 dt that StepDoubling keeps for the observed order (beyond them the
+#: run at 2 dt is made again beside the one at 4 dt)
+KEEP_FRAMES_MAX = 200_000
+
+
 class StepComparison:
     """max |y_fine - y_coarse| of every column where a run (fed block by block, :meth:`add_fine`) and
     the same run on every second step (``coarse_prep``, advanced block by block beside it) have a
     frame at the same step.  Also over the frames of the run at four times the step (``sub``: every
-    and last fine step of that grid's frames), for the observed order.  Holds about one block of each."""
+    and last fine step of that grid's frames), for the observed order, and the coarse run's frames on
+    that grid are kept (``keep``: every and last coarse step, at most KEEP_FRAMES_MAX frames) for
+    comparing it with the run at four times the step later.  Holds about one block of each besides."""
 
-    def __init__(self, coarse_prep, model: str, geometric, sub: tuple[int, int] | None = None):
+    def __init__(self, coarse_prep, model: str, geometric, sub: tuple[int, int] | None = None,
+                 keep: tuple[int, int] | None = None):
         self.coarse = coarse_prep.blocks(model, geometric)
-        self.sub = sub
+        self.sub, self.keep = sub, keep
         self.diff, self.t_at, self.diff_sub = {}, {}, {}
         self.frames = 0
         self.failed = None                   # the coarse run's SolverError, if it stopped
         self.done = False
         self.kernel_s, self.wall_s = 0.0, 0.0
         self._fine, self._coarse = _Frames(), _Frames()
+        self.kept = _Frames() if keep else None
+
+    def kept_block(self):
+        """The coarse run's kept frames as one block (steps on its own grid), or None when not kept."""
+        if self.kept is None:
+            return None
+        return SimpleNamespace(steps=self.kept.steps, t=self.kept.t, columns=self.kept.cols)
 
     @property
     def coarse_last(self) -> int:
@@ -540,6 +556,16 @@ class StepComparison:
             return
         self.kernel_s = cb.timing.get("kernel_s", self.kernel_s)
         self._coarse.add(2 * cb.steps, cb.t, cb.columns)
+        self._keep(cb)
+
+    def _keep(self, cb) -> None:
+        if self.kept is None:
+            return
+        every, last = self.keep
+        on = (((cb.steps % every) == 0) & (cb.steps <= last)) | (cb.steps == last)
+        self.kept.add(cb.steps[on], cb.t[on], {n: np.asarray(y)[on] for n, y in cb.columns.items()})
+        if self.kept.steps.size > KEEP_FRAMES_MAX:
+            self.kept = None
 
     def _match(self) -> None:
         f, c = self._fine, self._coarse
@@ -586,7 +612,9 @@ class StepDoubling:
         self.cmp = None
         if self.pc is not None:
             ncc, occ = coarse_grid(self.pc.nsteps, self.pc.out_every)
-            self.cmp = StepComparison(self.pc, model, geometric, sub=(4 * occ, 4 * ncc) if ncc >= occ >= 1 else None)
+            four = ncc >= occ >= 1          # a run at 4 dt has frames: compare with it, keep 2 dt on its grid
+            self.cmp = StepComparison(self.pc, model, geometric, sub=(4 * occ, 4 * ncc) if four else None,
+                                      keep=(2 * occ, 2 * ncc) if four else None)
 
     @property
     def coarse_steps(self) -> int:
@@ -632,14 +660,17 @@ class StepDoubling:
     def _observed_order(self, name: str) -> float | None:
         """Observed order of ``name``'s time error from the runs at dt, 2 dt and a third one at 4 dt (made
         only when the estimate passes ERROR_WARN): log2 of max |y_2dt - y_4dt| over max |y_dt - y_2dt| on
-        the 4 dt frames.  None when there is no run at 4 dt (too few steps, or it failed)."""
+        the 4 dt frames.  The 2 dt run's frames on that grid were kept while it ran (made again only when
+        there were more than KEEP_FRAMES_MAX).  None when there is no run at 4 dt (too few steps, or it
+        failed)."""
         d12 = self.cmp.diff_sub.get(name)
-        pc = self.prep.coarsened()       # the 2 dt run again, now beside the one at 4 dt
+        pc = self.prep.coarsened()
         if d12 is None or pc is None or pc.coarsened() is None:
             return None
         second = StepComparison(pc.coarsened(), self.model, self.geometric)
+        kept = self.cmp.kept_block()
         try:
-            for block in pc.blocks(self.model, self.geometric):
+            for block in ([kept] if kept is not None else pc.blocks(self.model, self.geometric)):
                 second.add_fine(block)
         except (SolverError, MechanismError):
             return None

@@ -279,3 +279,20 @@ def test_error_estimate_outside_the_asymptotic_range_promises_no_step():
     w = res.extra["error_estimate"]["warning"]
     assert w["suggested_dt"] is None and abs(w["observed_order"] - 2) > 0.3
     assert "not in the asymptotic range" in w["message"] and "no step can be promised" in w["message"]
+
+
+def test_observed_order_from_the_kept_frames_equals_the_run_made_again(monkeypatch):
+    """The 2 dt run's frames on the 4 dt grid are kept while it runs beside the dt run, so the observed
+    order needs only the run at 4 dt: the same order and message as when the 2 dt run is made again
+    (KEEP_FRAMES_MAX = 0 forces that)."""
+    from flexmech_py import guards
+
+    seen = []
+    original = guards.StepComparison.kept_block
+    monkeypatch.setattr(guards.StepComparison, "kept_block", lambda self: seen.append(original(self)) or seen[-1])
+    kept = fm.simulate(_spun_cantilever(0.016), model="classic").extra["error_estimate"]["warning"]
+    assert seen and seen[0] is not None and seen[0].steps.size > 2
+    monkeypatch.setattr(guards, "KEEP_FRAMES_MAX", 0)
+    again = fm.simulate(_spun_cantilever(0.016), model="classic").extra["error_estimate"]["warning"]
+    assert seen[-1] is None
+    assert kept["observed_order"] == again["observed_order"] and kept["message"] == again["message"]
