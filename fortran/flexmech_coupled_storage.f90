@@ -145,13 +145,37 @@ contains
     type(link_mats), intent(inout) :: lm
     integer, intent(in) :: l, ncl, cl(:)
     real(dp), intent(in) :: blk(:, :)
-    integer :: i, j
-    do j = 1, ncl
-      do i = 1, ncl
-        call lm_add(lm, l, cl(i), cl(j), blk(i, j))
+    integer :: i, j, o, d
+    if (.not. ends_first(ncl, cl)) then
+      do j = 1, ncl          ! any order: entry by entry
+        do i = 1, ncl
+          call lm_add(lm, l, cl(i), cl(j), blk(i, j))
+        end do
+      end do
+      return
+    end if
+    o = lm%off(l) - 4; d = 2*lm%kbi + 1   ! the end positions first, then elastic DOFs: by quadrant
+    lm%bb(:, :, l) = lm%bb(:, :, l) + blk(1:4, 1:4)
+    do j = 5, ncl
+      lm%bi(:, o + cl(j)) = lm%bi(:, o + cl(j)) + blk(1:4, j)
+      lm%ib(o + cl(j), :) = lm%ib(o + cl(j), :) + blk(j, 1:4)
+      do i = 5, ncl
+        lm%ai(d + cl(i) - cl(j), o + cl(j)) = lm%ai(d + cl(i) - cl(j), o + cl(j)) + blk(i, j)
       end do
     end do
   end subroutine lm_add_block
+
+  !> cl(1:4) are the end positions 1..4 and cl(5:ncl) elastic DOFs (> 4): lm_add_block by quadrant.
+  pure logical function ends_first(ncl, cl)
+    integer, intent(in) :: ncl, cl(:)
+    integer :: k
+    ends_first = ncl >= 4
+    if (.not. ends_first) return
+    do k = 1, 4
+      ends_first = ends_first .and. cl(k) == k
+    end do
+    ends_first = ends_first .and. all(cl(5:ncl) > 4)
+  end function ends_first
 
   !> The 6 x 6 block of one-element segment l (local DOFs [xs ys xe ye th_0 th_1]) out of its
   !> storage in lm, and back (lm_block_put), for dense work on it.
