@@ -180,8 +180,10 @@ contains
     real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, frame, info, itmax_frame, nf, nc, kat
+    !> restarts at q_n that kept the predictor's matrix: (1) converged with it, (2) rebuilt it after all
+    integer :: restart_kept(2)
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
-    logical :: converged, refactor, use_cond, refresh, second, use_saddle
+    logical :: converged, refactor, use_cond, refresh, second, use_saddle, kept
     type(link_mats) :: lm
     type(saddle_system) :: sd
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
@@ -189,6 +191,7 @@ contains
     nf = sys%nfree
     nc = sys%nc
     refactor = .false.
+    restart_kept = 0
     if (out_every < 1 .or. dt <= 0.0_dp .or. nsteps < 0 .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
         size(cval, 2) < nc .or. size(lf, 1) < nc .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
         alpha_m >= 1.0_dp .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. &
@@ -300,6 +303,7 @@ contains
     subroutine newton_iterations(n)
       integer, intent(in) :: n
       converged = .false.
+      kept = .false.
       da_prev = huge(1.0_dp)
       refresh = .true.
       qn = q; lamn = lam
@@ -329,13 +333,20 @@ contains
         refresh = newton_mode == NEWTON_FULL .or. &
                   (newton_mode == NEWTON_AUTO .and. kat > 1 .and. da_norm > NEWTON_RATE*da_prev)
         if (it == 1 .and. start_mode == START_VELOCITY .and. betap*dt*dt*da_norm > RESTART_MOVE*lref) then
-          ! the start q_n + dt v_n was far (an unresolved stiff mode's velocity): start again at q_n
+          ! the start q_n + dt v_n was far (an unresolved stiff mode's velocity): start again at q_n,
+          ! with the predictor's matrix while that has served the run's earlier restarts (NEWTON_AUTO)
           call restart_at_qn()
-          refresh = .true.
+          kept = newton_mode == NEWTON_AUTO .and. restart_kept(1) >= restart_kept(2)
+          refresh = .not. kept
           cycle
+        end if
+        if (kept .and. refresh) then     ! the kept matrix contracted too little: rebuilt after all
+          restart_kept(2) = restart_kept(2) + 1
+          kept = .false.
         end if
         if (accepted()) then
           converged = .true.
+          if (kept) restart_kept(1) = restart_kept(1) + 1
           exit
         end if
         da_prev = da_norm
