@@ -34,12 +34,9 @@ contains
     real(dp), intent(in) :: q(:), v(:), a(:)
     real(dp), intent(out) :: r(:)
     type(chord_frame) :: fr
-    real(dp) :: ga(2, 4), f, ath(2)
+    real(dp) :: f, ath(2)
     fr = frame_of(sys, l, q, v, a)
-    call inertia_residual(sys, l, fr, a, r, ga)
-    call rotary_residual(sys, l, fr, r)
-    call axial_residual(sys, l, fr, r, f, ath)
-    call bending_residual(sys, l, fr, r)
+    call residual_terms(sys, l, fr, a, r, f, ath)
     if (sys%absang(l) == 1) call absolute_rows(fr, r)
   end subroutine one_element_residual
 
@@ -54,12 +51,9 @@ contains
     logical, intent(in) :: want
     real(dp), intent(out) :: r(:), s6(6, 6), ekin, epot
     type(chord_frame) :: fr
-    real(dp) :: ga(2, 4), f, ath(2), msum(6), csum(6), sr
+    real(dp) :: f, ath(2), msum(6), csum(6), sr
     fr = frame_of(sys, l, q, v, a)
-    call inertia_residual(sys, l, fr, a, r, ga)
-    call rotary_residual(sys, l, fr, r)
-    call axial_residual(sys, l, fr, r, f, ath)
-    call bending_residual(sys, l, fr, r)
+    call residual_terms(sys, l, fr, a, r, f, ath)
     call energies(sys, l, fr, q, v, f, ekin, epot)
     sr = r(5) + r(6)
     if (sys%absang(l) == 1) call absolute_rows(fr, r)
@@ -92,6 +86,20 @@ contains
     s6(1:2, 3:4) = s6(1:2, 3:4) + h; s6(3:4, 1:2) = s6(3:4, 1:2) + h
   end subroutine absolute_block
 
+  !> The residual in chord-relative angles: inertia and gravity, rotary inertias, axial force f [N]
+  !> (ath = d eps/d th of a shallow arch), bending and damping.
+  pure subroutine residual_terms(sys, l, fr, a, r, f, ath)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(in) :: a(:)
+    real(dp), intent(out) :: r(:), f, ath(2)
+    call inertia_residual(sys, l, fr, a, r)
+    call rotary_residual(sys, l, fr, r)
+    call axial_residual(sys, l, fr, r, f, ath)
+    call bending_residual(sys, l, fr, r)
+  end subroutine residual_terms
+
   !> The chord frame of segment l and its chord-relative end angles at the local q, v, a.
   pure function frame_of(sys, l, q, v, a) result(fr)
     type(coupled_system), intent(in) :: sys
@@ -115,21 +123,20 @@ contains
   end function frame_of
 
   !> Inertia and gravity: R_j = sum_a J_a,j . (G (r'' - grav))_a with r'' = sum_a phi_a A_a,
-  !> A = [rs'', re'', -(alpha th_k + 2 omega th_k') e1 + (th_k'' - omega^2 th_k) e2]; ga = G A.
-  pure subroutine inertia_residual(sys, l, fr, a, r, ga)
+  !> A = [rs'', re'', -(alpha th_k + 2 omega th_k') e1 + (th_k'' - omega^2 th_k) e2].
+  pure subroutine inertia_residual(sys, l, fr, a, r)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
     type(chord_frame), intent(in) :: fr
     real(dp), intent(in) :: a(:)
-    real(dp), intent(out) :: r(:), ga(2, 4)
+    real(dp), intent(out) :: r(:)
     real(dp) :: acc(2, 4)
     integer :: b
     acc(:, 1) = a(1:2) - sys%grav; acc(:, 2) = a(3:4) - sys%grav      ! gravity: 1 = phi_1 + phi_2
     do b = 1, 2
       acc(:, 2 + b) = -(fr%al*fr%th(b) + 2.0_dp*fr%om*fr%thd(b))*fr%e1 + (fr%thdd(b) - fr%om**2*fr%th(b))*fr%e2
     end do
-    ga = matmul(acc, sys%gram(:, :, l))
-    r(1:6) = jt_times(ga, fr)
+    r(1:6) = jt_times(matmul(acc, sys%gram(:, :, l)), fr)
   end subroutine inertia_residual
 
   !> Rotary inertias J [kg m^2] at the segment's nodes, turning with psi = phi + th_k: J psi'' d psi/dq.
