@@ -303,6 +303,20 @@ def test_newton_converges_at_64_elements_per_link(cases_dir):
     assert _seed_newton(cases_dir, 64, 1e-5, 2e-4, 1, 2)["max_per_step"] <= 2
 
 
+def test_restart_at_the_last_position_keeps_the_factorized_matrix(cases_dir):
+    """Relative node angles at 64 el/link, dt = 1e-5 s: the ringing node angles make some steps start
+    again at q_n (3 iterations there: more than 2.2 per step on average); those steps converge with
+    the matrix factorized at q_n + dt v_n, so one factorization per step (1.6 when every restart
+    rebuilt it; theory.md 12.2)."""
+    from flexmech_py.simulate import Prepared
+
+    case = fm.load_case(cases_dir / "fourbar_hac.toml",
+                        overrides=["solver.dt=1e-5", "solver.t_end=3e-3", "solver.error_estimate='none'"])
+    newton = Prepared(case, elements_per_link=64).run("nonlinear").extra["coupled"]["newton"]
+    assert newton["mean_per_step"] > 2.2
+    assert newton["factorizations_per_step"] < 1.05
+
+
 def test_newton_converges_at_256_elements_per_link_with_generalized_alpha(cases_dir):
     """At 256 el/link (dt = 1.25e-5 s, generalized-alpha) the crank's node angle rings at ~1e12
     rad/s^2 and its velocity makes q_n + dt v_n a far start: the step starts again at q_n (theory.md
