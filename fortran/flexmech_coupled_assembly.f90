@@ -18,7 +18,8 @@ contains
   !> Assemble the global residual R (all DOFs) at time t and, if want, the iteration matrix
   !> S = M + cc*C_v + ck*K_t over the free DOFs (segment blocks and the rigid bodies' diagonal, in lm).
   !> R holds the inertia, elastic, damping, gravity and force-drive terms (not the constraint forces).
-  !> Returns energies [kinetic, potential (strain + gravity)].
+  !> Returns energies [kinetic, potential (strain + gravity)] when not want (with want the
+  !> one-element segments leave theirs out: the Newton iterations do not read them).
   subroutine assemble(sys, q, v, a, t, want, cc, ck, res, lm, energy)
     type(coupled_system), intent(in) :: sys
     real(dp), intent(in) :: q(:), v(:), a(:), t, cc, ck
@@ -152,6 +153,7 @@ contains
     call assemble(sys, q, v, a, t, .true., 0.0_dp, 1.0_dp, res, lm, energy)
     call lm_to_band(sys, lm, ab)
     km = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+    call assemble(sys, q, v, a, t, .false., 0.0_dp, 0.0_dp, res, lm, energy)   ! the energies (and res)
   end subroutine coupled_dense
 
   !> Residual res (all DOFs: inertia, elastic, damping, gravity and force drives, no constraint forces)

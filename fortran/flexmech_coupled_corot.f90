@@ -40,8 +40,9 @@ contains
     if (sys%absang(l) == 1) call absolute_rows(fr, r)
   end subroutine one_element_residual
 
-  !> Residual r (6), energies [J] (kinetic; strain + gravity) and, if want, the segment's block s6
-  !> (6 x 6) of S = M + ccv C_v + ckt K_t.  With absolute node angles the block of the chord-relative
+  !> Residual r (6) and either the energies [J] (kinetic; strain + gravity; want = .false., the
+  !> frames) or the segment's block s6 (6 x 6) of S = M + ccv C_v + ckt K_t (want; ekin = epot = 0:
+  !> the Newton iterations do not read them).  With absolute node angles the block of the chord-relative
   !> angles is carried back by T = d th / d(rs, re, psi) (docs/theory.md 12.1):
   !>   S = T^T S_rel T + (the chord terms of th', th'') - ckt (R_th0 + R_th1) d2phi/d(rs, re)2.
   pure subroutine one_element_eval(sys, l, q, v, a, want, ccv, ckt, r, s6, ekin, epot)
@@ -54,10 +55,13 @@ contains
     real(dp) :: f, ath(2), msum(6), csum(6), sr
     fr = frame_of(sys, l, q, v, a)
     call residual_terms(sys, l, fr, a, r, f, ath)
-    call energies(sys, l, fr, q, v, f, ekin, epot)
     sr = r(5) + r(6)
     if (sys%absang(l) == 1) call absolute_rows(fr, r)
-    if (.not. want) return
+    ekin = 0.0_dp; epot = 0.0_dp
+    if (.not. want) then
+      call energies(sys, l, fr, q, v, f, ekin, epot)
+      return
+    end if
     msum = 0.0_dp; csum = 0.0_dp
     call inertia_block(sys, l, fr, ccv, ckt, s6, msum, csum)
     call rotary_block(sys, l, fr, ccv, s6, msum)

@@ -29,7 +29,8 @@ contains
   end subroutine coupled_set_inertia
 
   !> Residual (local vector of length nld), energies and, if want, the blocks of segment l of the
-  !> iteration matrix S = M + ccv C_v + ckt K_t (added to lm, which the caller has zeroed).
+  !> iteration matrix S = M + ccv C_v + ckt K_t (added to lm, which the caller has zeroed); a
+  !> one-element segment's energies only when not want (one_element_eval).
   !> A segment with absolute node angles (sys%absang(l) = 1, the nonlinear model) is evaluated in the
   !> chord-relative angles th_k = psi_k - phi, th_k' = psi_k' - omega, th_k'' = psi_k'' - alpha, and
   !> its residual and matrix carried back by T = d th / d(xs, ys, xe, ye, psi) (docs/theory.md 12.1):
