@@ -63,8 +63,11 @@ def interrupt_after_first_result(argv: list, out: Path, cwd: Path) -> tuple[int,
     import subprocess
     import time
 
+    # SIGINT as a terminal delivers it: a suite started as a background job (its shell ignores SIGINT
+    # there, and children inherit that) must not make the sweep ignore it
     p = subprocess.Popen([sys.executable, "-m", "flexmech_py", *argv, "--out", str(out)], cwd=cwd,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     while not list((out / "cache").glob("*.json")) and time.monotonic() < deadline and p.poll() is None:
         time.sleep(0.005)
