@@ -3,11 +3,11 @@
 !> tests and the modal analysis.
 module flexmech_coupled_assembly
   use flexmech_kinds, only: dp
-  use flexmech_assembly, only: band_rows, band_to_dense
+  use flexmech_assembly, only: band_to_dense
   use flexmech_markers, only: marker_state, MAXCOL
   use flexmech_coupled_system, only: coupled_system
   use flexmech_coupled_rows, only: drive_load
-  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_to_band
+  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_zero, lm_band_setup, lm_band_finish
   use flexmech_coupled_element, only: link_eval, segment_residual
   implicit none
   private
@@ -30,9 +30,7 @@ contains
     real(dp) :: ek, ep
     res = 0.0_dp
     energy = 0.0_dp
-    if (want) then
-      lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp; lm%dg = 0.0_dp
-    end if
+    if (want) call lm_zero(lm)
     do l = 1, sys%nseg
       nl = 3*sys%n_el(l) + 3
       call gather(sys, l, nl, q, v, a, lm)
@@ -140,19 +138,18 @@ contains
     type(coupled_system), intent(in) :: sys
     real(dp), intent(in) :: q(:), v(:), a(:), t
     real(dp), intent(out) :: res(:), mm(:, :), cm(:, :), km(:, :), energy(2)
-    real(dp), allocatable :: ab(:, :)
     type(link_mats) :: lm
     call lm_setup(sys, 1, lm)
-    allocate (ab(band_rows(sys%kl, sys%ku), sys%nfree))
+    call lm_band_setup(sys, lm)       ! as a run's band: one-element segments straight into it
     call assemble(sys, q, v, a, t, .true., 0.0_dp, 0.0_dp, res, lm, energy)
-    call lm_to_band(sys, lm, ab)
-    mm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree)
+    call lm_band_finish(sys, lm)
+    mm = band_to_dense(lm%ab, sys%kl, sys%ku, sys%nfree)
     call assemble(sys, q, v, a, t, .true., 1.0_dp, 0.0_dp, res, lm, energy)
-    call lm_to_band(sys, lm, ab)
-    cm = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+    call lm_band_finish(sys, lm)
+    cm = band_to_dense(lm%ab, sys%kl, sys%ku, sys%nfree) - mm
     call assemble(sys, q, v, a, t, .true., 0.0_dp, 1.0_dp, res, lm, energy)
-    call lm_to_band(sys, lm, ab)
-    km = band_to_dense(ab, sys%kl, sys%ku, sys%nfree) - mm
+    call lm_band_finish(sys, lm)
+    km = band_to_dense(lm%ab, sys%kl, sys%ku, sys%nfree) - mm
     call assemble(sys, q, v, a, t, .false., 0.0_dp, 0.0_dp, res, lm, energy)   ! the energies (and res)
   end subroutine coupled_dense
 

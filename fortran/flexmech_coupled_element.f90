@@ -7,7 +7,7 @@ module flexmech_coupled_element
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap, elem_index, shape_fn, th_index, gx, gw
-  use flexmech_coupled_storage, only: link_mats, lm_add, lm_add_block, lm_block_get, lm_block_put
+  use flexmech_coupled_storage, only: link_mats, lm_add, lm_add_block, lm_block_get, lm_block_put, lm_put_one
   use flexmech_coupled_corot, only: one_element_residual, one_element_eval, absolute_block
   implicit none
   private
@@ -48,7 +48,7 @@ contains
     real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, s6(6, 6)
     if (sys%n_el(l) == 1 .and. inertia_mode == INERTIA_CLOSED) then   ! one element: one pass
       call one_element_eval(sys, l, q, v, a, want, ccv, ckt, r, s6, ekin, epot)
-      if (want) call lm_block_put(lm, l, s6)
+      if (want) call lm_put_one(lm, l, s6)
       return
     end if
     if (sys%absang(l) == 0) then

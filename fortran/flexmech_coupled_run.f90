@@ -13,11 +13,10 @@ module flexmech_coupled_run
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
                              STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
-  use flexmech_assembly, only: band_rows
   use flexmech_markers, only: marker_state, CON_POINT, CON_ANGLE, MAXCOL
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap
   use flexmech_coupled_rows, only: eval_row, drive_load
-  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_to_band, lm_factor, lm_solve
+  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_band_setup, lm_band_finish, lm_factor, lm_solve
   use flexmech_coupled_assembly, only: assemble, assemble_residual
   use flexmech_saddle_band, only: saddle_system, saddle_setup, saddle_factor, saddle_solve, saddle_flops
   implicit none
@@ -176,7 +175,7 @@ contains
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
-    real(dp), allocatable :: ab(:, :), res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
+    real(dp), allocatable :: res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
     real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, frame, info, itmax_frame, nf, nc, kat
@@ -274,11 +273,7 @@ contains
       call lm_setup(sys, nc, lm)
       use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
                                 (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
-      if (use_cond) then
-        allocate (ab(1, 1))
-      else
-        allocate (ab(band_rows(sys%kl, sys%ku), nf))
-      end if
+      if (.not. use_cond) call lm_band_setup(sys, lm)     ! S as one band, in lm%ab
       allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf), qn(sys%ndof))
       w = 0.0_dp
       allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
@@ -575,7 +570,7 @@ contains
         end do
       end do
       if (nc > 0 .and. refactor .and. use_saddle) then
-        call saddle_factor(sd, ab, gt, ngnz, gnz, status)
+        call saddle_factor(sd, lm%ab, gt, ngnz, gnz, status)
         refactor = .false.
       else if (nc > 0 .and. refactor) then
         x(:, 1:nc) = gt(:, 1:nc)
@@ -583,7 +578,7 @@ contains
           call lm_solve(sys, lm, nc, x, nf, status)
           if (status /= STATUS_OK) return
         else
-          call dgbtrs('N', nf, sys%kl, sys%ku, nc, ab, size(ab, 1), ipiv, x, nf, info)
+          call dgbtrs('N', nf, sys%kl, sys%ku, nc, lm%ab, size(lm%ab, 1), ipiv, x, nf, info)
         end if
         do j = 1, nc
           do ic = 1, nc
@@ -602,9 +597,9 @@ contains
       if (use_cond) then
         call lm_factor(sys, lm, status)
       else
-        call lm_to_band(sys, lm, ab)
+        call lm_band_finish(sys, lm)
         if (.not. use_saddle) then   ! (the saddle band takes S in once the gradients are known)
-          call dgbtrf(nf, nf, sys%kl, sys%ku, ab, size(ab, 1), ipiv, info)
+          call dgbtrf(nf, nf, sys%kl, sys%ku, lm%ab, size(lm%ab, 1), ipiv, info)
           status = lapack_status(info)
         end if
       end if
@@ -616,7 +611,7 @@ contains
       if (use_cond) then
         call lm_solve(sys, lm, 1, xx, nf, status)
       else
-        call dgbtrs('N', nf, sys%kl, sys%ku, 1, ab, size(ab, 1), ipiv, xx, nf, info)
+        call dgbtrs('N', nf, sys%kl, sys%ku, 1, lm%ab, size(lm%ab, 1), ipiv, xx, nf, info)
       end if
       if (.not. ieee_is_finite(sum(abs(xx)))) status = STATUS_NONFINITE
     end subroutine band_solve_rhs

@@ -10,7 +10,8 @@ module flexmech_coupled_storage
   use flexmech_coupled_system, only: coupled_system, elem_index
   implicit none
   private
-  public :: link_mats, lm_setup, lm_add, lm_add_block, lm_block_get, lm_block_put, lm_to_band, lm_factor, lm_solve
+  public :: link_mats, lm_setup, lm_band_setup, lm_zero, lm_put_one, lm_band_finish
+  public :: lm_add, lm_add_block, lm_block_get, lm_block_put, lm_to_band, lm_factor, lm_solve
 
   !> Iteration matrix S = M + cc C_v + ck K_t stored by segment blocks.  Local DOFs of segment l:
   !> 1..4 the end positions ("boundary", B), 5..nl the elastic DOFs ("interior", I; ni_l = nl - 4),
@@ -27,6 +28,12 @@ module flexmech_coupled_storage
     logical :: cond = .false.
     integer, allocatable :: off(:), ifree(:), bfree(:, :), bglob(:), ipi(:), ipb(:)
     integer, allocatable :: fl(:, :)     !< (maxld, nseg) free-DOF number of each local DOF (0: fixed)
+    !> the whole free-DOF band (LAPACK storage, kl = ku = sys%kl; lm_band_setup) when S is factorized
+    !> as one band: one-element segments write their block straight into it (lm_put_one, inband(l)),
+    !> the others and the rigid bodies through the blocks above (lm_band_finish)
+    real(dp), allocatable :: ab(:, :)
+    logical, allocatable :: inband(:)
+    integer :: kd = 0                    !< lm%ab's diagonal row, kl + ku + 1
     real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :), dg(:)
     !> assemble's work: a segment's all-DOF numbers and its local [R, q, v, a] (maxld; allocated once
     !> by lm_setup, so that no evaluation allocates; never referenced through lm by link_eval)
@@ -211,16 +218,78 @@ contains
     end do
   end subroutine lm_block_put
 
+  !> The whole free-DOF band lm%ab for the solves that factorize S as one band (see link_mats).
+  subroutine lm_band_setup(sys, lm)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    allocate (lm%ab(band_rows(sys%kl, sys%ku), sys%nfree), lm%inband(sys%nseg))
+    lm%kd = sys%kl + sys%ku + 1
+    lm%ab = 0.0_dp
+    lm%inband = .false.
+  end subroutine lm_band_setup
+
+  !> S = 0 before an assembly: the segment blocks, the rigid bodies' diagonal and lm%ab if there is one.
+  subroutine lm_zero(lm)
+    type(link_mats), intent(inout) :: lm
+    lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp; lm%dg = 0.0_dp
+    if (.not. allocated(lm%ab)) return
+    lm%ab = 0.0_dp
+    lm%inband = .false.
+  end subroutine lm_zero
+
+  !> The whole 6 x 6 block s6 of one-element segment l (local DOFs [xs ys xe ye th_0 th_1]): straight
+  !> into lm%ab when there is one, else into the segment blocks.
+  pure subroutine lm_put_one(lm, l, s6)
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: l
+    real(dp), intent(in) :: s6(6, 6)
+    integer :: i, j, fi, fj, d
+    if (.not. allocated(lm%ab)) then
+      call lm_block_put(lm, l, s6)
+      return
+    end if
+    d = lm%kd
+    do j = 1, 6
+      fj = lm%fl(j, l)
+      if (fj == 0) cycle
+      do i = 1, 6
+        fi = lm%fl(i, l)
+        if (fi > 0) lm%ab(d + fi - fj, fj) = lm%ab(d + fi - fj, fj) + s6(i, j)
+      end do
+    end do
+    lm%inband(l) = .true.
+  end subroutine lm_put_one
+
+  !> lm%ab += the segment blocks of the segments not written into it and the rigid bodies' diagonal:
+  !> the whole band S, ready to factorize.
+  subroutine lm_band_finish(sys, lm)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    call add_blocks(sys, lm, lm%inband, lm%ab)
+  end subroutine lm_band_finish
+
   !> Scatter the segment blocks into the band matrix ab (LAPACK storage, kl = ku = sys%kl) over the
-  !> free DOFs (and the rigid bodies' diagonal): the reference solve and coupled_dense.
+  !> free DOFs (and the rigid bodies' diagonal): coupled_dense's path without lm%ab.
   subroutine lm_to_band(sys, lm, ab)
     type(coupled_system), intent(in) :: sys
     type(link_mats), intent(in) :: lm
     real(dp), intent(out) :: ab(:, :)
-    integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d
+    logical :: none(sys%nseg)
     ab = 0.0_dp
+    none = .false.
+    call add_blocks(sys, lm, none, ab)
+  end subroutine lm_to_band
+
+  !> ab += the blocks of the segments l with .not. skip(l), and the rigid bodies' diagonal.
+  subroutine add_blocks(sys, lm, skip, ab)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(in) :: lm
+    logical, intent(in) :: skip(:)
+    real(dp), intent(inout) :: ab(:, :)
+    integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d
     d = sys%kl + sys%ku + 1
     do l = 1, sys%nseg
+      if (skip(l)) cycle
       nl = 3*sys%n_el(l) + 3; m = nl - 4; o = lm%off(l)
       do j = 1, 4
         fj = lm%fl(j, l)
@@ -250,7 +319,7 @@ contains
     do fi = 1, sys%nfree
       ab(d, fi) = ab(d, fi) + lm%dg(fi)
     end do
-  end subroutine lm_to_band
+  end subroutine add_blocks
 
   !> Condensed factorization: per segment S_II = LU (in place) and z = S_II^-1 S_IB; the Schur
   !> complement sb = S_BB - S_BI z on the boundary DOFs, assembled and factorized (band kbb).
