@@ -126,6 +126,13 @@ contains
     end if
   end function frame_of
 
+  !> w0 = d alpha0 / d c' [1/m s]: the chord velocity's part in alpha0 = -2 (c.c') omega/|c|^2.
+  pure function alpha0_rate(fr) result(w0)
+    type(chord_frame), intent(in) :: fr
+    real(dp) :: w0(2)
+    w0 = -(2.0_dp/fr%l2)*(fr%om*fr%c + (fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%g)
+  end function alpha0_rate
+
   !> Inertia and gravity: R_j = sum_a J_a,j . (G (r'' - grav))_a with r'' = sum_a phi_a A_a,
   !> A = [rs'', re'', -(alpha th_k + 2 omega th_k') e1 + (th_k'' - omega^2 th_k) e2].
   pure subroutine inertia_residual(sys, l, fr, a, r)
@@ -256,7 +263,7 @@ contains
     real(dp) :: gm(4, 4), w0(2), jc(2, 2), ac(2, 2), rot(2)
     integer :: j, b
     gm = sys%gram(:, :, l)
-    w0 = -(2.0_dp/fr%l2)*(fr%om*fr%c + (fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%g)   ! d alpha0 / d c'
+    w0 = alpha0_rate(fr)
     do j = 1, 2           ! the end-position columns rs_j, re_j
       do b = 1, 2         ! J's and dr''/dc'_j's coefficients of N_b (b = 1, 2: th_0, th_1)
         jc(:, b) = fr%th(b)*fr%g(j)*fr%e1
@@ -309,9 +316,9 @@ contains
     real(dp), intent(inout) :: s6(6, 6), msum(6)
     real(dp) :: d(6), w0(2)
     integer :: i, j
-    w0 = -(2.0_dp/fr%l2)*(fr%om*fr%c + (fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%g)
     do i = 1, sys%nri
       if (sys%ri_seg(i) /= l) cycle
+      w0 = alpha0_rate(fr)
       d = [-fr%g(1), -fr%g(2), fr%g(1), fr%g(2), 0.0_dp, 0.0_dp]
       d(5 + sys%ri_node(i)) = 1.0_dp
       do j = 1, 6

@@ -11,7 +11,7 @@ module flexmech_coupled_storage
   implicit none
   private
   public :: link_mats, lm_setup, lm_band_setup, lm_zero, lm_put_one, lm_band_finish
-  public :: lm_add, lm_add_block, lm_block_get, lm_block_put, lm_to_band, lm_factor, lm_solve
+  public :: lm_add, lm_add_block, lm_block_get, lm_block_put, lm_factor, lm_solve
 
   !> Iteration matrix S = M + cc C_v + ck K_t stored by segment blocks.  Local DOFs of segment l:
   !> 1..4 the end positions ("boundary", B), 5..nl the elastic DOFs ("interior", I; ni_l = nl - 4),
@@ -261,46 +261,25 @@ contains
   end subroutine lm_put_one
 
   !> lm%ab += the segment blocks of the segments not written into it and the rigid bodies' diagonal:
-  !> the whole band S, ready to factorize.
+  !> the whole band S (LAPACK storage, kl = ku = sys%kl, over the free DOFs), ready to factorize.
   subroutine lm_band_finish(sys, lm)
     type(coupled_system), intent(in) :: sys
     type(link_mats), intent(inout) :: lm
-    call add_blocks(sys, lm, lm%inband, lm%ab)
-  end subroutine lm_band_finish
-
-  !> Scatter the segment blocks into the band matrix ab (LAPACK storage, kl = ku = sys%kl) over the
-  !> free DOFs (and the rigid bodies' diagonal): coupled_dense's path without lm%ab.
-  subroutine lm_to_band(sys, lm, ab)
-    type(coupled_system), intent(in) :: sys
-    type(link_mats), intent(in) :: lm
-    real(dp), intent(out) :: ab(:, :)
-    logical :: none(sys%nseg)
-    ab = 0.0_dp
-    none = .false.
-    call add_blocks(sys, lm, none, ab)
-  end subroutine lm_to_band
-
-  !> ab += the blocks of the segments l with .not. skip(l), and the rigid bodies' diagonal.
-  subroutine add_blocks(sys, lm, skip, ab)
-    type(coupled_system), intent(in) :: sys
-    type(link_mats), intent(in) :: lm
-    logical, intent(in) :: skip(:)
-    real(dp), intent(inout) :: ab(:, :)
     integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d
-    d = sys%kl + sys%ku + 1
+    d = lm%kd
     do l = 1, sys%nseg
-      if (skip(l)) cycle
+      if (lm%inband(l)) cycle
       nl = 3*sys%n_el(l) + 3; m = nl - 4; o = lm%off(l)
       do j = 1, 4
         fj = lm%fl(j, l)
         if (fj == 0) cycle
         do i = 1, 4
           fi = lm%fl(i, l)
-          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bb(i, j, l)
+          if (fi > 0) lm%ab(d + fi - fj, fj) = lm%ab(d + fi - fj, fj) + lm%bb(i, j, l)
         end do
         do ii = 1, m
           fi = lm%fl(4 + ii, l)
-          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ib(o + ii, j)
+          if (fi > 0) lm%ab(d + fi - fj, fj) = lm%ab(d + fi - fj, fj) + lm%ib(o + ii, j)
         end do
       end do
       do jj = 1, m
@@ -308,18 +287,18 @@ contains
         if (fj == 0) cycle
         do i = 1, 4
           fi = lm%fl(i, l)
-          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%bi(i, o + jj)
+          if (fi > 0) lm%ab(d + fi - fj, fj) = lm%ab(d + fi - fj, fj) + lm%bi(i, o + jj)
         end do
         do ii = max(1, jj - lm%kbi), min(m, jj + lm%kbi)
           fi = lm%fl(4 + ii, l)
-          if (fi > 0) ab(d + fi - fj, fj) = ab(d + fi - fj, fj) + lm%ai(2*lm%kbi + 1 + ii - jj, o + jj)
+          if (fi > 0) lm%ab(d + fi - fj, fj) = lm%ab(d + fi - fj, fj) + lm%ai(2*lm%kbi + 1 + ii - jj, o + jj)
         end do
       end do
     end do
     do fi = 1, sys%nfree
-      ab(d, fi) = ab(d, fi) + lm%dg(fi)
+      lm%ab(d, fi) = lm%ab(d, fi) + lm%dg(fi)
     end do
-  end subroutine add_blocks
+  end subroutine lm_band_finish
 
   !> Condensed factorization: per segment S_II = LU (in place) and z = S_II^-1 S_IB; the Schur
   !> complement sb = S_BB - S_BI z on the boundary DOFs, assembled and factorized (band kbb).
