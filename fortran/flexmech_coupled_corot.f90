@@ -15,7 +15,7 @@ module flexmech_coupled_corot
   use flexmech_coupled_system, only: coupled_system, wrap
   implicit none
   private
-  public :: one_element_residual, one_element_eval, absolute_block
+  public :: one_element_residual, one_element_eval, one_element_elastic, absolute_block
 
   !> The chord frame of a segment and its chord-relative end angles: c = re - rs [m] and its rates,
   !> l2 = |c|^2, ell = |c|, e1 = c/ell, e2 = Omega e1, g = Omega c/l2 (d phi/d re), omega = g.c',
@@ -35,7 +35,7 @@ contains
     real(dp), intent(out) :: r(:)
     type(chord_frame) :: fr
     real(dp) :: f, ath(2)
-    fr = frame_of(sys, l, q, v, a)
+    fr = frame_of(q, v, a, sys%absang(l) == 1)
     call residual_terms(sys, l, fr, a, r, f, ath)
     if (sys%absang(l) == 1) call absolute_rows(fr, r)
   end subroutine one_element_residual
@@ -53,7 +53,7 @@ contains
     real(dp), intent(out) :: r(:), s6(6, 6), ekin, epot
     type(chord_frame) :: fr
     real(dp) :: f, ath(2), msum(6), csum(6), sr
-    fr = frame_of(sys, l, q, v, a)
+    fr = frame_of(q, v, a, sys%absang(l) == 1)
     call residual_terms(sys, l, fr, a, r, f, ath)
     sr = r(5) + r(6)
     if (sys%absang(l) == 1) call absolute_rows(fr, r)
@@ -69,6 +69,33 @@ contains
     call bending_block(sys, l, ccv, ckt, s6, csum)
     if (sys%absang(l) == 1) call absolute_block(s6, fr%c, fr%cd, fr%cdd, sr, ccv, ckt, msum, csum)
   end subroutine one_element_eval
+
+  !> The terms of a one-element segment besides its translational inertia, at local q, v, a with
+  !> chord-relative angles (the general path's Gauss-point check, flexmech_coupled_element: link_eval):
+  !> r (6) += rotary inertias, axial force (and the shallow arch's), bending and damping; ekin +=
+  !> the rotary inertias', epot += the strain energy; if want, s6 (6 x 6) gets their part of S and
+  !> msum, csum their angle-column sums of M and C_v (absolute node angles only, as one_element_eval).
+  pure subroutine one_element_elastic(sys, l, q, v, a, want, ccv, ckt, r, s6, msum, csum, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    real(dp), intent(in) :: q(:), v(:), a(:), ccv, ckt
+    logical, intent(in) :: want
+    real(dp), intent(inout) :: r(:), msum(6), csum(6), ekin, epot
+    real(dp), intent(out) :: s6(6, 6)
+    type(chord_frame) :: fr
+    real(dp) :: f, ath(2), ek, ep
+    fr = frame_of(q, v, a, .false.)
+    call rotary_residual(sys, l, fr, r)
+    call axial_residual(sys, l, fr, r, f, ath)
+    call bending_residual(sys, l, fr, r)
+    call elastic_energies(sys, l, fr, f, ek, ep)
+    ekin = ekin + ek; epot = epot + ep
+    s6 = 0.0_dp
+    if (.not. want) return
+    call rotary_block(sys, l, fr, ccv, s6, msum)
+    call axial_block(sys, l, fr, ckt, f, ath, s6)
+    call bending_block(sys, l, ccv, ckt, s6, csum)
+  end subroutine one_element_elastic
 
   !> A one-element segment's block s6 of S in chord-relative angles carried to absolute node angles
   !> (docs/theory.md 12.1): the chord terms of th', th'' (angle_rate_terms), T^T S T (angle_transform)
@@ -104,11 +131,11 @@ contains
     call bending_residual(sys, l, fr, r)
   end subroutine residual_terms
 
-  !> The chord frame of segment l and its chord-relative end angles at the local q, v, a.
-  pure function frame_of(sys, l, q, v, a) result(fr)
-    type(coupled_system), intent(in) :: sys
-    integer, intent(in) :: l
+  !> The chord frame of a one-element segment and its chord-relative end angles at the local q, v, a
+  !> (absolute: q(5:6) are absolute node angles psi_k, carried to th_k = psi_k - phi).
+  pure function frame_of(q, v, a, absolute) result(fr)
     real(dp), intent(in) :: q(:), v(:), a(:)
+    logical, intent(in) :: absolute
     type(chord_frame) :: fr
     real(dp) :: phi
     fr%c = q(3:4) - q(1:2); fr%cd = v(3:4) - v(1:2); fr%cdd = a(3:4) - a(1:2)
@@ -119,7 +146,7 @@ contains
     fr%al0 = -2.0_dp*(fr%c(1)*fr%cd(1) + fr%c(2)*fr%cd(2))*fr%om/fr%l2
     fr%al = fr%al0 + fr%g(1)*fr%cdd(1) + fr%g(2)*fr%cdd(2)
     fr%th = q(5:6); fr%thd = v(5:6); fr%thdd = a(5:6)
-    if (sys%absang(l) == 1) then
+    if (absolute) then
       phi = atan2(fr%e1(2), fr%e1(1))
       fr%th = [wrap(fr%th(1) - phi), wrap(fr%th(2) - phi)]
       fr%thd = fr%thd - fr%om; fr%thdd = fr%thdd - fr%al
@@ -230,25 +257,39 @@ contains
     type(chord_frame), intent(in) :: fr
     real(dp), intent(in) :: q(:), v(:), f
     real(dp), intent(out) :: ekin, epot
-    real(dp) :: vel(2, 4), gm(4, 4), gs
-    integer :: b, i, k
+    real(dp) :: vel(2, 4), gm(4, 4), gs, ek, ep
+    integer :: b
     gm = sys%gram(:, :, l)
     vel(:, 1) = v(1:2); vel(:, 2) = v(3:4)
     do b = 1, 2
       vel(:, 2 + b) = -fr%om*fr%th(b)*fr%e1 + fr%thd(b)*fr%e2
     end do
     ekin = 0.5_dp*sum(matmul(vel, gm)*vel)
+    gs = dot_product(sys%grav, fr%e2)
+    epot = -sum((gm(1, :) + gm(2, :))*[dot_product(sys%grav, q(1:2)), dot_product(sys%grav, q(3:4)), &
+                                       fr%th(1)*gs, fr%th(2)*gs])
+    call elastic_energies(sys, l, fr, f, ek, ep)
+    ekin = ekin + ek; epot = epot + ep
+  end subroutine energies
+
+  !> The rotary inertias' kinetic energy 1/2 J (omega + th_k')^2 and the strain energy (axial force f
+  !> [N], bending).
+  pure subroutine elastic_energies(sys, l, fr, f, ekin, epot)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: l
+    type(chord_frame), intent(in) :: fr
+    real(dp), intent(in) :: f
+    real(dp), intent(out) :: ekin, epot
+    integer :: i, k
+    ekin = 0.0_dp
     do i = 1, sys%nri
       if (sys%ri_seg(i) /= l) cycle
       k = sys%ri_node(i)
       ekin = ekin + 0.5_dp*sys%ri_j(i)*(fr%om + fr%thd(k + 1))**2
     end do
-    gs = dot_product(sys%grav, fr%e2)
-    epot = -sum((gm(1, :) + gm(2, :))*[dot_product(sys%grav, q(1:2)), dot_product(sys%grav, q(3:4)), &
-                                       fr%th(1)*gs, fr%th(2)*gs])
-    epot = epot + 0.5_dp*f**2*sys%prop(1, l)/sys%prop(3, l) &
+    epot = 0.5_dp*f**2*sys%prop(1, l)/sys%prop(3, l) &
            + 0.5_dp*dot_product(fr%th, matmul(sys%ke([3, 6], [3, 6], sys%el_off(l) + 1), fr%th))
-  end subroutine energies
+  end subroutine elastic_energies
 
   !> Inertia part of S: S_ij = sum_a J_a,i . (G B_j)_a with J = dr'/dq' and B = J + cc dr''/dv +
   !> ck dr''/dq (at fixed chord), column by column from B_j's phi coefficients (2, 4) (jt_times);

@@ -8,7 +8,7 @@ module flexmech_coupled_element
   use flexmech_lapack, only: STATUS_OK
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap, elem_index, shape_fn, th_index, gx, gw
   use flexmech_coupled_storage, only: link_mats, lm_add, lm_add_block, lm_block_get, lm_block_put, lm_put_one
-  use flexmech_coupled_corot, only: one_element_residual, one_element_eval, absolute_block
+  use flexmech_coupled_corot, only: one_element_residual, one_element_eval, one_element_elastic, absolute_block
   implicit none
   private
   public :: link_eval, segment_residual, coupled_set_inertia, INERTIA_CLOSED, INERTIA_GAUSS
@@ -92,7 +92,8 @@ contains
     end if
   end subroutine segment_residual
 
-  !> link_eval in chord-relative angles (the coupled model's segments).
+  !> link_eval in chord-relative angles (the coupled model's segments; one-element segments here only
+  !> on the Gauss-point check path, their other terms from flexmech_coupled_corot).
   subroutine link_eval_rel(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
@@ -102,9 +103,10 @@ contains
     real(dp), intent(out), optional :: msum(:), csum(:)   !< (nl) sums of the angle columns of M and C_v (if want)
     type(link_mats), intent(inout) :: lm
     integer :: n, nl, e
-    real(dp) :: cs, sn, ell, g(2), om, al0, al
+    real(dp) :: cs, sn, ell, g(2), om, al0, al, s6(6, 6), m6(6), c6(6)
     n = sys%n_el(l); nl = 3*n + 3
     r(1:nl) = 0.0_dp; ekin = 0.0_dp; epot = 0.0_dp
+    m6 = 0.0_dp; c6 = 0.0_dp
     if (present(msum)) then
       msum(1:nl) = 0.0_dp; csum(1:nl) = 0.0_dp
     end if
@@ -114,6 +116,14 @@ contains
       end do
     else
       call gauss_inertia(sys, l, q, v, a, want, ccv, ckt, r, lm, ekin, epot, msum, csum)
+    end if
+    if (n == 1) then      ! the one-pass kernel's own rotary, axial (arch) and bending terms
+      call one_element_elastic(sys, l, q, v, a, want, ccv, ckt, r, s6, m6, c6, ekin, epot)
+      if (want) call lm_add_block(lm, l, 6, [1, 2, 3, 4, 5, 6], s6)
+      if (present(msum)) then
+        msum(1:6) = msum(1:6) + m6; csum(1:6) = csum(1:6) + c6
+      end if
+      return
     end if
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     call rotary_inertias(sys, l, q, v, a, want, ccv, ell, g, om, al, r, lm, ekin, msum)
@@ -405,11 +415,9 @@ contains
     end do
   end subroutine rotary_inertias
 
-  !> Axial strain energy of segment l, U = 1/2 EA L eps^2 [J], its residual and (if want) ckt times its
-  !> stiffness. eps = (|c| - L)/L, c = re - rs the chord [m], L the segment's length; for a shallow-arch
-  !> segment (sys%arch, one element) eps also holds the element's mean w'^2/2 from its chord-relative
-  !> end angles th = (th_0, th_1) [rad]: eps += th^T A th / 60, A = [4 -1; -1 4] (docs/theory.md 12.4).
-  !> Local DOFs: 1:4 = (xs, ys, xe, ye) [m], 5:6 = (th_0, th_1) for a one-element segment.
+  !> Axial strain energy of a segment l of several elements, U = 1/2 EA L eps^2 [J], its residual and
+  !> (if want) ckt times its stiffness. eps = (|c| - L)/L, c = re - rs the chord [m], L the segment's
+  !> length (one-element segments, whose strain may hold the shallow arch's term: flexmech_coupled_corot).
   subroutine axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
@@ -417,21 +425,13 @@ contains
     logical, intent(in) :: want
     real(dp), intent(inout) :: r(:), epot
     type(link_mats), intent(inout) :: lm
-    real(dp) :: len, ea, c(2), u(2), eps, f, cc(2, 2), th(2), ath(2)
-    integer :: i, j
+    real(dp) :: len, ea, u(2), eps, f, cc(2, 2)
     len = sys%prop(1, l); ea = sys%prop(3, l)
-    c = q(3:4) - q(1:2); u = c/ell
+    u = (q(3:4) - q(1:2))/ell
     eps = (ell - len)/len
-    ath = 0.0_dp
-    if (sys%arch(l) == 1) then
-      th = q(5:6)
-      ath = [4.0_dp*th(1) - th(2), 4.0_dp*th(2) - th(1)]/30.0_dp     ! d eps / d th
-      eps = eps + 0.5_dp*dot_product(th, ath)
-    end if
     f = ea*eps                               ! axial force [N]
     r(1:2) = r(1:2) - f*u
     r(3:4) = r(3:4) + f*u
-    if (sys%arch(l) == 1) r(5:6) = r(5:6) + f*len*ath
     epot = epot + 0.5_dp*ea*len*eps**2
     if (.not. want) return
     cc(:, 1) = u*u(1); cc(:, 2) = u*u(2)
@@ -439,20 +439,6 @@ contains
     cc(1, 1) = cc(1, 1) + ckt*f/ell; cc(2, 2) = cc(2, 2) + ckt*f/ell
     lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) + cc; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) + cc
     lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) - cc; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) - cc
-    if (sys%arch(l) == 0) return
-    do j = 1, 2
-      do i = 1, 2        ! d2U/d(re) d(th) = EA u ath^T, the start with the opposite sign
-        call lm_add(lm, l, 2 + i, 4 + j, ckt*ea*u(i)*ath(j))
-        call lm_add(lm, l, 4 + j, 2 + i, ckt*ea*u(i)*ath(j))
-        call lm_add(lm, l, i, 4 + j, -ckt*ea*u(i)*ath(j))
-        call lm_add(lm, l, 4 + j, i, -ckt*ea*u(i)*ath(j))
-      end do
-    end do
-    do j = 1, 2          ! d2U/dth2 = EA L ath ath^T + f L A / 30
-      do i = 1, 2
-        call lm_add(lm, l, 4 + i, 4 + j, ckt*(ea*len*ath(i)*ath(j) + f*len*merge(4.0_dp, -1.0_dp, i == j)/30.0_dp))
-      end do
-    end do
   end subroutine axial_strain
 
   !> Bending (the elements' local stiffness K) and Rayleigh damping of segment l, element by element

@@ -193,13 +193,14 @@ def test_shared_angles_round_trip(cases_dir):
 
 def test_iteration_matrix_is_the_derivative_of_the_residual(cases_dir):
     """S = M + gamma' dt C_v + beta' dt^2 K_t of the kernel against central differences of the Fortran
-    residual at a state of the seed four-bar (16 el/link, the issue's step): M to 1e-8, C_v to 1e-6, the
+    residual at a state of the seed four-bar (16 el/link, the issue's step; with Rayleigh damping, so
+    that C_v holds its angle-column terms of absolute angles): M to 1e-8, C_v to 1e-6, the
     contraction rho(S^-1 (S_fd - S)) of a Newton iteration below 1e-3."""
     from flexmech_py import kernels
 
     dt, t = 1.25e-5, 2.5e-4
     p, cm, q, v, a = _seed_state(cases_dir, 16, dt, t)
-    ispec, rspec = cm._spec(p.gravity, (0.0, 0.0), kernel=True)
+    ispec, rspec = cm._spec(p.gravity, (2.0, 1e-4), kernel=True)
     res, mm, cmat, km, _, status = kernels.cpl.cpl_dense(int(cm.shared.free_of.max()), ispec, rspec, q, v, a, t)
     assert status == 0
     free = np.flatnonzero(cm.shared.free_of > 0)
@@ -257,6 +258,40 @@ def test_shallow_arch_stiffness_is_the_derivative_of_its_residual(cases_dir):
     assert np.abs(d_fd).max() > 1e-6 * np.abs(f1).max()
     assert np.abs(d_an - d_fd).max() <= 1e-6 * np.abs(d_fd).max()
     assert np.abs(f1 - f1.T).max() <= 1e-9 * np.abs(f1).max()
+
+
+def test_damping_matrices_are_the_derivatives_of_its_residual(cases_dir):
+    """Rayleigh damping alone (a0 M + a1 K on the elements' angles, acting on th' = psi' - omega(c, c')
+    with absolute node angles): its part of C_v and of K_t (damped minus undamped, the same state)
+    against central differences of its residual in v and in q, to 1e-6 of their largest entries (the
+    part is exact: linear in th', whose chord term omega depends on the end positions and rates)."""
+    from flexmech_py import kernels
+
+    _, cm, q, v, a = _seed_state(cases_dir, 4, 1e-5, 0.02)        # moving: omega of the chords nonzero
+    free = np.flatnonzero(cm.shared.free_of > 0)
+    free = free[np.argsort(cm.shared.free_of[free])]
+    nf = free.size
+    specs = [cm._spec((0.0, 0.0), ray, kernel=True) for ray in ((2.0, 1e-4), (0.0, 0.0))]
+
+    def residual(spec, qq, vv):
+        return kernels.cpl.cpl_residuals(*spec, np.asfortranarray(qq[:, None]), vv, a, 0.0)[0][free, 0]
+
+    def matrices(spec):
+        cmat, km = kernels.cpl.cpl_dense(nf, *spec, q, v, a, 0.0)[2:4]
+        fq, fv = np.zeros((nf, nf)), np.zeros((nf, nf))
+        for j, d in enumerate(free):
+            for f, rel, k in ((fq, 1e-7, 0), (fv, 1e-5, 1)):
+                h = rel * max(1.0, abs((q, v)[k][d]))
+                up, dn = [q.copy(), v.copy()], [q.copy(), v.copy()]
+                up[k][d] += h
+                dn[k][d] -= h
+                f[:, j] = (residual(spec, *up) - residual(spec, *dn)) / (2 * h)
+        return cmat, km, fv, fq
+
+    (c1, k1, fv1, fq1), (c0, k0, fv0, fq0) = matrices(specs[0]), matrices(specs[1])
+    for an, fd in ((c1 - c0, fv1 - fv0), (k1 - k0, fq1 - fq0)):
+        assert np.abs(fd).max() > 0
+        assert np.abs(an - fd).max() <= 1e-6 * np.abs(fd).max()
 
 
 def _seed_newton(cases_dir, epl, dt, t_end, start, mode):
@@ -376,11 +411,13 @@ def test_closed_form_inertia_of_longer_segments_equals_the_gauss_points(cases_di
 @pytest.mark.parametrize("angles", ["shared", "relative"])
 def test_closed_form_inertia_equals_the_gauss_points(cases_dir, angles):
     """One-element segments in one pass (flexmech_coupled_corot.f90; theory.md 12.3) against the
-    general path's Gauss-point evaluation of the same integrals, at a state of the seed four-bar
-    (point masses on elements), the manipulator (payload, hub; with Rayleigh damping here) and the
-    slider-crank, with absolute (shared) and chord-relative node angles: M, C_v, K_t and the energies
-    equal to 1e-13, the residual to 1e-13 of its inertia terms M a (its own size is a cancellation of
-    larger terms), and the residual alone (cpl_residuals, the Newton iterations' path) equal to it."""
+    general path's Gauss-point evaluation of the same inertia integrals (the two share the rotary,
+    axial and bending terms, whose derivatives have their own tests), at a state of the seed
+    four-bar (point masses on elements), the manipulator (payload, hub; with Rayleigh damping here)
+    and the slider-crank, with absolute (shared) and chord-relative node angles: M, C_v, K_t and the
+    energies equal to 1e-13, the residual to 1e-13 of its inertia terms M a (its own size is a
+    cancellation of larger terms), and the residual alone (cpl_residuals, the Newton iterations'
+    path) equal to it."""
     from flexmech_py import kernels
     from flexmech_py.simulate import Prepared
 
