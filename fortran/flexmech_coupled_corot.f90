@@ -168,13 +168,14 @@ contains
     type(chord_frame), intent(in) :: fr
     real(dp), intent(in) :: a(:)
     real(dp), intent(out) :: r(:)
-    real(dp) :: acc(2, 4)
+    real(dp) :: acc(2, 4), gm(4, 4)
     integer :: b
+    gm = sys%gram(:, :, l)         ! fixed shapes: matmul inline, no temporary
     acc(:, 1) = a(1:2) - sys%grav; acc(:, 2) = a(3:4) - sys%grav      ! gravity: 1 = phi_1 + phi_2
     do b = 1, 2
       acc(:, 2 + b) = -(fr%al*fr%th(b) + 2.0_dp*fr%om*fr%thd(b))*fr%e1 + (fr%thdd(b) - fr%om**2*fr%th(b))*fr%e2
     end do
-    r(1:6) = jt_times(matmul(acc, sys%gram(:, :, l)), fr)
+    r(1:6) = jt_times(matmul(acc, gm), fr)
   end subroutine inertia_residual
 
   !> Rotary inertias J [kg m^2] at the segment's nodes, turning with psi = phi + th_k: J psi'' d psi/dq.
@@ -223,9 +224,11 @@ contains
     real(dp) :: kth(2, 2)
     integer :: el
     el = sys%el_off(l) + 1
-    kth = sys%ke([3, 6], [3, 6], el)
+    kth = angle_part(sys, el, .true.)
     r(5:6) = r(5:6) + matmul(kth, fr%th)
-    if (damped(sys)) r(5:6) = r(5:6) + matmul(damping_th(sys, el), fr%thd)
+    if (.not. damped(sys)) return
+    kth = damping_th(sys, el)      ! (a local: matmul of a function result copies through the heap)
+    r(5:6) = r(5:6) + matmul(kth, fr%thd)
   end subroutine bending_residual
 
   pure logical function damped(sys)
@@ -238,8 +241,28 @@ contains
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: el
     real(dp) :: cth(2, 2)
-    cth = sys%ray(1)*sys%me([3, 6], [3, 6], el) + sys%ray(2)*sys%ke([3, 6], [3, 6], el)
+    cth = sys%ray(1)*angle_part(sys, el, .false.) + sys%ray(2)*angle_part(sys, el, .true.)
   end function damping_th
+
+  !> The angle part (rows and columns 3 and 6: th_0, th_1) of element el's 6 x 6 stiffness or mass
+  !> matrix (element by element: a vector-subscripted section would copy through the heap).
+  pure function angle_part(sys, el, stiffness) result(m2)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: el
+    logical, intent(in) :: stiffness       !< sys%ke, else sys%me
+    real(dp) :: m2(2, 2)
+    integer :: i, j
+    integer, parameter :: th(2) = [3, 6]
+    do j = 1, 2
+      do i = 1, 2
+        if (stiffness) then
+          m2(i, j) = sys%ke(th(i), th(j), el)
+        else
+          m2(i, j) = sys%me(th(i), th(j), el)
+        end if
+      end do
+    end do
+  end function angle_part
 
   !> Absolute node angles: th_k = psi_k - phi(rs, re), so the ends' rows gain (R_th0 + R_th1) d th/d(rs, re).
   pure subroutine absolute_rows(fr, r)
@@ -280,6 +303,7 @@ contains
     type(chord_frame), intent(in) :: fr
     real(dp), intent(in) :: f
     real(dp), intent(out) :: ekin, epot
+    real(dp) :: kth(2, 2)
     integer :: i, k
     ekin = 0.0_dp
     do i = 1, sys%nri
@@ -287,8 +311,8 @@ contains
       k = sys%ri_node(i)
       ekin = ekin + 0.5_dp*sys%ri_j(i)*(fr%om + fr%thd(k + 1))**2
     end do
-    epot = 0.5_dp*f**2*sys%prop(1, l)/sys%prop(3, l) &
-           + 0.5_dp*dot_product(fr%th, matmul(sys%ke([3, 6], [3, 6], sys%el_off(l) + 1), fr%th))
+    kth = angle_part(sys, sys%el_off(l) + 1, .true.)
+    epot = 0.5_dp*f**2*sys%prop(1, l)/sys%prop(3, l) + 0.5_dp*dot_product(fr%th, matmul(kth, fr%th))
   end subroutine elastic_energies
 
   !> Inertia part of S: S_ij = sum_a J_a,i . (G B_j)_a with J = dr'/dq' and B = J + cc dr''/dv +
@@ -411,7 +435,7 @@ contains
     real(dp) :: cth(2, 2)
     integer :: el
     el = sys%el_off(l) + 1
-    s6(5:6, 5:6) = s6(5:6, 5:6) + ckt*sys%ke([3, 6], [3, 6], el)
+    s6(5:6, 5:6) = s6(5:6, 5:6) + ckt*angle_part(sys, el, .true.)
     if (.not. damped(sys)) return
     cth = damping_th(sys, el)
     s6(5:6, 5:6) = s6(5:6, 5:6) + ccv*cth

@@ -19,7 +19,8 @@ contains
     integer, intent(in) :: m
     real(dp), intent(in) :: q(:), v(:)
     type(marker_state), intent(out) :: ms
-    integer :: s, n, b
+    integer :: s, n, b, i
+    real(dp) :: z(3), zd(3)
     select case (sys%mk_kind(m))
     case (MK_NODE)
       s = sys%mk_idx(m); n = sys%n_el(s)
@@ -27,7 +28,10 @@ contains
                           sys%absang(s) /= 0, ms)
     case (MK_BODY)
       b = sys%mk_idx(m)
-      call body_marker(q(sys%rb_dof(:, b)), v(sys%rb_dof(:, b)), sys%rb_dof(:, b), sys%mk_pos(:, m), ms)
+      do i = 1, 3           ! a loop: vector subscripts would copy through the heap
+        z(i) = q(sys%rb_dof(i, b)); zd(i) = v(sys%rb_dof(i, b))
+      end do
+      call body_marker(z, zd, sys%rb_dof(:, b), sys%mk_pos(:, m), ms)
     case default
       call ground_marker(sys%mk_pos(:, m), ms)
     end select

@@ -177,6 +177,7 @@ contains
     real(dp), intent(out) :: newton(4)
     real(dp), allocatable :: res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
     real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
+    real(dp), allocatable :: th1(:), tau1(:), g1(:)      ! step_work's drive states and row values
     integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, frame, info, itmax_frame, nf, nc, kat
     !> restarts at q_n that kept the predictor's matrix: (1) converged with it, (2) rebuilt it after all
@@ -279,7 +280,7 @@ contains
       allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
                 dlam(max(1, nc)), lamn(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
                 lam0(max(1, nc)), gsh(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
-                tau0(max(1, sys%nd)))
+                tau0(max(1, sys%nd)), th1(max(1, sys%nd)), tau1(max(1, sys%nd)), g1(max(1, nc)))
       gt = 0.0_dp
       do i = 1, sys%ndof
         if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
@@ -304,7 +305,7 @@ contains
       qn = q; lamn = lam
       second = .false.
       kat = 0
-      if (start_mode == START_VELOCITY) a(freeidx) = (q(freeidx) + dt*v(freeidx) - qs(freeidx))/(betap*dt*dt)
+      if (start_mode == START_VELOCITY) call put_at(q, dt)
       if (start_mode == START_POSITION) call restart_at_qn()
       do it = 1, merge(2*maxit, maxit, start_mode /= START_ACCELERATION)
         q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
@@ -361,7 +362,9 @@ contains
     subroutine correction(shift)
       real(dp), intent(in) :: shift(:)
       integer :: i
-      rf = -res(freeidx)
+      do i = 1, nf
+        rf(i) = -res(freeidx(i))
+      end do
       newton(1) = norm2(rf)
       if (use_saddle) then
         call saddle_correction(shift)
@@ -426,10 +429,21 @@ contains
     !> acceleration that puts q at qn, a fresh contraction history.
     subroutine restart_at_qn()
       lam = lamn
-      a(freeidx) = (qn(freeidx) - qs(freeidx))/(betap*dt*dt)
+      call put_at(qn, 0.0_dp)
       da_prev = huge(1.0_dp)
       kat = 0
     end subroutine restart_at_qn
+
+    !> The acceleration a (free DOFs) that puts the step's position q = qs + betap dt^2 a at
+    !> qb + h v (h [s]: 0 for qb itself).
+    subroutine put_at(qb, h)
+      real(dp), intent(in) :: qb(:), h
+      integer :: i, j
+      do i = 1, nf             ! a loop: vector subscripts would copy through the heap
+        j = freeidx(i)
+        a(j) = (qb(j) + h*v(j) - qs(j))/(betap*dt*dt)
+      end do
+    end subroutine put_at
 
     !> The state a continuation needs besides (q, v, a, p): multipliers, lref, work.
     subroutine save_carry()
@@ -528,7 +542,7 @@ contains
     !> (kinematic drives, whose generalized force is -lam) -lam d g.
     subroutine step_work(tt)
       real(dp), intent(in) :: tt
-      real(dp) :: th1(max(1, sys%nd)), tau1(max(1, sys%nd)), g1(max(1, nc)), dth
+      real(dp) :: dth
       integer :: i2
       call drive_state(tt, th1, tau1)
       do i2 = 1, sys%nd

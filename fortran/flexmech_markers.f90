@@ -98,7 +98,9 @@ contains
       ms%psi = q(cols(kt)); ms%psid = v(cols(kt)); ms%psia0 = 0.0_dp
       ms%dpsi(1:4) = 0.0_dp
     end if
-    ms%col(1:ms%n) = cols(ms%loc(1:ms%n))
+    do j = 1, ms%n          ! a loop: a vector subscript would copy through the heap
+      ms%col(j) = cols(ms%loc(j))
+    end do
   end subroutine segment_marker
 
   !> Marker at s (body frame, from the centre of mass) of a rigid body with coordinates z = [x_C, y_C,
