@@ -64,31 +64,47 @@ contains
   end subroutine assemble_residual
 
   !> Segment l's local q, v, a (lm%wl(:, 2:4)) and all-DOF numbers (lm%widx) out of the all-DOF
-  !> vectors (explicit loops: vector-subscripted sections copy through the heap).
+  !> vectors.
   pure subroutine gather(sys, l, nl, q, v, a, lm)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l, nl
     real(dp), intent(in) :: q(:), v(:), a(:)
     type(link_mats), intent(inout) :: lm
+    call gather_into(nl, sys%ld(1, l), q, v, a, lm%widx, size(lm%wl, 1), lm%wl)
+  end subroutine gather
+
+  !> gather's loop over plain arrays (explicit loops: vector-subscripted sections copy through the
+  !> heap; explicit shapes: no descriptor reads per element).
+  pure subroutine gather_into(nl, ld, q, v, a, widx, ldw, wl)
+    integer, intent(in) :: nl, ldw, ld(nl)
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    integer, intent(out) :: widx(nl)
+    real(dp), intent(inout) :: wl(ldw, 4)
     integer :: i, j
     do i = 1, nl
-      j = sys%ld(i, l)
-      lm%widx(i) = j
-      lm%wl(i, 2) = q(j); lm%wl(i, 3) = v(j); lm%wl(i, 4) = a(j)
+      j = ld(i)
+      widx(i) = j
+      wl(i, 2) = q(j); wl(i, 3) = v(j); wl(i, 4) = a(j)
     end do
-  end subroutine gather
+  end subroutine gather_into
 
   !> res += the segment's local residual lm%wl(1:nl, 1) at its all-DOF numbers.
   pure subroutine scatter(nl, lm, res)
     integer, intent(in) :: nl
     type(link_mats), intent(in) :: lm
     real(dp), intent(inout) :: res(:)
-    integer :: i, j
-    do i = 1, nl
-      j = lm%widx(i)
-      res(j) = res(j) + lm%wl(i, 1)
-    end do
+    call scatter_from(nl, lm%widx, lm%wl(1, 1), res)
   end subroutine scatter
+
+  pure subroutine scatter_from(nl, widx, r, res)
+    integer, intent(in) :: nl, widx(nl)
+    real(dp), intent(in) :: r(nl)
+    real(dp), intent(inout) :: res(:)
+    integer :: i
+    do i = 1, nl
+      res(widx(i)) = res(widx(i)) + r(i)
+    end do
+  end subroutine scatter_from
 
   !> Rigid bodies: residual m (a_C - grav), J alpha; S gets diag(m, m, J_S) (J_S > 0 also for a body
   !> of zero inertia whose angle a constraint holds); energies 1/2 m |v_C|^2 + 1/2 J omega^2, -m grav.r_C.

@@ -33,6 +33,9 @@ module flexmech_coupled_storage
     !> the others and the rigid bodies through the blocks above (lm_band_finish)
     real(dp), allocatable :: ab(:, :)
     logical, allocatable :: inband(:)
+    !> every segment went straight into lm%ab at the last lm_band_finish: the segment blocks were not
+    !> written since they were zeroed, and lm_zero leaves them
+    logical :: blocks_clean = .false.
     integer :: kd = 0                    !< lm%ab's diagonal row, kl + ku + 1
     real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :), dg(:)
     !> assemble's work: a segment's all-DOF numbers and its local [R, q, v, a] (maxld; allocated once
@@ -228,10 +231,14 @@ contains
     lm%inband = .false.
   end subroutine lm_band_setup
 
-  !> S = 0 before an assembly: the segment blocks, the rigid bodies' diagonal and lm%ab if there is one.
+  !> S = 0 before an assembly: the segment blocks (unless no segment wrote them, blocks_clean), the
+  !> rigid bodies' diagonal and lm%ab if there is one.
   subroutine lm_zero(lm)
     type(link_mats), intent(inout) :: lm
-    lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp; lm%dg = 0.0_dp
+    if (.not. lm%blocks_clean) then
+      lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp
+    end if
+    lm%dg = 0.0_dp
     if (.not. allocated(lm%ab)) return
     lm%ab = 0.0_dp
     lm%inband = .false.
@@ -298,6 +305,7 @@ contains
     do fi = 1, sys%nfree
       lm%ab(d, fi) = lm%ab(d, fi) + lm%dg(fi)
     end do
+    lm%blocks_clean = all(lm%inband)
   end subroutine lm_band_finish
 
   !> Condensed factorization: per segment S_II = LU (in place) and z = S_II^-1 S_IB; the Schur
