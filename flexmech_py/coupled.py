@@ -161,7 +161,7 @@ class CoupledModel:
         nframes = nsteps // out_every + 1
         nc = len(self.rows)
         keep = np.arange(nc) if self.shared is None else self.shared.keep
-        carry = np.zeros(max(1, keep.size) + 6)     # cpl_run: multipliers, 4 of its policy, lref, work
+        carry = np.zeros(max(1, keep.size) + 2)
         if state is not None:
             start = 2
             q, v, a, p, carry = (np.array(state[k], float) for k in ("q", "v", "a", "p", "carry"))
@@ -187,7 +187,7 @@ class CoupledModel:
                 qf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid])
         self.last_run = {"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "frames_valid": int(nvalid),
                          "q": q, "v": v, "a": a, "p": p, "carry": carry, "status": int(status), "fail_step": int(fail),
-                         "factorizations": int(newton[3]), "symmetric_factorizations": int(newton[4])}
+                         "factorizations": int(newton[3])}
         detail = ""
         if status == kernels.STATUS_NEWTON:
             detail = (f" (last iteration: residual norm {newton[0]:.3g}, acceleration correction {newton[1]:.3g} "

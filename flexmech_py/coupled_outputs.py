@@ -392,7 +392,7 @@ class Diagnostics:
         self.e0 = None
         self.energy_drift, self.scale = 0.0, 1e-300
         self.final_kinetic = self.final_work = 0.0
-        self.iterations, self.max_iterations, self.factorizations, self.symmetric = 0, 0, 0, 0
+        self.iterations, self.max_iterations, self.factorizations = 0, 0, 0
         self.stretch = 0.0
         self.violation = {"point_m": 0.0, "guide_normal_m": 0.0, "angle_rad": 0.0, "slide_m": 0.0}
         self.drift: dict[str, dict] = {}
@@ -411,7 +411,6 @@ class Diagnostics:
         self.final_kinetic, self.final_work = float(ef[0, -1]), float(ef[2, -1])
         self.iterations += int(iters)
         self.factorizations += int((cm.last_run or {}).get("factorizations", 0))
-        self.symmetric += int((cm.last_run or {}).get("symmetric_factorizations", 0))
         self.max_iterations = max(self.max_iterations, int(np.max(ef[3])))
         for si, (li, k0, k1) in enumerate(cm.segments):
             d = cm.seg_slice(si)
@@ -449,8 +448,7 @@ class Diagnostics:
                                    "final_kinetic_J": self.final_kinetic, "final_work_J": self.final_work},
                 "newton": {"iterations": self.iterations, "mean_per_step": self.iterations / max(nsteps, 1),
                            "max_per_step": self.max_iterations, "factorizations": self.factorizations,
-                           "factorizations_per_step": self.factorizations / max(nsteps, 1),
-                           "symmetric_part_factorizations": self.symmetric},
+                           "factorizations_per_step": self.factorizations / max(nsteps, 1)},
                 "link_length_drift": {"max_relative": self.stretch, "bound": 1e-3, "within_bound": self.stretch < 1e-3},
                 "joint_closure_error_m": max(viol["point_m"], viol["guide_normal_m"]),
                 "constraint_violation": viol,

@@ -33,17 +33,16 @@ contains
 
   !> Run the model (generalized-alpha-Newton; Newmark for alpha_m = alpha_f = 0) over nsteps steps of
   !> dt from time t0 [s].  cval (3, nc1, nsteps+1): [value, rate, acceleration] of every constraint row
-  !> at every step.  q, v, a, pa (ndof) and carry (nc1 + 6) [multipliers, the symmetric-part
-  !> policy's state (4), Newton length scale [m], work of the inputs [J]]: on entry the initial state (fixed entries hold their values), on exit the
+  !> at every step.  q, v, a, pa (ndof) and carry (nc1 + 2) [multipliers, Newton length scale [m],
+  !> work of the inputs [J]]: on entry the initial state (fixed entries hold their values), on exit the
   !> last state reached.  start = 1: a fresh run (the free accelerations a and the multipliers made
   !> consistent, pa = a, carry not read); 0: the same with pa as given; 2: continue the run that left
   !> (q, v, a, pa, carry) (the same steps as one uninterrupted run).  div_limit [m] > 0: the run stops
   !> with status 6 when coupled_elastic_measure (flexmech_coupled_run) exceeds it; seg_link(nseg) is the
   !> mechanism link of each segment (segments of a link listed consecutively from its start).  Frames: qf, vf, af (ndof, nframes), lf (nc1, nframes)
   !> the multipliers (constraint forces), ef (4, nframes) [kinetic, potential, work of the inputs, max
-  !> Newton iterations since the last frame]; nvalid: number of valid frames; newton(5): the last
-  !> iteration's residual, correction and acceleration norms, factorizations, of which by the symmetric
-  !> part's Cholesky factor (coupled_run).
+  !> Newton iterations since the last frame]; nvalid: number of valid frames; newton(4): the last
+  !> iteration's residual, correction and acceleration norms, factorizations (coupled_run).
   subroutine cpl_run(ni, nr, ndof, nc1, nsteps, nframes, nseg, ispec, rspec, cval, t0, dt, alpha_m, alpha_f, &
                      beta, gamma, out_every, tol, maxit, start, div_limit, seg_link, q, v, a, pa, carry, &
                      qf, vf, af, lf, ef, status, fail_step, iters, nvalid, newton)
@@ -54,11 +53,11 @@ contains
     real(dp), intent(in) :: t0, dt, alpha_m, alpha_f, beta, gamma, tol, div_limit
     integer, intent(in) :: out_every, maxit, start
     integer, intent(in) :: seg_link(nseg)
-    real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof), pa(ndof), carry(nc1 + 6)
+    real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof), pa(ndof), carry(nc1 + 2)
     real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
     real(dp), intent(out) :: lf(nc1, nframes)
     integer, intent(out) :: status, fail_step, iters, nvalid
-    real(dp), intent(out) :: newton(5)
+    real(dp), intent(out) :: newton(4)
     type(coupled_system) :: sys
     qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
     newton = 0.0_dp

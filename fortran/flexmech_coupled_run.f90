@@ -11,13 +11,12 @@
 module flexmech_coupled_run
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
+  use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
                              STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
   use flexmech_markers, only: marker_state, CON_POINT, CON_ANGLE, MAXCOL
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap
   use flexmech_coupled_rows, only: eval_row, drive_load
-  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_band_setup, lm_band_finish, lm_band_factor, &
-                                      lm_band_solve, lm_factor, lm_solve
+  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_band_setup, lm_band_finish, lm_factor, lm_solve
   use flexmech_coupled_assembly, only: assemble, assemble_residual
   use flexmech_saddle_band, only: saddle_system, saddle_setup, saddle_factor, saddle_solve, saddle_flops
   implicit none
@@ -50,14 +49,6 @@ module flexmech_coupled_run
   !> section 12.2): NEWTON_MODIFIED once per step (at the predictor), NEWTON_FULL at every iteration,
   !> NEWTON_AUTO (default) once per step and again whenever an iteration contracts the correction by
   !> less than NEWTON_RATE (the matrix of the predictor no longer describes the step).
-  !> SYM_NEWTON: in NEWTON_AUTO with the automatic solver and multiplier choices (SOLVER_AUTO,
-  !> MULT_AUTO; a forced choice is the exact reference), when S is factorized as one band without the
-  !> saddle band, the factorization may be the Cholesky factor of S's symmetric part (S + S^T)/2 (while
-  !> that is positive definite): S's skew part is O(omega dt) of its inertia, so the iteration still
-  !> contracts by about that much per iteration; the factorization has no pivots and half the band of
-  !> the pivoted LU, its solves are two band substitutions.  Whether that pays depends on how many
-  !> more iterations it takes, so the run measures it (sym_policy); a step whose iteration contracts by
-  !> less than NEWTON_RATE with it refactorizes by the exact LU.
   integer, parameter :: NEWTON_MODIFIED = 0, NEWTON_FULL = 1, NEWTON_AUTO = 2
   real(dp), parameter :: NEWTON_RATE = 0.1_dp
   integer :: newton_mode = NEWTON_AUTO
@@ -72,45 +63,7 @@ module flexmech_coupled_run
   !> than this fraction of the mechanism's size
   real(dp), parameter :: RESTART_MOVE = 0.05_dp
 
-  !> The run's choice between the exact LU and the symmetric part's factor (SYM_NEWTON), by the
-  !> Newton iterations its steps take with each: in every cycle of SYM_CYCLE blocks of SYM_BLOCK
-  !> steps the first block iterates with the exact LU, the second with the symmetric part, the others
-  !> with the symmetric part when its block took at most SYM_EXTRA more iterations per step (the
-  !> factorization and solves it saves cost about as much as that many residual evaluations and
-  !> solves; docs/performance.md).  Deterministic: counts, not clocks.
-  type :: sym_policy
-    logical :: allowed = .false.
-    integer :: step = 0                  !< steps of the cycle so far
-    integer :: iters(2) = 0              !< Newton iterations of the probe blocks: exact, symmetric
-    logical :: use = .false.             !< the cycle's later blocks: the symmetric part
-  end type sym_policy
-  integer, parameter :: SYM_BLOCK = 50, SYM_CYCLE = 20
-  real(dp), parameter :: SYM_EXTRA = 0.6_dp
-
 contains
-
-  !> Whether this step factorizes by the symmetric part (sym_policy).
-  pure logical function sym_now(sp)
-    type(sym_policy), intent(in) :: sp
-    integer :: blk
-    blk = sp%step/SYM_BLOCK
-    sym_now = sp%allowed .and. (blk == 1 .or. (blk > 1 .and. sp%use))
-  end function sym_now
-
-  !> Count a converged step's Newton iterations it into the probe blocks; decide after them.
-  pure subroutine sym_record(sp, it)
-    type(sym_policy), intent(inout) :: sp
-    integer, intent(in) :: it
-    integer :: blk
-    blk = sp%step/SYM_BLOCK
-    if (blk < 2) sp%iters(blk + 1) = sp%iters(blk + 1) + it
-    sp%step = sp%step + 1
-    if (sp%step == 2*SYM_BLOCK) sp%use = sp%iters(2) <= sp%iters(1) + SYM_EXTRA*SYM_BLOCK
-    if (sp%step == SYM_CYCLE*SYM_BLOCK) then
-      sp%step = 0
-      sp%iters = 0
-    end if
-  end subroutine sym_record
 
   !> Select the linear solver of coupled_run (SOLVER_AUTO, SOLVER_BAND or SOLVER_CONDENSED;
   !> module-wide, for tests and benchmarks).  status = STATUS_BAD_INPUT for another value.
@@ -198,17 +151,15 @@ contains
   !>   0  as 1 but p as given;
   !>   2  the continuation of a run (docs/theory.md section 11.7): q, v, a, p and carry as a run left
   !>      them, so the steps are the ones an uninterrupted run takes.
-  !> carry(nc1 + 6) = [multipliers (nc1), sym_policy's state (4: steps of its cycle, the probe blocks'
-  !> iterations, its choice), Newton length scale lref [m], work of the inputs [J]]: read when
-  !> start = 2, on return the state reached (like q, v, a, p).
+  !> carry(nc1 + 2) = [multipliers (nc1), Newton length scale lref [m], work of the inputs [J]]: read
+  !> when start = 2, on return the state reached (like q, v, a, p).
   !> Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes), lf (nc, nframes) multipliers,
   !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the inputs (force drives and
   !> moving constraint rows), max Newton iterations since the last frame]; nvalid frames are valid.
   !> Divergence guard: coupled_elastic_measure > div_limit [m] after a step stops the run with
-  !> STATUS_DIVERGED (fail_step = that step).  newton(5) on return: [norm of the residual (free DOFs,
+  !> STATUS_DIVERGED (fail_step = that step).  newton(4) on return: [norm of the residual (free DOFs,
   !> with the constraint forces) before the last iteration, norm of its acceleration correction, norm
-  !> of the accelerations, number of factorizations of the iteration matrix, of which by the Cholesky
-  !> factor of its symmetric part (SYM_NEWTON)].
+  !> of the accelerations, number of factorizations of the iteration matrix].
   subroutine coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
                          start, div_limit, seg_link, q, v, a, p, carry, qf, vf, af, lf, ef, status, fail_step, &
                          iters, nvalid, newton)
@@ -223,17 +174,14 @@ contains
     real(dp), intent(inout) :: carry(:)            !< (nc1 + 2) [multipliers, lref [m], work [J]]
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
-    real(dp), intent(out) :: newton(5)
+    real(dp), intent(out) :: newton(4)
     real(dp), allocatable :: res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
     real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
     real(dp), allocatable :: th1(:), tau1(:), g1(:)      ! step_work's drive states and row values
-    integer, allocatable :: freeidx(:), ipc(:), gnz(:, :), ngnz(:)
+    integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
     integer :: nsteps, n, it, frame, info, itmax_frame, nf, nc, kat
     !> restarts at q_n that kept the predictor's matrix: (1) converged with it, (2) rebuilt it after all
     integer :: restart_kept(2)
-    !> the exact LU or the symmetric part's factor (exact_now: this step's next factorization is the exact LU)
-    type(sym_policy) :: sp
-    logical :: exact_now
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
     logical :: converged, refactor, use_cond, refresh, second, use_saddle, kept
     type(link_mats) :: lm
@@ -244,11 +192,10 @@ contains
     nc = sys%nc
     refactor = .false.
     restart_kept = 0
-    exact_now = .false.
     if (out_every < 1 .or. dt <= 0.0_dp .or. nsteps < 0 .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
         size(cval, 2) < nc .or. size(lf, 1) < nc .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
         alpha_m >= 1.0_dp .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. &
-        size(seg_link) /= sys%nseg .or. size(p) /= sys%ndof .or. size(carry) < max(1, nc) + 6 .or. &
+        size(seg_link) /= sys%nseg .or. size(p) /= sys%ndof .or. size(carry) < max(1, nc) + 2 .or. &
         start < 0 .or. start > 2) then
       status = STATUS_BAD_INPUT
       return
@@ -269,8 +216,6 @@ contains
       lam = 0.0_dp
       lam(1:nc) = carry(1:nc)
       work = carry(size(carry))
-      sp%step = nint(carry(size(carry) - 5)); sp%iters = nint(carry(size(carry) - 4:size(carry) - 3))
-      sp%use = carry(size(carry) - 2) > 0.5_dp
       call assemble(sys, q, v, a, t0, .false., 0.0_dp, 0.0_dp, res, lm, energy)
     else
       call initial_acceleration()
@@ -302,7 +247,6 @@ contains
       v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
       p(freeidx) = c1*((1.0_dp - alpha_f)*a(freeidx) + w(freeidx))
       itmax_frame = max(itmax_frame, it)
-      call sym_record(sp, it)
       if (coupled_elastic_measure(sys, seg_link, q) > div_limit) then
         status = STATUS_DIVERGED
         fail_step = n
@@ -331,7 +275,7 @@ contains
       use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
                                 (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
       if (.not. use_cond) call lm_band_setup(sys, lm)     ! S as one band, in lm%ab
-      allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), w(sys%ndof), freeidx(nf), qn(sys%ndof))
+      allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf), qn(sys%ndof))
       w = 0.0_dp
       allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
                 dlam(max(1, nc)), lamn(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
@@ -348,8 +292,6 @@ contains
         fl = saddle_flops(nf, nc, sys%kl, sd%ka)
         use_saddle = multiplier_mode == MULT_SADDLE .or. fl(2) < fl(1)
       end if
-      sp%allowed = newton_mode == NEWTON_AUTO .and. solver_mode == SOLVER_AUTO .and. multiplier_mode == MULT_AUTO &
-                   .and. .not. use_cond .and. .not. use_saddle .and. sys%kl == sys%ku
     end subroutine setup_work
 
     !> The Newton iterations of step n (predictor qs, vs set): converged, it and the state at the
@@ -362,7 +304,6 @@ contains
       refresh = .true.
       qn = q; lamn = lam
       second = .false.
-      exact_now = .false.
       kat = 0
       if (start_mode == START_VELOCITY) call put_at(q, dt)
       if (start_mode == START_POSITION) call restart_at_qn()
@@ -395,7 +336,6 @@ contains
           refresh = .not. kept
           cycle
         end if
-        if (refresh .and. lm%sym) exact_now = .true.    ! the symmetric part contracted too little
         if (kept .and. refresh) then     ! the kept matrix contracted too little: rebuilt after all
           restart_kept(2) = restart_kept(2) + 1
           kept = .false.
@@ -411,7 +351,6 @@ contains
           ! matrix rebuilt at every iteration
           call restart_at_qn()
           second = .true.
-          exact_now = .true.
         end if
         refresh = refresh .or. second
       end do
@@ -506,11 +445,10 @@ contains
       end do
     end subroutine put_at
 
-    !> The state a continuation needs besides (q, v, a, p): multipliers, the symmetric-part policy, lref, work.
+    !> The state a continuation needs besides (q, v, a, p): multipliers, lref, work.
     subroutine save_carry()
       carry = 0.0_dp
       carry(1:nc) = lam(1:nc)
-      carry(size(carry) - 5:size(carry) - 2) = [real(sp%step, dp), real(sp%iters, dp), merge(1.0_dp, 0.0_dp, sp%use)]
       carry(size(carry) - 1) = lref
       carry(size(carry)) = work
     end subroutine save_carry
@@ -654,8 +592,7 @@ contains
           call lm_solve(sys, lm, nc, x, nf, status)
           if (status /= STATUS_OK) return
         else
-          call lm_band_solve(sys, lm, nc, x, nf, status)
-          if (status /= STATUS_OK) return
+          call dgbtrs('N', nf, sys%kl, sys%ku, nc, lm%ab, size(lm%ab, 1), ipiv, x, nf, info)
         end if
         do j = 1, nc
           do ic = 1, nc
@@ -676,25 +613,19 @@ contains
       else
         call lm_band_finish(sys, lm)
         if (.not. use_saddle) then   ! (the saddle band takes S in once the gradients are known)
-          call lm_band_factor(sys, lm, try_sym(), status)
-          if (lm%sym) newton(5) = newton(5) + 1.0_dp
+          call dgbtrf(nf, nf, sys%kl, sys%ku, lm%ab, size(lm%ab, 1), ipiv, info)
+          status = lapack_status(info)
         end if
       end if
       refactor = .true.
     end subroutine factor
-
-    !> Factorize the whole band by its symmetric part's Cholesky factor (lm_band_factor; SYM_NEWTON)
-    !> when the run's policy says so and this step does not need the exact matrix.
-    logical function try_sym()
-      try_sym = sym_now(sp) .and. .not. exact_now
-    end function try_sym
 
     subroutine band_solve_rhs(xx)
       real(dp), intent(inout) :: xx(:)
       if (use_cond) then
         call lm_solve(sys, lm, 1, xx, nf, status)
       else
-        call lm_band_solve(sys, lm, 1, xx, nf, status)
+        call dgbtrs('N', nf, sys%kl, sys%ku, 1, lm%ab, size(lm%ab, 1), ipiv, xx, nf, info)
       end if
       if (.not. ieee_is_finite(sum(abs(xx)))) status = STATUS_NONFINITE
     end subroutine band_solve_rhs

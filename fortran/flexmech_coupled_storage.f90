@@ -5,12 +5,12 @@
 module flexmech_coupled_storage
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: dgbtrf, dgbtrs, dpbtrf, dpbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE
+  use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE
   use flexmech_assembly, only: band_rows
   use flexmech_coupled_system, only: coupled_system, elem_index
   implicit none
   private
-  public :: link_mats, lm_setup, lm_band_setup, lm_zero, lm_put_one, lm_band_finish, lm_band_factor, lm_band_solve
+  public :: link_mats, lm_setup, lm_band_setup, lm_zero, lm_put_one, lm_band_finish
   public :: lm_add, lm_add_block, lm_block_get, lm_block_put, lm_factor, lm_solve
 
   !> Iteration matrix S = M + cc C_v + ck K_t stored by segment blocks.  Local DOFs of segment l:
@@ -37,11 +37,6 @@ module flexmech_coupled_storage
     !> written since they were zeroed, and lm_zero leaves them
     logical :: blocks_clean = .false.
     integer :: kd = 0                    !< lm%ab's diagonal row, kl + ku + 1
-    !> lm_band_factor's factors: the LU of ab in place with its pivots ipv, or (sym) the Cholesky
-    !> factor of S's symmetric part in sab (upper band storage: row kl + 1 + i - j)
-    integer, allocatable :: ipv(:)
-    real(dp), allocatable :: sab(:, :)
-    logical :: sym = .false.
     real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :), dg(:)
     !> assemble's work: a segment's all-DOF numbers and its local [R, q, v, a] (maxld; allocated once
     !> by lm_setup, so that no evaluation allocates; never referenced through lm by link_eval)
@@ -230,8 +225,7 @@ contains
   subroutine lm_band_setup(sys, lm)
     type(coupled_system), intent(in) :: sys
     type(link_mats), intent(inout) :: lm
-    allocate (lm%ab(band_rows(sys%kl, sys%ku), sys%nfree), lm%inband(sys%nseg), lm%ipv(sys%nfree), &
-              lm%sab(sys%kl + 1, sys%nfree))
+    allocate (lm%ab(band_rows(sys%kl, sys%ku), sys%nfree), lm%inband(sys%nseg))
     lm%kd = sys%kl + sys%ku + 1
     lm%ab = 0.0_dp
     lm%inband = .false.
@@ -313,48 +307,6 @@ contains
     end do
     lm%blocks_clean = all(lm%inband)
   end subroutine lm_band_finish
-
-  !> Factorize the whole band lm%ab (S, after lm_band_finish): with try_sym the Cholesky factor of
-  !> its symmetric part (S + S^T)/2 when that is positive definite (lm%sym; LAPACK dpbtrf: no pivots,
-  !> half the band of a pivoted LU; the matrix of a modified Newton iteration, whose skew part is
-  !> O(omega dt) of the inertia, docs/theory.md 12.2), else its LU with partial pivoting (dgbtrf).
-  subroutine lm_band_factor(sys, lm, try_sym, status)
-    type(coupled_system), intent(in) :: sys
-    type(link_mats), intent(inout) :: lm
-    logical, intent(in) :: try_sym
-    integer, intent(out) :: status
-    integer :: i, j, info
-    lm%sym = .false.
-    if (try_sym) then
-      do j = 1, sys%nfree
-        do i = max(1, j - sys%kl), j
-          lm%sab(sys%kl + 1 + i - j, j) = 0.5_dp*(lm%ab(lm%kd + i - j, j) + lm%ab(lm%kd + j - i, i))
-        end do
-      end do
-      call dpbtrf('U', sys%nfree, sys%kl, lm%sab, size(lm%sab, 1), info)
-      lm%sym = info == 0
-    end if
-    status = STATUS_OK
-    if (lm%sym) return
-    call dgbtrf(sys%nfree, sys%nfree, sys%kl, sys%ku, lm%ab, size(lm%ab, 1), lm%ipv, info)
-    status = lapack_status(info)
-  end subroutine lm_band_factor
-
-  !> Solve S x = b with lm_band_factor's factors for nrhs columns of x (leading dimension ldx), in place.
-  subroutine lm_band_solve(sys, lm, nrhs, x, ldx, status)
-    type(coupled_system), intent(in) :: sys
-    type(link_mats), intent(in) :: lm
-    integer, intent(in) :: nrhs, ldx
-    real(dp), intent(inout) :: x(ldx, *)
-    integer, intent(out) :: status
-    integer :: info
-    if (lm%sym) then
-      call dpbtrs('U', sys%nfree, sys%kl, nrhs, lm%sab, size(lm%sab, 1), x, ldx, info)
-    else
-      call dgbtrs('N', sys%nfree, sys%kl, sys%ku, nrhs, lm%ab, size(lm%ab, 1), lm%ipv, x, ldx, info)
-    end if
-    status = lapack_status(info)
-  end subroutine lm_band_solve
 
   !> Condensed factorization: per segment S_II = LU (in place) and z = S_II^-1 S_IB; the Schur
   !> complement sb = S_BB - S_BI z on the boundary DOFs, assembled and factorized (band kbb).

@@ -22,7 +22,7 @@ module flexmech_lapack
   use flexmech_kinds, only: dp
   implicit none
   private
-  public :: dgbtrf, dgbtrs, dgetrf, dgetrs, dgecon, dpbtrf, dpbtrs
+  public :: dgbtrf, dgbtrs, dgetrf, dgetrs, dgecon
   public :: STATUS_OK, STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON, &
             STATUS_DIVERGED, STATUS_SINGULAR_POSITION, STATUS_ASSEMBLY
   public :: lapack_status
@@ -47,21 +47,6 @@ module flexmech_lapack
       real(dp), intent(inout) :: b(ldb, *)
       integer, intent(out) :: info
     end subroutine dgbtrs
-    subroutine dpbtrf(uplo, n, kd, ab, ldab, info)
-      import :: dp
-      character, intent(in) :: uplo
-      integer, intent(in) :: n, kd, ldab
-      real(dp), intent(inout) :: ab(ldab, *)
-      integer, intent(out) :: info
-    end subroutine dpbtrf
-    subroutine dpbtrs(uplo, n, kd, nrhs, ab, ldab, b, ldb, info)
-      import :: dp
-      character, intent(in) :: uplo
-      integer, intent(in) :: n, kd, nrhs, ldab, ldb
-      real(dp), intent(in) :: ab(ldab, *)
-      real(dp), intent(inout) :: b(ldb, *)
-      integer, intent(out) :: info
-    end subroutine dpbtrs
     subroutine dgetrf(m, n, a, lda, ipiv, info)
       import :: dp
       integer, intent(in) :: m, n, lda

@@ -88,48 +88,6 @@ def test_saddle_band_equals_schur_complement(cases_dir, name, epl, extra):
             assert np.max(np.abs(other - col)) <= (1e-4 if key in forces else 1e-7) * scale, key
 
 
-# nonlinear model, shared node angles: the whole band without the saddle band, where the automatic
-# choice may factorize S by its symmetric part; the kinematic drive adds a multiplier row (X = S^-1 G)
-SYM_BLOCK = 50          # flexmech_coupled_run: sym_policy's probe blocks
-SYM_CASES = [("fourbar_hac", 8, True), ("manipulator_bricout", 8, True), ("fourbar_constant_speed", 6, False)]
-
-
-@pytest.mark.parametrize("name, epl, chosen", SYM_CASES, ids=[c[0] for c in SYM_CASES])
-def test_symmetric_part_iteration_equals_the_exact_lu(cases_dir, name, epl, chosen):
-    """The automatic choice (theory.md §12.2, "The symmetric part") iterates the first 50 steps with
-    the exact LU, the next 50 with the Cholesky factor of S's symmetric part, and keeps the latter when
-    its steps took at most 0.6 more Newton iterations.  Nonlinear model, shared node angles,
-    generalized-alpha, 400 steps against the forced whole band (the exact LU at every step): every
-    output column agrees to 1e-6 of its largest value (both stop within the Newton tolerance of the
-    same solution).  The torque-driven four-bar and the manipulator start from rest and keep the
-    symmetric part (same iterations); the four-bar at constant crank speed needs a third iteration
-    with it (its skew, gyroscopic part is larger) and goes back to the exact LU after the probe."""
-    over = ["solver.t_end=0.004", "solver.dt=1e-5", "solver.output_every=10", f"mesh.elements_per_link={epl}",
-            "solver.error_estimate='none'", "solver.node_angles='shared'", "solver.integrator='generalized-alpha'"]
-    case = fm.load_case(cases_dir / f"{name}.toml", overrides=over)
-    auto = fm.simulate(case, model="nonlinear")
-    assert kernels.cpl.cpl_set_solver(BAND) == 0
-    try:
-        exact = fm.simulate(case, model="nonlinear")
-    finally:
-        kernels.cpl.cpl_set_solver(AUTO)
-    na, ne = auto.extra["coupled"]["newton"], exact.extra["coupled"]["newton"]
-    print(f"\n{name}: {na['symmetric_part_factorizations']} of {na['factorizations']} factorizations by the "
-          f"symmetric part, iterations {na['iterations']} against {ne['iterations']} (exact LU)")
-    assert ne["symmetric_part_factorizations"] == 0
-    if chosen:
-        assert na["symmetric_part_factorizations"] >= auto.nsteps - SYM_BLOCK
-    else:
-        assert na["symmetric_part_factorizations"] == SYM_BLOCK
-    for key, col in exact.columns.items():
-        if key == "newton_iterations":
-            continue
-        col, other = np.asarray(col, float), np.asarray(auto.columns[key], float)
-        scale = np.max(np.abs(col))
-        if scale > 0:
-            assert np.max(np.abs(other - col)) <= 1e-6 * scale, key
-
-
 def test_set_multipliers_rejects_unknown_mode():
     assert kernels.cpl.cpl_set_multipliers(2) == 4
     assert kernels.cpl.cpl_set_multipliers(AUTO) == 0

@@ -230,31 +230,19 @@ def test_nonlinear_drive_torque_stays_smooth_with_average_acceleration():
     the element's end rotation, its curvature was missing from the iteration matrix, and the drive
     torque's period-2 dt oscillation grew until Newton failed (the guards blamed the integrator).
     Now the drive row is linear in the node angle: Newmark runs through, its drive torque equals
-    generalized-alpha's to 1e-4 of its peak, with at most 2 Newton iterations per step with the exact
-    iteration matrix (the whole band's LU, forced: the automatic choice iterates with the symmetric
-    part's Cholesky factor, theory.md 12.2, and takes up to 3)."""
-    from flexmech_py import kernels
-
-    def run(integ):
-        return fm.simulate(fm.load_case(
+    generalized-alpha's to 1e-4 of its peak, with at most 2 Newton iterations per step."""
+    runs = {}
+    for integ in ("newmark", "generalized-alpha"):
+        runs[integ] = fm.simulate(fm.load_case(
             CASES / "extreme" / "spinup_beam.toml",
             overrides=["solver.dt=2e-3", "solver.t_end=4.0", "solver.model='nonlinear'", f"solver.integrator='{integ}'",
                        "solver.error_estimate='none'"]))
-
-    runs = {integ: run(integ) for integ in ("newmark", "generalized-alpha")}
-    assert kernels.cpl.cpl_set_solver(0) == 0          # SOLVER_BAND: the exact LU
-    try:
-        exact = run("newmark")
-    finally:
-        kernels.cpl.cpl_set_solver(-1)
     tn, tg = (runs[k].columns["drive_torque"] for k in ("newmark", "generalized-alpha"))
     peak = np.abs(tn).max()
     assert runs["newmark"].t[-1] == pytest.approx(4.0)
     assert np.abs(tn - tg).max() < 1e-4 * peak
     assert np.abs(np.diff(tn, 2)).max() < 1e-3 * peak          # no period-2 dt oscillation
-    assert np.abs(exact.columns["drive_torque"] - tn).max() < 1e-6 * peak
-    assert exact.extra["coupled"]["newton"]["max_per_step"] <= 2
-    assert runs["newmark"].extra["coupled"]["newton"]["max_per_step"] <= 3
+    assert runs["newmark"].extra["coupled"]["newton"]["max_per_step"] <= 2
 
 
 # ----------------------------------------------------------------------------- error-estimate warning
