@@ -372,84 +372,12 @@ def _undamped_constraints(prep, model: str, data) -> bool:
 def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True) -> SolverError:
     """The SolverError a failed run raises: one line naming the time, what stopped, the quantity
     and the likely cause; ``partial`` is marked failed and its summary carries the diagnosis."""
-    res, data, code, t_fail = exc.partial, exc.data, exc.code, exc.time
-    dt = prep.dt
-    geo = data.get("geometric", "none") if data else "none"
-    what = kernels.STATUS_WHAT.get(code, f"status {code}")
-    if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:
-        what = kernels.STATUS_WHAT_GEOMETRIC
-    elif code == kernels.STATUS_NEWTON:
-        what += f" = {prep.case['solver']['newton_maxit']} (tolerance {prep.case['solver']['newton_tol']:g})"
-        nw = (data or {}).get("newton")
-        if nw is not None:       # the coupled/nonlinear loop's last iteration
-            what += (f"; last iteration: residual norm {nw[0]:.3g}, acceleration correction {nw[1]:.3g} against "
-                     f"accelerations of norm {nw[2]:.3g}")
-    qtext, quantity = _largest_displacement(res)
-    comp = res.extra["validity_overall"]
-    if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:
-        quantity.update(max_compression_over_euler=comp["max_compression_over_euler"],
-                        link=comp["max_compression_link"])
-        qtext += (f"; largest compression {comp['max_compression_over_euler']:.3g} x the Euler load "
-                  f"({comp['max_compression_link']})")
-    evidence = {}
-    period = _shortest_period(prep, model, res, data or {})
-    if period:
-        evidence.update(shortest_period_s=period, dt_over_shortest_period=dt / period)
-    if diagnose and code in kernels.RUNTIME_FAILURES and code != kernels.STATUS_SINGULAR:
-        evidence["half_step"] = _half_step_check(prep, model, geometric, t_fail)
-    hs = evidence.get("half_step")
-    valid_until = comp["valid_until_s"]
-    ratio = evidence.get("dt_over_shortest_period")
-    res_txt = ""
-    if ratio:
-        part = f"{ratio:.3g} times" if ratio >= 1 else f"{ratio:.2g} of"
-        res_txt = f" (dt = {dt:.3g} s is {part} the shortest elastic period {period:.3g} s)"
-    if code in (kernels.STATUS_LAPACK_ARG, kernels.STATUS_BAD_INPUT):
-        cause, ctext = "bug_or_input", kernels.STATUS_MESSAGES[code]
-    elif code == kernels.STATUS_SINGULAR:
-        cause, ctext = "singular", kernels.STATUS_MESSAGES[code]
-    elif (_undamped_constraints(prep, model, data) and t_fail > 100 * dt and hs and "error" not in hs
-          and hs["failed_at_s"] is not None):   # a slow growth over many steps, not a first-step failure
-        cause = "undamped_integrator"
-        ctext = (f"the average-acceleration rule adds no numerical damping, and the constraint (drive) torques of the "
-                 f"{model} model carry a period-2 dt oscillation that it lets grow (at dt/2 the run fails again at "
-                 f"t = {_fmt_t(hs['failed_at_s'])} s); rerun with numerical dissipation: --integrator generalized-alpha "
-                 "--rho-inf 0.8 (theory.md §15)")
-    elif hs and "error" not in hs and (hs["failed_at_s"] is None
-                                       or hs["failed_at_s"] > t_fail + max(0.1 * t_fail, 20 * dt)):
-        cause = "step_too_large"
-        passed = ("passes t = " + _fmt_t(hs["checked_until_s"]) + " s" if hs["failed_at_s"] is None
-                  else "fails only at t = " + _fmt_t(hs["failed_at_s"]) + " s")
-        ctext = f"the time step is too large: at dt/2 the run {passed}{res_txt}; reduce solver.dt"
-    elif valid_until is not None and valid_until <= t_fail:
-        cause = "outside_validity"
-        adv = _advice(model, geo) or "the elastic model is past its range"
-        again = (f"; at dt/2 it fails again at t = {_fmt_t(hs['failed_at_s'])} s" if hs and hs.get("failed_at_s")
-                 else "")
-        ctext = (f"the model left its validity before the failure ({_limits_before(res, t_fail)}{again}), so the "
-                 f"growth is the model's, not the structure's; {adv}")
-    elif hs is None and ratio is not None and ratio > 0.25:
-        cause = "step_too_large"
-        ctext = f"probably the time step{res_txt}; reduce solver.dt"
-    elif code == kernels.STATUS_NEWTON and ratio is not None and ratio > 10 and not _grew(res):
-        cause = "step_too_large"
-        ctext = (f"the time step is far above the shortest elastic period{res_txt}: the iteration cannot settle the "
-                 "unresolved stiff (axial) modes, also at dt/2; reduce solver.dt toward that period, use "
-                 "--integrator generalized-alpha, or fewer elements per link")
-    elif not _grew(res) and code == kernels.STATUS_NEWTON:
-        cause = "solver_settings"
-        ctext = ("the motion had not grown before the failure and it persists at dt/2: solver.newton_tol is below what "
-                 "the iteration can reach (round-off) or solver.newton_maxit is too small; raise them")
-    elif not _grew(res):
-        cause = "unknown"
-        ctext = ("the motion had not grown before the failure and it persists at dt/2; check the case (joints, masses, "
-                 "drive) and report it with the case file if it looks right")
-    else:
-        cause = "physical_instability"
-        again = (f"at dt/2 it fails again at t = {_fmt_t(hs['failed_at_s'])} s" if hs and hs.get("failed_at_s")
-                 else "the step is well resolved")
-        ctext = (f"a physical instability of the model ({again}{res_txt}), e.g. parametric resonance; for a "
-                 "constant-speed drive, `flexmech stability CASE` maps the unstable speeds")
+    res, data, code, t_fail = exc.partial, exc.data or {}, exc.code, exc.time
+    what = _what_stopped(prep, model, code, data)
+    qtext, quantity = _stopping_quantity(res, model, code)
+    evidence = _evidence(prep, model, geometric, res, data, code, t_fail, diagnose)
+    geo = data.get("geometric", "none")
+    cause, ctext = _likely_cause(prep, model, res, data, code, t_fail, evidence, geo)
     msg = (f"{model} run stopped at t = {_fmt_t(t_fail)} s: {what}; {qtext}. Likely cause: {ctext}. "
            f"Partial results up to t = {_fmt_t(res.t[-1])} s are kept.")
     failure = {"code": code, "step": exc.step, "what": what, "cause": cause, "message": msg,
@@ -457,6 +385,96 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
     res.failure = dict(failure, time_s=t_fail)
     res.extra["error_estimate"] = {"method": "none", "reason": "the run failed"}
     return SolverError(msg, time=t_fail, code=code, step=exc.step, partial=res, failure=res.failure)
+
+
+def _what_stopped(prep, model: str, code: int, data: dict) -> str:
+    """What stopped the run, in words (the Newton limits and the coupled loop's last iteration)."""
+    what = kernels.STATUS_WHAT.get(code, f"status {code}")
+    if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:
+        return kernels.STATUS_WHAT_GEOMETRIC
+    if code == kernels.STATUS_NEWTON:
+        what += f" = {prep.case['solver']['newton_maxit']} (tolerance {prep.case['solver']['newton_tol']:g})"
+        nw = data.get("newton")
+        if nw is not None:       # the coupled/nonlinear loop's last iteration
+            what += (f"; last iteration: residual norm {nw[0]:.3g}, acceleration correction {nw[1]:.3g} against "
+                     f"accelerations of norm {nw[2]:.3g}")
+    return what
+
+
+def _stopping_quantity(res, model: str, code: int) -> tuple[str, dict]:
+    """The largest displacement before the failure (and, for a linear model's failed axial-force
+    iteration, the largest compression against the Euler load): text and numbers."""
+    qtext, quantity = _largest_displacement(res)
+    comp = res.extra["validity_overall"]
+    if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:
+        quantity.update(max_compression_over_euler=comp["max_compression_over_euler"],
+                        link=comp["max_compression_link"])
+        qtext += (f"; largest compression {comp['max_compression_over_euler']:.3g} x the Euler load "
+                  f"({comp['max_compression_link']})")
+    return qtext, quantity
+
+
+def _evidence(prep, model: str, geometric, res, data: dict, code: int, t_fail: float, diagnose: bool) -> dict:
+    """The shortest elastic period against dt and (diagnose, a runtime failure) the run again at dt/2."""
+    evidence = {}
+    period = _shortest_period(prep, model, res, data)
+    if period:
+        evidence.update(shortest_period_s=period, dt_over_shortest_period=prep.dt / period)
+    if diagnose and code in kernels.RUNTIME_FAILURES and code != kernels.STATUS_SINGULAR:
+        evidence["half_step"] = _half_step_check(prep, model, geometric, t_fail)
+    return evidence
+
+
+def _likely_cause(prep, model: str, res, data: dict, code: int, t_fail: float, evidence: dict,
+                  geo: str) -> tuple[str, str]:
+    """(cause, its sentence) of a failure from its code and evidence (see failed)."""
+    dt, hs = prep.dt, evidence.get("half_step")
+    valid_until = res.extra["validity_overall"]["valid_until_s"]
+    ratio = evidence.get("dt_over_shortest_period")
+    res_txt = ""
+    if ratio:
+        part = f"{ratio:.3g} times" if ratio >= 1 else f"{ratio:.2g} of"
+        res_txt = f" (dt = {dt:.3g} s is {part} the shortest elastic period {evidence['shortest_period_s']:.3g} s)"
+    ran_at_half = bool(hs) and "error" not in hs
+    if code in (kernels.STATUS_LAPACK_ARG, kernels.STATUS_BAD_INPUT):
+        return "bug_or_input", kernels.STATUS_MESSAGES[code]
+    if code == kernels.STATUS_SINGULAR:
+        return "singular", kernels.STATUS_MESSAGES[code]
+    if (_undamped_constraints(prep, model, data) and t_fail > 100 * dt and ran_at_half
+            and hs["failed_at_s"] is not None):   # a slow growth over many steps, not a first-step failure
+        return "undamped_integrator", (
+            f"the average-acceleration rule adds no numerical damping, and the constraint (drive) torques of the "
+            f"{model} model carry a period-2 dt oscillation that it lets grow (at dt/2 the run fails again at "
+            f"t = {_fmt_t(hs['failed_at_s'])} s); rerun with numerical dissipation: --integrator generalized-alpha "
+            "--rho-inf 0.8 (theory.md §15)")
+    if ran_at_half and (hs["failed_at_s"] is None or hs["failed_at_s"] > t_fail + max(0.1 * t_fail, 20 * dt)):
+        passed = ("passes t = " + _fmt_t(hs["checked_until_s"]) + " s" if hs["failed_at_s"] is None
+                  else "fails only at t = " + _fmt_t(hs["failed_at_s"]) + " s")
+        return "step_too_large", f"the time step is too large: at dt/2 the run {passed}{res_txt}; reduce solver.dt"
+    again = f"at dt/2 it fails again at t = {_fmt_t(hs['failed_at_s'])} s" if hs and hs.get("failed_at_s") else ""
+    if valid_until is not None and valid_until <= t_fail:
+        adv = _advice(model, geo) or "the elastic model is past its range"
+        return "outside_validity", (f"the model left its validity before the failure ({_limits_before(res, t_fail)}"
+                                    f"{'; ' + again if again else ''}), so the growth is the model's, not the "
+                                    f"structure's; {adv}")
+    if hs is None and ratio is not None and ratio > 0.25:
+        return "step_too_large", f"probably the time step{res_txt}; reduce solver.dt"
+    grew = _grew(res)
+    if code == kernels.STATUS_NEWTON and ratio is not None and ratio > 10 and not grew:
+        return "step_too_large", (
+            f"the time step is far above the shortest elastic period{res_txt}: the iteration cannot settle the "
+            "unresolved stiff (axial) modes, also at dt/2; reduce solver.dt toward that period, use "
+            "--integrator generalized-alpha, or fewer elements per link")
+    if not grew and code == kernels.STATUS_NEWTON:
+        return "solver_settings", (
+            "the motion had not grown before the failure and it persists at dt/2: solver.newton_tol is below what "
+            "the iteration can reach (round-off) or solver.newton_maxit is too small; raise them")
+    if not grew:
+        return "unknown", ("the motion had not grown before the failure and it persists at dt/2; check the case "
+                           "(joints, masses, drive) and report it with the case file if it looks right")
+    return "physical_instability", (f"a physical instability of the model ({again or 'the step is well resolved'}"
+                                    f"{res_txt}), e.g. parametric resonance; for a constant-speed drive, "
+                                    "`flexmech stability CASE` maps the unstable speeds")
 
 
 # ----------------------------------------------------------------------------- error estimate
