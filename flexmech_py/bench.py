@@ -485,6 +485,71 @@ def _exponent_rows(metric: str, pts: list, lo: float, hi: float, what: str) -> l
     return [{"metric": metric, "value": fit_exponent(xs, ys), "unit": "1", "note": note}]
 
 
+def _startup_rows(startup: dict, peak: float) -> list[dict]:
+    """Summary rows of the start-up measurements and the scalar peak."""
+    rows = []
+    notes = {"python_startup": "python -c pass", "import": "import flexmech_py.cli (start-up subtracted)",
+             "flexmech_run_no_plots": f"flexmech run {SEED} --no-plots (subprocess, start-up included)",
+             "flexmech_run_with_plots": f"flexmech run {SEED} (subprocess, PNG plots included)"}
+    for k, note in notes.items():
+        rows.append({"metric": k, "value": startup[f"{k}_s"], "unit": "s", "note": note + ", wall"})
+        rows.append({"metric": k + "_cpu", "value": startup[f"{k}_cpu_s"], "unit": "s", "note": note + ", CPU"})
+    return rows + [{"metric": "matplotlib_imported_by_import", "value": startup["matplotlib_imported_by_import"],
+                    "unit": "1", "note": "1 = plotting library loaded without plotting"},
+                   {"metric": "scipy_integrate_imported_by_import", "value": startup["scipy_integrate_imported_by_import"],
+                    "unit": "1", "note": "1 = loaded at import (it is needed only by torque-driven runs)"},
+                   {"metric": "scalar_peak", "value": peak / 1e9, "unit": "GFLOP/s",
+                    "note": "tight multiply-add loop, 8 independent chains, kernels' compiler flags"}]
+
+
+def _seed_rows(seeds: list[dict], ref: dict) -> list[dict]:
+    """Summary rows of the seed cases' runs and of the NumPy reference."""
+    rows = []
+    for r in seeds:
+        for k in ("setup_s", "rigid_s", "rigid_cpu_s", "kernel_s", "kernel_cpu_s", "python_overhead_s",
+                  "python_overhead_cpu_s", "total_s", "total_cpu_s", "us_per_step", "ns_per_dof_step"):
+            rows.append({"metric": f"seed.{r['case']}.{k}", "value": r[k], "unit": k.rsplit("_", 1)[-1] if k.endswith("_s") else k.split("_per")[0],
+                         "note": f"model {r['model']}, {r['steps']} steps, {r['dofs']} DOFs"})
+    for k, v in ref.items():
+        rows.append({"metric": f"reference.{k}", "value": v, "unit": "", "note": "seed four-bar, hac, NumPy reference"})
+    return rows
+
+
+def _scaling_rows(ladder: list[dict], solves: list[dict]) -> list[dict]:
+    """Summary rows of the mesh ladder (exponents, fractions of the peak) and of the solves."""
+    rows = []
+    for model in MODELS:
+        rows += _exponent_rows(f"exponent.{model}", [(x["elements"], x["us_per_step"]) for x in ladder
+                                                     if x["model"] == model and np.isfinite(x["us_per_step"])],
+                               16, 1024, "time per step ~ elements^p, elements in total:")
+        big = [x["peak_fraction"] for x in ladder if x["model"] == model and x["elements"] >= 64
+               and np.isfinite(x["peak_fraction"])]
+        if big:
+            rows.append({"metric": f"peak_fraction_min_ge64.{model}", "value": min(big), "unit": "1",
+                         "note": "smallest fraction of the scalar peak at >= 64 elements"})
+    for key in ("banded_us", "dense_us"):
+        rows += _exponent_rows(f"exponent.solve_{key[:-3]}", [(x["dofs"], x[key]) for x in solves if np.isfinite(x[key])],
+                               50, math.inf, "LU + solve time ~ DOFs^p, DOFs:")
+    return rows
+
+
+def _memory_rows(memory: list[dict]) -> list[dict]:
+    """Summary rows of the long runs' memory."""
+    return [{"metric": f"memory.{m['steps']}_steps.{k}", "value": m[k], "unit": k.rsplit("_", 1)[-1],
+             "note": f"fourbar_constant_speed, {m['frames']} frames (every 1000th step)"}
+            for m in memory for k in ("tracemalloc_peak_MB", "maxrss_MB", "wall_s")]
+
+
+def _exudyn_rows(exudyn: list[dict], exudyn_manipulator: list[dict]) -> list[dict]:
+    """Summary rows of the side-by-side runs with Exudyn (CPU time ratios)."""
+    rows = [{"metric": f"exudyn.{r['model']}.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
+             "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed four-bar, {r['steps']} steps of 1.25e-5 s"}
+            for r in exudyn]
+    return rows + [{"metric": f"exudyn.manipulator.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
+                    "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed manipulator, {r['steps']} steps of 1.25e-5 s"}
+                   for r in exudyn_manipulator]
+
+
 def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=print) -> dict:
     """Run every measurement; write the CSV files and the PNG into out_dir; return all results."""
     out = Path(out_dir)
@@ -511,61 +576,17 @@ def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=pri
     exudyn = bench_side_by_side(seed, quick, progress)
     exudyn_manipulator = bench_side_by_side_manipulator(cases, quick, progress)
 
-    summary = []
-    notes = {"python_startup": "python -c pass", "import": "import flexmech_py.cli (start-up subtracted)",
-             "flexmech_run_no_plots": f"flexmech run {SEED} --no-plots (subprocess, start-up included)",
-             "flexmech_run_with_plots": f"flexmech run {SEED} (subprocess, PNG plots included)"}
-    for k, note in notes.items():
-        summary.append({"metric": k, "value": startup[f"{k}_s"], "unit": "s", "note": note + ", wall"})
-        summary.append({"metric": k + "_cpu", "value": startup[f"{k}_cpu_s"], "unit": "s", "note": note + ", CPU"})
-    summary += [{"metric": "matplotlib_imported_by_import", "value": startup["matplotlib_imported_by_import"],
-                 "unit": "1", "note": "1 = plotting library loaded without plotting"},
-                {"metric": "scipy_integrate_imported_by_import", "value": startup["scipy_integrate_imported_by_import"],
-                 "unit": "1", "note": "1 = loaded at import (it is needed only by torque-driven runs)"},
-                {"metric": "scalar_peak", "value": peak / 1e9, "unit": "GFLOP/s",
-                 "note": "tight multiply-add loop, 8 independent chains, kernels' compiler flags"}]
-    for r in seeds:
-        for k in ("setup_s", "rigid_s", "rigid_cpu_s", "kernel_s", "kernel_cpu_s", "python_overhead_s",
-                  "python_overhead_cpu_s", "total_s", "total_cpu_s", "us_per_step", "ns_per_dof_step"):
-            summary.append({"metric": f"seed.{r['case']}.{k}", "value": r[k], "unit": k.rsplit("_", 1)[-1] if k.endswith("_s") else k.split("_per")[0],
-                            "note": f"model {r['model']}, {r['steps']} steps, {r['dofs']} DOFs"})
-    for k, v in ref.items():
-        summary.append({"metric": f"reference.{k}", "value": v, "unit": "", "note": "seed four-bar, hac, NumPy reference"})
-    for model in MODELS:
-        summary += _exponent_rows(f"exponent.{model}", [(x["elements"], x["us_per_step"]) for x in ladder
-                                                        if x["model"] == model and np.isfinite(x["us_per_step"])],
-                                  16, 1024, "time per step ~ elements^p, elements in total:")
-        big = [x["peak_fraction"] for x in ladder if x["model"] == model and x["elements"] >= 64
-               and np.isfinite(x["peak_fraction"])]
-        if big:
-            summary.append({"metric": f"peak_fraction_min_ge64.{model}", "value": min(big), "unit": "1",
-                            "note": "smallest fraction of the scalar peak at >= 64 elements"})
-    for key in ("banded_us", "dense_us"):
-        summary += _exponent_rows(f"exponent.solve_{key[:-3]}", [(x["dofs"], x[key]) for x in solves if np.isfinite(x[key])],
-                                  50, math.inf, "LU + solve time ~ DOFs^p, DOFs:")
-    for m in memory:
-        for k in ("tracemalloc_peak_MB", "maxrss_MB", "wall_s"):
-            summary.append({"metric": f"memory.{m['steps']}_steps.{k}", "value": m[k], "unit": k.rsplit("_", 1)[-1],
-                            "note": f"fourbar_constant_speed, {m['frames']} frames (every 1000th step)"})
-    for r in exudyn:
-        summary.append({"metric": f"exudyn.{r['model']}.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
-                        "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed four-bar, {r['steps']} steps of 1.25e-5 s"})
-    for r in exudyn_manipulator:
-        summary.append({"metric": f"exudyn.manipulator.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
-                        "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed manipulator, {r['steps']} steps of 1.25e-5 s"})
+    summary = (_startup_rows(startup, peak) + _seed_rows(seeds, ref) + _scaling_rows(ladder, solves)
+               + _memory_rows(memory) + _exudyn_rows(exudyn, exudyn_manipulator))
     summary.append({"metric": "bench_wall", "value": time.perf_counter() - t_all, "unit": "s", "note": "quick" if quick else "full"})
 
     paths = [out / "bench_ladder.csv", out / "bench_solves.csv", out / "bench_summary.csv", out / "bench_seed.csv"]
-    _write_csv(paths[0], ladder)
-    _write_csv(paths[1], solves)
-    _write_csv(paths[2], summary)
-    _write_csv(paths[3], seeds)
-    if exudyn:
-        paths.append(out / "bench_exudyn.csv")
-        _write_csv(paths[-1], exudyn)
-    if exudyn_manipulator:
-        paths.append(out / "bench_exudyn_manipulator.csv")
-        _write_csv(paths[-1], exudyn_manipulator)
+    for path, rows in zip(paths, (ladder, solves, summary, seeds)):
+        _write_csv(path, rows)
+    for name, rows in (("bench_exudyn.csv", exudyn), ("bench_exudyn_manipulator.csv", exudyn_manipulator)):
+        if rows:
+            paths.append(out / name)
+            _write_csv(paths[-1], rows)
     png = _plot(out / "bench.png", ladder, solves)
     if png is not None:
         paths.append(png)
