@@ -52,11 +52,28 @@ contains
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: nrhs
     type(link_mats), intent(out) :: lm
-    integer :: l, n, nl, e, k, f, idx(6), lo, hi
-    integer, allocatable :: cnt(:), bnum(:)
-    logical, allocatable :: isb(:)
+    integer, allocatable :: bnum(:)
     allocate (lm%off(sys%nseg), lm%bfree(4, sys%nseg), lm%widx(sys%maxld), lm%wl(sys%maxld, 4))
     allocate (lm%fl(sys%maxld, sys%nseg))
+    call interior_layout(sys, lm)
+    lm%nrhs = max(1, nrhs)
+    allocate (lm%bb(4, 4, sys%nseg), lm%bi(4, lm%ni), lm%ib(lm%ni, 4), lm%ai(lm%ldi, lm%ni), lm%ifree(lm%ni))
+    allocate (lm%dg(sys%nfree))
+    lm%dg = 0.0_dp
+    call boundary_dofs(sys, lm, bnum)
+    call boundary_band(sys, lm, bnum)
+    if (lm%cond) then
+      allocate (lm%z(lm%ni, 4), lm%sb(lm%ldb, lm%nb), lm%ipi(lm%ni), lm%ipb(lm%nb), lm%yi(lm%ni, lm%nrhs), &
+                lm%yb(lm%nb, lm%nrhs))
+    end if
+  end subroutine lm_setup
+
+  !> Every segment's free-DOF numbers per local DOF (lm%fl), its interior offset (lm%off), the
+  !> number of interior DOFs (lm%ni) and their band (lm%kbi, lm%ldi: coupling is element by element).
+  pure subroutine interior_layout(sys, lm)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer :: l, n, nl, e, idx(6)
     lm%fl = 0
     lm%ni = 0; lm%kbi = 0
     do l = 1, sys%nseg
@@ -64,14 +81,24 @@ contains
       lm%fl(1:nl, l) = sys%free_of(sys%ld(1:nl, l))
       lm%off(l) = lm%ni
       lm%ni = lm%ni + nl - 4
-      do e = 1, n           ! interior coupling is element by element: half band of the element DOFs
+      do e = 1, n
         idx = elem_index(n, e)
         lm%kbi = max(lm%kbi, maxval(idx) - minval(idx, mask=idx > 0))
       end do
     end do
     lm%ldi = 3*lm%kbi + 1
-    lm%nrhs = max(1, nrhs)
-    allocate (lm%bb(4, 4, sys%nseg), lm%bi(4, lm%ni), lm%ib(lm%ni, 4), lm%ai(lm%ldi, lm%ni), lm%ifree(lm%ni))
+  end subroutine interior_layout
+
+  !> The interior DOFs' free numbers (lm%ifree), the boundary DOFs (segment ends and rigid bodies)
+  !> numbered in free order (bnum, lm%bglob, lm%nb), and whether the condensed solve applies (lm%cond:
+  !> interior DOFs free, in one segment only, never an end position; every free DOF one or the other).
+  subroutine boundary_dofs(sys, lm, bnum)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer, allocatable, intent(out) :: bnum(:)
+    integer, allocatable :: cnt(:)
+    logical, allocatable :: isb(:)
+    integer :: l, nl, k, f
     allocate (cnt(sys%nfree), isb(sys%nfree), bnum(sys%nfree))
     cnt = 0; isb = .false.
     lm%cond = .true.
@@ -97,10 +124,6 @@ contains
         if (f > 0) isb(f) = .true.
       end do
     end do
-    allocate (lm%dg(sys%nfree))
-    lm%dg = 0.0_dp
-    ! condensation needs: interior DOFs free, in one segment only, never an end position; every free
-    ! DOF interior or boundary
     if (any(cnt > 1) .or. any(cnt > 0 .and. isb) .or. any(cnt == 0 .and. .not. isb)) lm%cond = .false.
     lm%nb = count(isb)
     if (lm%nb == 0) lm%cond = .false.
@@ -112,6 +135,15 @@ contains
       k = k + 1
       bnum(f) = k; lm%bglob(k) = f
     end do
+  end subroutine boundary_dofs
+
+  !> Every segment's boundary numbers per end-position DOF (lm%bfree) and the condensed band
+  !> (lm%kbb, lm%ldb).
+  pure subroutine boundary_band(sys, lm, bnum)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: bnum(:)
+    integer :: l, k, f, lo, hi
     lm%kbb = 0
     do l = 1, sys%nseg
       lo = huge(1); hi = 0
@@ -126,11 +158,7 @@ contains
       if (hi > 0) lm%kbb = max(lm%kbb, hi - lo)
     end do
     lm%ldb = 3*lm%kbb + 1
-    if (lm%cond) then
-      allocate (lm%z(lm%ni, 4), lm%sb(lm%ldb, lm%nb), lm%ipi(lm%ni), lm%ipb(lm%nb), lm%yi(lm%ni, lm%nrhs), &
-                lm%yb(lm%nb, lm%nrhs))
-    end if
-  end subroutine lm_setup
+  end subroutine boundary_band
 
   !> S(i, j) += val for the local DOFs i, j of segment l (the entry must lie in the block structure).
   pure subroutine lm_add(lm, l, i, j, val)
