@@ -96,6 +96,7 @@ contains
     call scatter_from(nl, lm%widx, lm%wl(1, 1), res)
   end subroutine scatter
 
+  !> scatter's loop over plain arrays: res(widx(i)) += r(i).
   pure subroutine scatter_from(nl, widx, r, res)
     integer, intent(in) :: nl, widx(nl)
     real(dp), intent(in) :: r(nl)
