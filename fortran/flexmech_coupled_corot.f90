@@ -15,7 +15,7 @@ module flexmech_coupled_corot
   use flexmech_coupled_system, only: coupled_system, wrap
   implicit none
   private
-  public :: one_element_residual, one_element_eval, one_element_elastic, absolute_block
+  public :: one_element_residual, one_element_eval, one_element_elastic, absolute_block, chord
 
   !> The chord frame of a segment and its chord-relative end angles: c = re - rs [m] and its rates,
   !> l2 = |c|^2, ell = |c|, e1 = c/ell, e2 = Omega e1, g = Omega c/l2 (d phi/d re), omega = g.c',
@@ -152,6 +152,17 @@ contains
       fr%thd = fr%thd - fr%om; fr%thdd = fr%thdd - fr%al
     end if
   end function frame_of
+
+  !> The chord of a segment (frame_of's, for the general path's segments of several elements, whose
+  !> q(5:6) are not end angles): direction (cs, sn), length ell [m], g = d phi/d re [1/m], omega [rad/s],
+  !> alpha0 (alpha's velocity part) and alpha [rad/s^2].
+  pure subroutine chord(q, v, a, cs, sn, ell, g, om, al0, al)
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(out) :: cs, sn, ell, g(2), om, al0, al
+    type(chord_frame) :: fr
+    fr = frame_of(q, v, a, .false.)
+    cs = fr%e1(1); sn = fr%e1(2); ell = fr%ell; g = fr%g; om = fr%om; al0 = fr%al0; al = fr%al
+  end subroutine chord
 
   !> w0 = d alpha0 / d c' [1/m s]: the chord velocity's part in alpha0 = -2 (c.c') omega/|c|^2.
   pure function alpha0_rate(fr) result(w0)

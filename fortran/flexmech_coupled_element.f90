@@ -8,7 +8,8 @@ module flexmech_coupled_element
   use flexmech_lapack, only: STATUS_OK
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap, elem_index, shape_fn, th_index, gx, gw
   use flexmech_coupled_storage, only: link_mats, lm_add, lm_add_block, lm_block_get, lm_block_put, lm_put_one
-  use flexmech_coupled_corot, only: one_element_residual, one_element_eval, one_element_elastic, absolute_block
+  use flexmech_coupled_corot, only: one_element_residual, one_element_eval, one_element_elastic, absolute_block, &
+                                    chord
   implicit none
   private
   public :: link_eval, segment_residual, coupled_set_inertia, INERTIA_CLOSED, INERTIA_GAUSS
@@ -48,7 +49,7 @@ contains
     real(dp) :: cs, sn, ell, g(2), om, al0, al, phi, sr, s6(6, 6)
     if (sys%n_el(l) == 1 .and. inertia_mode == INERTIA_CLOSED) then   ! one element: one pass
       call one_element_eval(sys, l, q, v, a, want, ccv, ckt, r, s6, ekin, epot)
-      if (want) call lm_put_one(lm, l, s6)
+      if (want) call lm_put_one(sys, lm, l, s6)
       return
     end if
     if (sys%absang(l) == 0) then
@@ -130,21 +131,6 @@ contains
     call axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
     call bending_forces(sys, l, q, v, want, ccv, ckt, r, lm, epot, csum)
   end subroutine link_eval_rel
-
-  !> Chord quantities of a link from its local q, v, a.
-  pure subroutine chord(q, v, a, cs, sn, ell, g, om, al0, al)
-    real(dp), intent(in) :: q(:), v(:), a(:)
-    real(dp), intent(out) :: cs, sn, ell, g(2), om, al0, al
-    real(dp) :: c(2), cd(2), cdd(2), l2
-    c = q(3:4) - q(1:2); cd = v(3:4) - v(1:2); cdd = a(3:4) - a(1:2)
-    l2 = c(1)**2 + c(2)**2
-    ell = sqrt(l2)
-    cs = c(1)/ell; sn = c(2)/ell
-    g = [-c(2), c(1)]/l2
-    om = g(1)*cd(1) + g(2)*cd(2)
-    al0 = -2.0_dp*(c(1)*cd(1) + c(2)*cd(2))*om/l2   ! part of alpha independent of the accelerations
-    al = al0 + g(1)*cdd(1) + g(2)*cdd(2)
-  end subroutine chord
 
   !> Inertia of element e of a longer segment l in closed form (what mass_point gives summed over the
   !> element's Gauss points and point masses): residual, kinetic and gravity energy and, if want, the

@@ -6,7 +6,7 @@ module flexmech_coupled_storage
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE
-  use flexmech_assembly, only: band_rows
+  use flexmech_assembly, only: band_rows, band_add_element6, half_bandwidth
   use flexmech_coupled_system, only: coupled_system, elem_index
   implicit none
   private
@@ -143,20 +143,15 @@ contains
     type(coupled_system), intent(in) :: sys
     type(link_mats), intent(inout) :: lm
     integer, intent(in) :: bnum(:)
-    integer :: l, k, f, lo, hi
-    lm%kbb = 0
+    integer :: l, k, f
     do l = 1, sys%nseg
-      lo = huge(1); hi = 0
       do k = 1, 4
         f = sys%free_of(sys%ld(k, l))
         lm%bfree(k, l) = 0
-        if (f > 0) then
-          lm%bfree(k, l) = bnum(f)
-          lo = min(lo, bnum(f)); hi = max(hi, bnum(f))
-        end if
+        if (f > 0) lm%bfree(k, l) = bnum(f)
       end do
-      if (hi > 0) lm%kbb = max(lm%kbb, hi - lo)
     end do
+    lm%kbb = half_bandwidth(lm%bfree)
     lm%ldb = 3*lm%kbb + 1
   end subroutine boundary_band
 
@@ -274,24 +269,16 @@ contains
 
   !> The whole 6 x 6 block s6 of one-element segment l (local DOFs [xs ys xe ye th_0 th_1]): straight
   !> into lm%ab when there is one, else into the segment blocks.
-  pure subroutine lm_put_one(lm, l, s6)
+  pure subroutine lm_put_one(sys, lm, l, s6)
+    type(coupled_system), intent(in) :: sys
     type(link_mats), intent(inout) :: lm
     integer, intent(in) :: l
     real(dp), intent(in) :: s6(6, 6)
-    integer :: i, j, fi, fj, d
     if (.not. allocated(lm%ab)) then
       call lm_block_put(lm, l, s6)
       return
     end if
-    d = lm%kd
-    do j = 1, 6
-      fj = lm%fl(j, l)
-      if (fj == 0) cycle
-      do i = 1, 6
-        fi = lm%fl(i, l)
-        if (fi > 0) lm%ab(d + fi - fj, fj) = lm%ab(d + fi - fj, fj) + s6(i, j)
-      end do
-    end do
+    call band_add_element6(lm%ab, size(lm%ab, 1), sys%kl, sys%ku, lm%fl(1:6, l), s6)
     lm%inband(l) = .true.
   end subroutine lm_put_one
 
