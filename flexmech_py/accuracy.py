@@ -189,7 +189,7 @@ def run_point(task: dict) -> dict:
         prep.coupled[task["model"]] = cm
     else:
         prep.fe.run = timed(prep.fe.run)
-    # the per-run error estimate (step doubling, guards.error_estimate) is computed once after the
+    # the per-run error estimate (step doubling, step_doubling.error_estimate) is computed once after the
     # timed runs, not inside them: it is one more run at 2 dt
     no_estimate = {"estimate": False} if "estimate" in inspect.signature(prep.run).parameters else {}
     kernel, total, cpu, kernel_cpu = [], [], [], []
@@ -206,9 +206,9 @@ def run_point(task: dict) -> dict:
         kernel_cpu.append(sum(kcpu) if kcpu else float("nan"))
     estimate = None
     if no_estimate:
-        from . import guards
+        from . import step_doubling
 
-        est = guards.error_estimate(prep, res)
+        est = step_doubling.error_estimate(prep, res)
         if est.get("columns"):
             estimate = {k: est["columns"][k]["relative"] for k in case["outputs"] if k in est["columns"]}
     return {"columns": {k: res.columns[k].tolist() for k in case["outputs"]}, "nsteps": int(res.nsteps),

@@ -70,7 +70,7 @@ UNITS = {
     "position": "m", "axial_force": "N",
 }
 REACTION_SOURCES = ("model", "rigid")   # reaction outputs: the run model's, or the rigid-body solution's
-ERROR_ESTIMATES = ("time", "none")   # step doubling (one more run at 2 dt), or nothing (guards.py)
+ERROR_ESTIMATES = ("time", "none")   # step doubling (one more run at 2 dt), or nothing (step_doubling.py)
 TOP_KEYS = {"case", "mechanism", "links", "bodies", "mesh", "joints", "drive", "drives", "initial", "point_masses",
             "rotary_inertias", "loads", "solver", "outputs"}
 

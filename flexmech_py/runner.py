@@ -16,7 +16,7 @@ import shutil
 import time
 from pathlib import Path
 
-from . import guards
+from . import guards, step_doubling
 from .case import MODELS
 from .errors import CaseError, Interrupted, MechanismError, SolverError
 from .frames import ColumnStats, Envelope, join
@@ -190,7 +190,7 @@ def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | N
     if estimate is None:
         estimate = prep.case["solver"].get("error_estimate", "time") != "none"
     validity = guards.ValidityTracker()
-    doubling = guards.StepDoubling(prep, model, geometric) if estimate else None
+    doubling = step_doubling.StepDoubling(prep, model, geometric) if estimate else None
     total = prep.nsteps + (doubling.coarse_steps if doubling else 0)
     stop = None
     try:

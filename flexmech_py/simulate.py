@@ -11,7 +11,7 @@ import numpy as np
 
 from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients
 from .errors import CaseError, MechanismError, SolverError
-from . import guards
+from . import guards, step_doubling
 from . import coupled_outputs as cpl_out
 from .coupled import CoupledModel
 from .mechanism import MotionSource, prepare_motion
@@ -251,7 +251,7 @@ class Prepared:
         its own), for the step-doubling error estimate: output frames on this run's frames (every frame
         when out_every is even, every second one when it is odd; the grid then ends at the last frame
         both share).  None when the coarse grid would have fewer than two frames."""
-        nc, oc = guards.coarse_grid(self.nsteps, self.out_every)
+        nc, oc = step_doubling.coarse_grid(self.nsteps, self.out_every)
         if nc < oc or nc < 1:
             return None
         pc = copy.copy(self)

@@ -256,7 +256,7 @@ def _spun_cantilever(dt, final_speed=6.0, t_end=0.8):
 
 
 def test_error_estimate_warns_past_the_threshold_with_the_step_that_meets_it():
-    from flexmech_py.guards import ERROR_WARN
+    from flexmech_py.step_doubling import ERROR_WARN
 
     res = fm.simulate(_spun_cantilever(0.016), model="classic")
     est = res.extra["error_estimate"]
@@ -285,14 +285,14 @@ def test_observed_order_from_the_kept_frames_equals_the_run_made_again(monkeypat
     """The 2 dt run's frames on the 4 dt grid are kept while it runs beside the dt run, so the observed
     order needs only the run at 4 dt: the same order and message as when the 2 dt run is made again
     (KEEP_FRAMES_MAX = 0 forces that)."""
-    from flexmech_py import guards
+    from flexmech_py import step_doubling
 
     seen = []
-    original = guards.StepComparison.kept_block
-    monkeypatch.setattr(guards.StepComparison, "kept_block", lambda self: seen.append(original(self)) or seen[-1])
+    original = step_doubling.StepComparison.kept_block
+    monkeypatch.setattr(step_doubling.StepComparison, "kept_block", lambda self: seen.append(original(self)) or seen[-1])
     kept = fm.simulate(_spun_cantilever(0.016), model="classic").extra["error_estimate"]["warning"]
     assert seen and seen[0] is not None and seen[0].steps.size > 2
-    monkeypatch.setattr(guards, "KEEP_FRAMES_MAX", 0)
+    monkeypatch.setattr(step_doubling, "KEEP_FRAMES_MAX", 0)
     again = fm.simulate(_spun_cantilever(0.016), model="classic").extra["error_estimate"]["warning"]
     assert seen[-1] is None
     assert kept["observed_order"] == again["observed_order"] and kept["message"] == again["message"]
