@@ -390,6 +390,8 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
     Path elements index tables by key, arrays by position (``links.0.length``)
     or, for arrays of named tables, by name (``links.coupler.length``).
     Values are TOML values (``2e-5``, ``"pin"``, ``[0, -9.81]``); bare words are strings.
+    An empty value (``KEY.PATH=``) removes the key (``drives.0.final_speed=`` when a drive changes
+    its law); an empty string is ``KEY.PATH=""``.
     """
     raw = copy.deepcopy(raw)
     for ov in overrides:
@@ -399,32 +401,50 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         parts = [p for p in key.strip().split(".") if p]
         if not parts:
             raise CaseError("--set", f"{ov!r} has an empty key")
-        node = raw
-        for depth, p in enumerate(parts[:-1]):
-            where = ".".join(parts[: depth + 1])
-            if isinstance(node, list):
-                node = _list_item(node, p, where)
-            elif isinstance(node, dict):
-                node = node.setdefault(p, {})
-            else:
-                raise CaseError(f"--set {key}", f"{where} is a value, not a table")
-        last = parts[-1]
-        if isinstance(node, list):
-            raise CaseError(f"--set {key}", "cannot replace a whole array element; set one of its keys")
-        if not isinstance(node, dict):
-            raise CaseError(f"--set {key}", f"{'.'.join(parts[:-1])} is a value, not a table")
-        node[last] = _parse_value(text.strip())
+        remove = not text.strip()
+        node = _override_parent(raw, parts, key, create=not remove)
+        if remove:
+            if parts[-1] not in node:
+                have = ", ".join(sorted(node)) or "none"
+                raise CaseError(f"--set {key}", f"nothing to remove: {'.'.join(parts[:-1]) or 'the case'} has no key "
+                                                f"{parts[-1]!r} (its keys: {have})")
+            del node[parts[-1]]
+        else:
+            node[parts[-1]] = _parse_value(text.strip())
     return raw
 
 
+def _override_parent(raw: dict, parts: list[str], key: str, create: bool) -> dict:
+    """The table an override's last key lives in (missing tables created when ``create``)."""
+    node = raw
+    for depth, p in enumerate(parts[:-1]):
+        where = ".".join(parts[: depth + 1])
+        if isinstance(node, list):
+            node = _list_item(node, p, where)
+        elif isinstance(node, dict):
+            if p not in node and not create:
+                raise CaseError(f"--set {key}", f"nothing to remove: {where} is not in the case")
+            node = node.setdefault(p, {})
+        else:
+            raise CaseError(f"--set {key}", f"{where} is a value, not a table")
+    if isinstance(node, list):
+        what = "replace" if create else "remove"
+        raise CaseError(f"--set {key}", f"cannot {what} a whole array element; {'set' if create else 'remove'} one of "
+                                        "its keys")
+    if not isinstance(node, dict):
+        raise CaseError(f"--set {key}", f"{'.'.join(parts[:-1])} is a value, not a table")
+    return node
+
+
 def _list_item(lst: list, p: str, where: str):
+    """An array's entry by position, by its ``name``, or (``[[drives]]``, which have none) by its ``joint``."""
     if p.isdigit():
         i = int(p)
         if i >= len(lst):
             raise CaseError(f"--set {where}", f"index {i} out of range (the array has {len(lst)} entries)")
         return lst[i]
     for item in lst:
-        if isinstance(item, dict) and item.get("name") == p:
+        if isinstance(item, dict) and item.get("name", item.get("joint")) == p:
             return item
-    names = [str(item.get("name")) for item in lst if isinstance(item, dict)]
+    names = [str(item.get("name", item.get("joint"))) for item in lst if isinstance(item, dict)]
     raise CaseError(f"--set {where}", f"no entry named {p!r}; names are {', '.join(names)}")

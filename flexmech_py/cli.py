@@ -87,7 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--hht-alpha", type=float, metavar="A",
                    help="HHT alpha, 0..1/3 (alias of --set solver.hht_alpha=A; implies --integrator hht)")
     r.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
-                   help="override a case value, e.g. --set solver.t_end=0.1 --set links.coupler.area=5e-5")
+                   help="override a case value, e.g. --set solver.t_end=0.1 --set links.coupler.area=5e-5; "
+                        "an empty VALUE removes the key")
     r.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>)")
     r.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     r.add_argument("--draw", type=int, nargs="?", const=6, default=None, metavar="N",

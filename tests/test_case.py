@@ -111,3 +111,46 @@ def test_overrides(raw):
 def test_rectangular_section_half_depth(cases_dir):
     case = fm.load_case(cases_dir / "fourbar_hac.toml")
     assert case["links"][1]["half_depth"] == pytest.approx(0.8e-3, rel=1e-3)  # 1.6 mm coupler
+
+
+def test_an_empty_override_removes_the_key(cases_dir):
+    """`--set KEY=` removes a key (issue 24): a drive switched from spinup to constant_speed loses the
+    spinup's parameters, which validation would otherwise refuse; [[drives]] are also named by their
+    joint.  Removing what is not there says what is."""
+    from pathlib import Path
+
+    watt = Path(__file__).parent / "data" / "watt_sixbar_spinup.toml"
+    raw = tomllib.loads(watt.read_text())
+    switch = ["drives.crank_pivot.law=constant_speed", "drives.crank_pivot.speed=60.0"]
+    with pytest.raises(fm.CaseError, match="final_speed: unknown key"):
+        fm.validate_case(apply_overrides(raw, switch))
+    out = apply_overrides(raw, switch + ["drives.crank_pivot.final_speed=", "drives.0.spinup_time= "])
+    assert out["drives"][0] == {"joint": "crank_pivot", "law": "constant_speed", "speed": 60.0}
+    case = fm.validate_case(out)
+    assert case.mechanism.drives[0].law == "constant_speed"
+    assert apply_overrides(raw, ['case.title=""'])["case"]["title"] == ""          # an empty string, quoted
+    assert "rotary_inertias" not in apply_overrides({"rotary_inertias": []}, ["rotary_inertias="])
+    with pytest.raises(fm.CaseError, match=r"nothing to remove: drives\.0 has no key 'foo' \(its keys: final_speed"):
+        apply_overrides(raw, ["drives.0.foo="])
+    with pytest.raises(fm.CaseError, match="nothing to remove: loads is not in the case"):
+        apply_overrides(raw, ["loads.gravity="])
+    with pytest.raises(fm.CaseError, match="cannot remove a whole array element"):
+        apply_overrides(raw, ["links.crank="])
+
+
+@pytest.mark.parametrize("at, turns_with", [("coupler.0.25", None), ("coupler.0.75", "coupler"),
+                                            ("crank.end", "coupler"), ("coupler.mid", None)])
+def test_rotary_inertia_at_any_node_fraction(cases_dir, at, turns_with):
+    """A rotary inertia at a fraction of a link that is a mesh node (0.25 with 4 elements) sits on that
+    node's rotation of the link it turns with (it was refused: "link 'coupler' does not pass through
+    'coupler.0.25'"), as at a named point; its J counts in the link's rigid inertia."""
+    from flexmech_py.model import FEModel
+
+    spec = f'{{at = "{at}", inertia = 2e-5' + (f', turns_with = "{turns_with}"}}' if turns_with else "}")
+    case = fm.load_case(cases_dir / "fourbar_hac.toml",
+                        overrides=["mesh.elements_per_link=4", f"rotary_inertias=[{spec}]"])
+    fe = FEModel.from_case(case)
+    _, node, _ = fe.node_ref(at, "at")
+    carrier = fe.link_names.index(turns_with or at.split(".")[0])
+    assert fe.ri_dof.tolist() == [fe.rot_dof[(node, carrier)] + 1] and fe.ri_prop.tolist() == [2e-5]
+    assert [j for _, j in case.mechanism.links[carrier].hubs] == [2e-5]

@@ -284,18 +284,28 @@ def _lumped(mech: Mechanism, raw: dict) -> None:
             carrier = ref.body
             if "turns_with" in it:
                 carrier = mech.body(v.text(it, "turns_with", w), f"{w}.turns_with")
-                if carrier.kind != "link" or _fraction_at(carrier, ref.position) is None:
+                at = frac if carrier is ref.body else _fraction_at(carrier, ref.position)
+                if carrier.kind != "link" or at is None:
                     raise CaseError(f"{w}.turns_with", f"link {it['turns_with']!r} does not pass through {it['at']!r}; "
                                                        "name a link that meets at that point")
-                frac = _fraction_at(carrier, ref.position)
+                frac = at
             carrier.hubs.append((frac, val))
 
 
 def _fraction_at(link, pos):
-    """The fraction of a named point of ``link`` at assembly position ``pos``, or None."""
+    """The fraction of the length at which ``link`` passes through the assembly position ``pos`` (a
+    named point's own fraction when one is there, else any point of its axis), or None."""
+    if link.kind != "link":
+        return None
+    tol = 1e-9 * max(1.0, link.length)
     for name in link.point_names():
-        if np.linalg.norm(link.position(name) - np.asarray(pos)) <= 1e-9 * max(1.0, link.length):
+        if np.linalg.norm(link.position(name) - np.asarray(pos)) <= tol:
             return link.fraction(name)
+    start, end = np.asarray(link.start, float), np.asarray(link.end, float)
+    axis = end - start
+    s = float(np.dot(np.asarray(pos, float) - start, axis) / np.dot(axis, axis))
+    if 0.0 <= s <= 1.0 and np.linalg.norm(start + s * axis - np.asarray(pos, float)) <= tol:
+        return s
     return None
 
 
