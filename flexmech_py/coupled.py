@@ -44,8 +44,9 @@ class CoupledModel:
         self.shared = SharedAngles.of(layout) if shared else None
 
     @classmethod
-    def from_case(cls, case: dict, split: bool = False) -> "CoupledModel":
-        cm = cls(Layout(case, split))
+    def from_case(cls, case: dict, split: bool = False, hold_forced: bool = False) -> "CoupledModel":
+        """The model of a resolved case (``hold_forced``: see :class:`~flexmech_py.coupled_layout.Layout`)."""
+        cm = cls(Layout(case, split, hold_forced))
         for name, sp in case["outputs"].items():   # points must be markers the model can follow
             if isinstance(sp.get("at"), str):
                 cm.output_marker(sp["at"], f"outputs.{name}.at")

@@ -164,10 +164,14 @@ class Layout:
     ``markers`` (kind, segment or body, node, (x, y)), ``rows`` the constraint rows, ``joints``
     {name: JointModel}, ``forces`` [(coordinate Row, Drive)], ``pm`` (segment, element, xi, mass),
     ``ri`` (segment, node, J), ``node_ends`` {position node: [(segment, 0 start / 1 end)]}; then
-    ``ld``, ``n_el``, ``free_of``, ``q_fixed`` and ``mesh``."""
+    ``ld``, ``n_el``, ``free_of``, ``q_fixed`` and ``mesh``.  ``hold_forced``: a force-driven joint
+    whose elastic condition holds it (HOLDING: a torque-driven crank's default ``clamp``) also gets a
+    ``hold`` row, as the superposition models' elastic problem holds it; the frozen eigenproblem of
+    ``flexmech modes`` uses it (a run leaves the joint to its force, whatever its condition)."""
 
-    def __init__(self, case, split: bool):
+    def __init__(self, case, split: bool, hold_forced: bool = False):
         self.case, self.split, self.mech = case, split, case.mechanism
+        self.hold_forced = hold_forced
         if not any(not ln.rigid for ln in self.mech.links):
             raise CaseError("links", "no link is flexible: flexmech's models need at least one flexible link; make one flexible "
                                      "(rigid = false); the rigid-body motion alone is Prepared(case).rm (docs/api.md)")
@@ -302,7 +306,8 @@ class Layout:
             elif drive is not None:
                 jm.force = len(self.forces)
                 self.forces.append((c, drive))
-            elif self.mech.condition(j) in HOLDING[j.kind]:
+            held = drive is None or (self.hold_forced and not drive.kinematic)
+            if held and self.mech.condition(j) in HOLDING[j.kind]:
                 what = "angle" if coord == "angle" else "coordinate"
                 self._add_row(jm, "hold", Row(c.kind, *jm.markers, d=c.d, value=("start", j.name, what)))
             self.joints[j.name] = jm

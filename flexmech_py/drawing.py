@@ -284,7 +284,7 @@ def draw_modes(path, ms, *, title: str | None = None):
         if dm > 0:
             scaled.d[k] *= TARGET_FRACTION * size / dm
             scaled.rot[k] *= TARGET_FRACTION * size / dm
-    labels = [f"mode {k + 1}: {ms.hz[k]:.4g} Hz" + (" (rigid-body)" if ms.rigid[k] else "") for k in range(n)]
+    labels = [f"mode {k + 1}: " + ("rigid (a free DOF)" if ms.rigid[k] else f"{ms.hz[k]:.4g} Hz") for k in range(n)]
     where = f"t = {ms.t:.4g} s" + (f", {ms.joint} at {ms.crank_angle:.4g}°" if ms.joint else "")
     title = title or f"{ms.case['case']['title']}\nmode shapes, model {ms.model}, {where}"
     if not have_matplotlib():

@@ -25,12 +25,24 @@ from . import modal, shapes
 from .case import MODELS, SUPERPOSITION_MODELS, Case
 from .errors import CaseError
 
-__all__ = ["ModeSet", "Along", "modes", "frequencies_along", "drive_joint", "configuration_time", "cycle_times",
-           "resonance_crossings", "DEFAULT_COUNT"]
+__all__ = ["ModeSet", "Along", "modes", "frequencies_along", "drive_joint", "turn_angle", "configuration_time",
+           "cycle_times", "resonance_crossings", "DEFAULT_COUNT"]
 
 DEFAULT_COUNT = 4
 #: crank speed harmonics k Omega listed and drawn at most
 MAX_HARMONICS = 20
+
+
+#: angles closer than this [deg] to a whole turn are on it (round-off of the assembly and the drive law)
+TURN_ROUND_OFF_DEG = 1e-9
+
+
+def turn_angle(deg: float) -> float:
+    """An angle [deg] as the position on the turn, in [0, 360): a value within round-off of a whole
+    turn is 0 (a crank drawn at 0 deg whose loop closure leaves it at -1e-14 rad is at 0 deg, not 360)."""
+    a = deg % 360.0
+    tol = TURN_ROUND_OFF_DEG * max(1.0, abs(deg) / 360.0)
+    return 0.0 if a < tol or 360.0 - a < tol else a
 
 
 def drive_joint(mech):
@@ -147,7 +159,7 @@ class _Frozen:
         else:
             from .coupled import CoupledModel
 
-            self.fe, self.cm = None, CoupledModel.from_case(case, split=(model == "nonlinear"))
+            self.fe, self.cm = None, CoupledModel.from_case(case, split=(model == "nonlinear"), hold_forced=True)
             node_frac = self.cm.mesh.node_frac
         self.bodies = shapes.body_points(case.mechanism, node_frac)
         self._checked = False
@@ -246,7 +258,7 @@ class ModeSet:
                 "geometric_stiffness": "quasi_static" if self.geometric else "none",
                 "state": STATE[self.model in SUPERPOSITION_MODELS], "t_s": self.t, "crank_joint": self.joint,
                 "crank_angle_deg": self.crank_angle,
-                "modes": [{"mode": k + 1, "kind": "rigid-body" if r else "elastic", "f_hz": float(f),
+                "modes": [{"mode": k + 1, "kind": "rigid" if r else "elastic", "f_hz": float(f),
                            "omega_rad_s": float(w), "rigid_fraction": float(rf)}
                           for k, (f, w, r, rf) in enumerate(zip(self.hz, self.omega, self.rigid, self.rigid_fraction))],
                 **self.extra, "versions": versions(), "input": self.case}
@@ -257,7 +269,8 @@ class ModeSet:
                  + (", geometric stiffness (quasi-static)" if self.geometric else "") + f"]; {where}",
                  f"{'mode':>4}  {'f [Hz]':>12} {'omega [rad/s]':>14}  kind"]
         for k, (f, w, r) in enumerate(zip(self.hz, self.omega, self.rigid)):
-            lines.append(f"{k + 1:>4}  {f:>12.6g} {w:>14.6g}  {'rigid-body (mechanism DOF)' if r else 'elastic'}")
+            kind = "rigid (a free DOF of the mechanism)" if r else "elastic"
+            lines.append(f"{k + 1:>4}  {f:>12.6g} {w:>14.6g}  {kind}")
         return "\n".join(lines)
 
     def write(self, out_dir) -> list[Path]:
@@ -268,7 +281,7 @@ class ModeSet:
         out.mkdir(parents=True, exist_ok=True)
         head = [f"flexmech modes; case {self.case['case']['title']!r}; model {self.model}; t = {self.t:.10g} s"
                 + (f"; {self.joint} at {self.crank_angle:.10g} deg" if self.joint else "")]
-        rows = [f"{k + 1},{f:.10g},{w:.10g},{'rigid-body' if r else 'elastic'},{rf:.6g}"
+        rows = [f"{k + 1},{f:.10g},{w:.10g},{'rigid' if r else 'elastic'},{rf:.6g}"
                 for k, (f, w, r, rf) in enumerate(zip(self.hz, self.omega, self.rigid, self.rigid_fraction))]
         paths = [out / "modes.csv", out / "mode_shapes.csv", out / "modes.json"]
         _atomic_write(paths[0], "\n".join([f"# {h}" for h in head] + ["mode,f_hz,omega_rad_s,kind,rigid_fraction"]
@@ -303,7 +316,7 @@ def modes(case, *, at: float | None = None, crank_angle: float | None = None, co
     rm = source(np.array([t]))
     ev = frozen.eigen(rm, 0, count)
     j = drive_joint(case.mechanism)
-    ang = float(np.degrees(rm.joint(j.name)[0, 0])) % 360.0 if j is not None and j.angular else None
+    ang = turn_angle(float(np.degrees(rm.joint(j.name)[0, 0]))) if j is not None and j.angular else None
     return ModeSet(case, model, frozen.geometric, t, j.name if ang is not None else None, ang, ev.omega, ev.rigid,
                    ev.rigid_fraction, frozen.shapes(rm, 0, ev))
 
@@ -437,6 +450,6 @@ def frequencies_along(case, positions: int = 36, *, count: int = DEFAULT_COUNT, 
         ang = np.degrees(jq[:, 0])
         d = case.mechanism.drives[0]
         if d.law in ("constant_speed", "spinup") and span.startswith("one"):
-            x, xlabel = ang - 360.0 * math.floor(ang[0] / 360.0), "crank angle [deg]"
+            x, xlabel = ang - (float(ang[0]) - turn_angle(float(ang[0]))), "crank angle [deg]"
     return Along(case, model, frozen.geometric, t, x, xlabel, omega, speed, None if speed is None else j.name, span,
                  nrigid, None if speed is None else np.degrees(rm.joint(j.name)[:, 0]))

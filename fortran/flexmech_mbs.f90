@@ -29,7 +29,7 @@ module flexmech_mbs
   private
   public :: mbs_system, mbs_build, mbs_constraints, mbs_forces, mbs_accelerations, mbs_project, &
             mbs_solve_positions, mbs_joint_coordinates, mbs_kinematic_sample, mbs_gram_rcond, mbs_nspec_header, &
-            mbs_drive_values
+            mbs_drive_values, mbs_drive_change
   public :: JOINT_REVOLUTE, JOINT_PRISMATIC, JOINT_WELD
 
   integer, parameter :: JOINT_REVOLUTE = 1, JOINT_PRISMATIC = 2, JOINT_WELD = 3
@@ -572,6 +572,25 @@ contains
       end if
     end do
   end subroutine mbs_drive_values
+
+  !> How far the kinematic drives move their coordinates from t0 to t1: max |f(t1) - f(t0)| over the
+  !> kinematic drives, in units of the mechanism's length lref (angles in rad, slides / lref); 0
+  !> without kinematic drives.  It sees the prescribed motion before any position is solved (a start
+  !> from rest, whose rates and accelerations at t0 predict no motion).
+  pure function mbs_drive_change(sys, t0, t1) result(change)
+    type(mbs_system), intent(in) :: sys
+    real(dp), intent(in) :: t0, t1
+    real(dp) :: change, f0(3), f1(3)
+    integer :: i, k, nk
+    change = 0.0_dp
+    do i = 1, sys%nd
+      if (sys%dv_row(i) == 0) cycle
+      k = sys%dv_tab(1, i); nk = max(sys%dv_tab(2, i), 1)
+      f0 = kinematic_law(sys%dv_kind(i), sys%dv_par(:, i), sys%tab_t(k:k + nk - 1), sys%tab_c(:, k:k + nk - 1), t0)
+      f1 = kinematic_law(sys%dv_kind(i), sys%dv_par(:, i), sys%tab_t(k:k + nk - 1), sys%tab_c(:, k:k + nk - 1), t1)
+      change = max(change, abs(f1(1) - f0(1))*sys%rscale(sys%dv_row(i))/sys%lref)
+    end do
+  end function mbs_drive_change
 
   !> Coordinates of every joint [value, rate, acceleration] (3, nj) at (z, zd, zdd).
   pure subroutine mbs_joint_coordinates(sys, z, zd, zdd, jq)

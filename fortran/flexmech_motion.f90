@@ -23,13 +23,15 @@ module flexmech_motion
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_SINGULAR_POSITION, STATUS_NONFINITE
   use flexmech_mbs, only: mbs_system, mbs_kinematic_sample, mbs_accelerations, mbs_project, mbs_gram_rcond, &
-                          mbs_joint_coordinates, mbs_constraints, mbs_drive_values
+                          mbs_joint_coordinates, mbs_constraints, mbs_drive_values, mbs_drive_change
   use flexmech_ode, only: ode_state, ode_start, ode_step, ode_dense, ode_pack, ode_unpack, ODE_OK
   implicit none
   private
   public :: kinematic_samples, dynamic_start, dynamic_samples, POSITION_MAXIT
 
   integer, parameter :: POSITION_MAXIT = 25   !< Newton iterations allowed for positions and projections
+  real(dp), parameter :: MAX_SUBSTEP_CHANGE = 0.05_dp   !< largest motion of a kinematic substep (rad, or lref)
+  integer, parameter :: MAX_SUBSTEPS = 1000000          !< kinematic substeps allowed between two samples
 
 contains
 
@@ -44,7 +46,7 @@ contains
     real(dp), intent(out) :: zf(:, :), zdf(:, :), zddf(:, :), lamf(:, :), jqf(:, :, :), dvf(:, :)
     integer, intent(out) :: nvalid, status
     real(dp), intent(out) :: fail_t, rcond_low
-    real(dp) :: z(sys%n), zd(sys%n), zdd(sys%n), lam(sys%nrow), dt, rc, h, scale(sys%n)
+    real(dp) :: z(sys%n), zd(sys%n), zdd(sys%n), lam(sys%nrow), rc, h, scale(sys%n)
     integer :: i, n
     n = sys%n
     scale = 1.0_dp/sys%lref
@@ -69,22 +71,22 @@ contains
 
   contains
 
-    !> From the state to time tn, in as many substeps as keep the second-order extrapolation of every
-    !> coordinate within 0.05 rad (0.05 lref for positions) of the last solution, so Newton follows
-    !> the assembly branch however far apart the samples are; a substep that crosses a singular
-    !> position stops the motion (see the module's header).
+    !> From the state to time tn in substeps, each short enough that neither the second-order
+    !> extrapolation of any coordinate from the last solution nor the kinematic drives' prescribed
+    !> coordinates move more than MAX_SUBSTEP_CHANGE (rad, or lref for positions), so Newton follows
+    !> the assembly branch however far apart the samples are (a start from rest, whose rates predict no
+    !> motion, is stepped by the drive laws); a substep that crosses a singular position stops the
+    !> motion (see the module's header).
     subroutine advance(tn, stat)
       real(dp), intent(in) :: tn
       integer, intent(out) :: stat
-      real(dp) :: change, tk, t0, guess(n), corr, moved, predicted
-      integer :: m, k, dsign
-      t0 = state(1)
-      dt = tn - t0
-      change = maxval((abs(state(3 + n:2 + 2*n))*abs(dt) + 0.5_dp*abs(state(3 + 2*n:2 + 3*n))*dt*dt)*scale)
-      m = min(100000, 1 + int(change/0.05_dp))
-      do k = 1, m
-        tk = t0 + dt*real(k, dp)/real(m, dp)
-        if (k == m) tk = tn
+      real(dp) :: tk, guess(n), corr, moved, predicted
+      integer :: k, dsign
+      stat = STATUS_OK
+      do k = 1, MAX_SUBSTEPS
+        h = substep(tn - state(1))
+        tk = state(1) + h
+        if (tn - tk <= 1e-12_dp*max(1.0_dp, abs(tn))) tk = tn
         h = tk - state(1)
         guess = state(3:2 + n) + h*state(3 + n:2 + 2*n) + (0.5_dp*h*h)*state(3 + 2*n:2 + 3*n)
         z = guess
@@ -102,8 +104,25 @@ contains
           end if
         end if
         state = [tk, real(dsign, dp), z, zd, zdd]
+        if (tk == tn) return
       end do
+      stat = STATUS_SINGULAR_POSITION      ! the substeps shrank without reaching tn
     end subroutine advance
+
+    !> The longest substep from the state, at most hmax_k, that keeps the extrapolated and the
+    !> prescribed motion within MAX_SUBSTEP_CHANGE (halving from hmax_k).
+    real(dp) function substep(hmax_k) result(hs)
+      real(dp), intent(in) :: hmax_k
+      real(dp) :: change
+      integer :: k
+      hs = hmax_k
+      do k = 1, 60
+        change = maxval((abs(state(3 + n:2 + 2*n))*abs(hs) + 0.5_dp*abs(state(3 + 2*n:2 + 3*n))*hs*hs)*scale)
+        change = max(change, mbs_drive_change(sys, state(1), state(1) + hs))
+        if (change <= MAX_SUBSTEP_CHANGE) return
+        hs = 0.5_dp*hs
+      end do
+    end function substep
 
   end subroutine kinematic_samples
 
