@@ -129,19 +129,34 @@ def _label(part: dict) -> str:
     return TYPE_TEXT[part["type"]]
 
 
+def _span(lo: float, hi: float, f: str) -> str:
+    """``lo-hi``, or the one speed when the run has a single sample (never a zero-width ``x-x``)."""
+    return f.format(lo) if lo == hi else f"{f.format(lo)}-{f.format(hi)}"
+
+
 def describe_region(region: dict, digits: int = 1) -> str:
-    """One line: the speeds, the largest |mu| and the multiplier type of every part."""
+    """One line: the speeds, the largest |mu| and the multiplier type of every part.  A region of one
+    unstable sample is said to be one: its width is below the chart's spacing there, between the
+    stable speeds that bracket it."""
     f = f"{{:.{digits}f}}"
-    edges = [x for x in (region["from"] - region["below"] if region["below"] is not None else None,
-                         region["above"] - region["to"] if region["above"] is not None else None) if x is not None]
-    text = (f"{f.format(region['from'])}-{f.format(region['to'])} rad/s"
-            + (f" (edges within {f.format(max(edges))})" if edges else "")
-            + f": max |mu| {region['max_abs_mu']:.4g} at {f.format(region['at'])} "
-              f"(growth {region['growth_rate']:.3g} 1/s)")
+    lo, hi = region["from"], region["to"]
+    below, above = region["below"], region["above"]
+    if lo == hi:
+        around = [x for x in (below, above) if x is not None]
+        where = (f" (one unstable sample: the region is narrower than the spacing there, inside "
+                 f"{f.format(below if below is not None else lo)}-{f.format(above if above is not None else hi)})"
+                 if around else " (one unstable sample)")
+        text = f"{f.format(lo)} rad/s{where}"
+    else:
+        edges = [x for x in (lo - below if below is not None else None, above - hi if above is not None else None)
+                 if x is not None]
+        text = f"{_span(lo, hi, f)} rad/s" + (f" (edges within {f.format(max(edges))})" if edges else "")
+    text += (f": max |mu| {region['max_abs_mu']:.4g} at {f.format(region['at'])} "
+             f"(growth {region['growth_rate']:.3g} 1/s)")
     parts = region["parts"]
     if len(parts) == 1:
         return f"{text}, {_label(parts[0])}"
-    return text + "; " + ", ".join(f"{_label(p)} {f.format(p['from'])}-{f.format(p['to'])}" for p in parts)
+    return text + "; " + ", ".join(f"{_label(p)} {_span(p['from'], p['to'], f)}" for p in parts)
 
 
 def write_regions_csv(regions: list, path, header: str = "") -> None:

@@ -106,3 +106,21 @@ def test_no_refinement_on_a_flat_floor_and_none_below_the_resolution():
     assert PEAK_PROMINENCE > 1e-6 and refinement_speeds(flat, 0.25) == []
     rows = _synthetic_rows([230.0, 230.5, 231.0])
     assert refinement_speeds(rows, 0.5) == []       # every interval is at the resolution already
+
+
+def test_a_region_of_one_sample_is_not_labelled_with_zero_width():
+    """One unstable speed between stable neighbours (124 rad/s on the seed four-bar's chart) is said to be
+    one sample inside its stable neighbours, not '124.00-124.00 rad/s'; a one-sample part likewise."""
+    def row(speed, mu, stable, re=None, im=0.0):
+        return {"speed": speed, "max_abs_mu": mu, "growth_rate": 0.3 if not stable else -1.0, "stable": stable,
+                "mu_re": -mu if re is None else re, "mu_im": im}
+
+    rows = [row(123.75, 0.99, True), row(124.0, 1.018, False, re=-0.94, im=0.39), row(124.25, 0.99, True),
+            row(190.75, 0.99, True), row(191.0, 1.2, False), row(191.25, 1.1, False, re=-1.0, im=0.4),
+            row(191.5, 0.99, True)]
+    regs = unstable_regions(rows)
+    one = describe_region(regs[0], 2)
+    assert "124.00-124.00" not in one and one.startswith("124.00 rad/s (one unstable sample")
+    assert "inside 123.75-124.25" in one
+    two = describe_region(regs[1], 2)
+    assert "191.25-191.25" not in two and "191.00-191.25 rad/s" in two and two.endswith("191.25")
