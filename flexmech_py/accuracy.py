@@ -54,7 +54,7 @@ __all__ = ["accuracy_study", "run_point", "richardson", "successive_orders", "pa
 INTEGRATORS = ("newmark", "hht", "generalized-alpha")
 MAX_REPEAT = 20              # timing repeats of a short run at most
 SHORT_RUN_BUDGET_S = 0.2     # [s] kernel time spent on repeating a short run
-DEFAULT_KINDS = ("strain", "displacement")   # output kinds compared by default (elastic quantities)
+DEFAULT_KINDS = ("strain", "displacement", "deflection")   # output kinds compared by default (elastic quantities)
 
 
 # ----------------------------------------------------------------------------- integrators

@@ -53,6 +53,7 @@ OUTPUT_KINDS = {
     "strain": ({"link"}, {"at": 0.5}),
     "curvature": ({"link"}, {"at": 0.5}),
     "displacement": ({"at", "component"}, {}),
+    "deflection": ({"at", "component"}, {}),
     "position": ({"at", "component"}, {}),
     "inertia_load": ({"component"}, {"at": None, "model": "run"}),
     "axial_force": ({"link"}, {"at": 0.5}),
@@ -61,6 +62,7 @@ OUTPUT_KINDS = {
 }
 COMPONENTS = {
     "displacement": ("x", "y", "rotation", "axial", "transverse"),
+    "deflection": ("x", "y", "rotation", "axial", "transverse"),
     "position": ("x", "y"),
     "inertia_load": ("x", "y", "rotation", "norm"),
     "reaction": ("x", "y", "magnitude", "moment"),
@@ -312,7 +314,7 @@ def _outputs(raw, mech) -> dict:
                     raise CaseError(f"{w}.at", f"is a fraction of the link length and must lie in [0, 1], got {d['at']}")
         if kind in COMPONENTS:
             d["component"] = v.text(spec, "component", w, choices=COMPONENTS[kind])
-        if kind in ("displacement", "position", "inertia_load"):
+        if kind in ("displacement", "deflection", "position", "inertia_load"):
             _output_point(spec, d, kind, w, mech)
         if kind == "inertia_load":
             d["model"] = v.text(spec, "model", w, default="run", choices=("run",) + SUPERPOSITION_MODELS)
@@ -348,7 +350,8 @@ def _output_point(spec: dict, d: dict, kind: str, w: str, mech) -> None:
         raise CaseError(f"{w}.at", "names a ground point, which does not move; name a point of a body")
     if kind == "inertia_load" and (ref.body.kind != "link" or ref.body.rigid):
         raise CaseError(f"{w}.at", "inertia loads are given at the points of flexible links (the mesh nodes)")
-    if kind == "displacement" and d["component"] in ("rotation", "axial", "transverse") and ref.body.kind != "link":
+    link_only = d.get("component") in ("rotation", "axial", "transverse")
+    if kind in ("displacement", "deflection") and link_only and ref.body.kind != "link":
         raise CaseError(f"{w}.component", f"{d['component']!r} is defined for link points; use x or y")
     d["at"] = spec["at"]
 

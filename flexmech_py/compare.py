@@ -18,7 +18,8 @@ from .errors import CaseError, FlexmechError, MechanismError, SolverError
 from .plots import display_unit, line_figure
 from .results import _atomic_write
 
-__all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models", "model_run", "ModelRun"]
+__all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models", "model_run", "ModelRun",
+           "definition_notes"]
 
 #: the units flexmech writes (outputs.output_unit, simulate.py), and the angle units converted to them
 KNOWN_UNITS = ("s", "m", "m/s", "m/s^2", "rad", "rad/s", "rad/s^2", "1", "1/m", "N", "N m", "J")
@@ -182,13 +183,14 @@ def _write(metrics: dict, out_dir: Path, x: str, title: str, labels=("result", "
         u, k = units.get(c), 1.0
         if u == "m" and max(np.max(np.abs(m["_ref"])), np.max(np.abs(m["_res"]))) < 0.1:
             u, k = "mm", 1e3   # small lengths in mm, as the reports quote them
+        note = " - definitions differ, see compare.json" if m.get("definition_note") else ""
         p = line_figure(out_dir / f"compare_{c}.png",
                         [{"x": m["_x"], "ylabel": _axis_label(c, u),
                           "series": [(labels[1], k * m["_ref"], {"color": "k", "lw": 1.4}),
                                      (labels[0], k * m["_res"], {"color": "C3", "lw": 1.0})]},
                          {"x": m["_x"], "ylabel": _axis_label(f"{labels[0]} - {labels[1]}", u),
                           "series": [("", k * (m["_res"] - m["_ref"]), {"color": "C3", "lw": 0.8})]}],
-                        title=f"{title}: {c} (max error {100 * m['max_error']:.3g} % of the reference peak)",
+                        title=f"{title}: {c} (max error {100 * m['max_error']:.3g} % of the reference peak{note})",
                         xlabel=xlabel)
         if p:
             paths.append(p)
@@ -203,11 +205,17 @@ def _write(metrics: dict, out_dir: Path, x: str, title: str, labels=("result", "
 
 
 def table(metrics: dict) -> str:
+    """The printed table; a column whose two curves are not the same quantity is marked * and explained
+    under the table (:func:`definition_notes`)."""
     lines = [f"{'column':<26} {'max err':>9} {'rms err':>9} {'peak err':>9} {'peak shift':>11} {'corr':>7}"]
+    notes = {}          # note -> the columns it explains
     for c, m in metrics.items():
-        lines.append(f"{c:<26} {100 * m['max_error']:>8.3g}% {100 * m['rms_error']:>8.3g}% "
+        mark = "*" if m.get("definition_note") else ""
+        lines.append(f"{c + mark:<26} {100 * m['max_error']:>8.3g}% {100 * m['rms_error']:>8.3g}% "
                      f"{100 * m['peak_error']:>8.3g}% {m['peak_shift']:>11.4g} {m['correlation']:>7.4f}")
-    return "\n".join(lines)
+        if mark:
+            notes.setdefault(m["definition_note"], []).append(c)
+    return "\n".join(lines + [f"  * {', '.join(cols)}: {note}" for note, cols in notes.items()])
 
 
 def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None):
@@ -250,7 +258,8 @@ def model_run(task: dict) -> dict:
     from .simulate import simulate
 
     res = simulate(task["case"], model=task["model"])
-    return {"model": res.model, "t": res.t, "columns": res.columns, "timing": res.timing}
+    return {"model": res.model, "t": res.t, "columns": res.columns, "timing": res.timing,
+            "rigid_motion": res.extra.get("mechanism", {}).get("rigid_motion", "kinematic")}
 
 
 def compare_models(case: dict, models, reference_model="nonlinear", x="t", columns=None, out_dir="compare", *,
@@ -270,6 +279,7 @@ def compare_models(case: dict, models, reference_model="nonlinear", x="t", colum
             for m, r in zip(models, batch.results)}
     ref = runs[reference_model]
     ref_cols = {"t": ref.t, **ref.columns}
+    free_motion = any(r.get("rigid_motion") == "dynamic" for r in batch.results)
     out, paths = {}, []
     for m in models:
         if m == reference_model:
@@ -277,8 +287,59 @@ def compare_models(case: dict, models, reference_model="nonlinear", x="t", colum
         cols = {"t": runs[m].t, **runs[m].columns}
         use = columns or [c for c in case["outputs"] if c in cols and c in ref_cols]
         out[m] = compare_columns(cols, ref_cols, x=x, columns=use)
+        for c, note in definition_notes(case, m, reference_model, free_motion).items():
+            if c in out[m]:
+                out[m][c]["definition_note"] = note
         paths += _write(out[m], Path(out_dir) / m, x, f"{m} against {reference_model}", labels=(m, reference_model),
                         extra={"model": m, "reference_model": reference_model,
                                "kernel_s": runs[m].timing["kernel_s"], "reference_kernel_s": ref.timing["kernel_s"]},
                         units=_case_units(case))
     return out, runs, paths
+
+
+def definition_notes(case: dict, model: str, reference_model: str, free_motion: bool) -> dict[str, str]:
+    """{output: why model's and reference_model's values of it are not the same quantity} (docs/theory.md
+    section 8.1): across the model families, ``displacement`` when the mechanism has a degree of freedom
+    no kinematic drive fixes (``free_motion``: the coupled and nonlinear models' own rigid motion drifts
+    from the rigid-body solution the displacement is measured from; the superposition models' does not,
+    by their premise) and the ``joint_*`` outputs of a revolute or weld joint on a flexible link that no
+    kinematic drive moves (the rigid-body solution's frames against the chords); ``inertia_load`` with
+    ``model = "run"`` between different load models.  Every other kind means the same in every model."""
+    from .case import SUPERPOSITION_MODELS
+
+    coupled = [m for m in (model, reference_model) if m not in SUPERPOSITION_MODELS]
+    own = {m: m if m in SUPERPOSITION_MODELS else "classic" for m in (model, reference_model)}  # a "run" load's model
+    out = {}
+    for name, sp in case["outputs"].items():
+        if sp["kind"] == "displacement" and len(coupled) == 1 and free_motion:
+            out[name] = (f"not the same quantity: the {coupled[0]} model's displacement includes the drift of its own "
+                         "rigid motion from the rigid-body solution (this mechanism has degrees of freedom no "
+                         "kinematic drive fixes), which the superposition models leave out by their premise; compare "
+                         "deflection outputs (kind = \"deflection\", the same at and component) for the bending "
+                         "alone")
+        elif sp["kind"] in JOINT_KINDS and len(coupled) == 1 and _frames_differ(case.mechanism, sp["joint"]):
+            out[name] = (f"not the same quantity: the superposition models give the rigid-body solution's angle "
+                         f"between the bodies' frames (no elastic part), the {coupled[0]} model the angle between "
+                         "their chords (the links' elastic rotation and the model's drift included); compare "
+                         "link_angle outputs (the chord in every model) for like with like")
+        elif sp["kind"] == "inertia_load" and sp["model"] == "run" and own[model] != own[reference_model]:
+            load = {m: (f"{m}: the classic load of its own rigid motion (it has no load model)" if m in coupled
+                        else f"{m}: its {m} load") for m in (model, reference_model)}
+            out[name] = (f"not the same quantity: model = \"run\" is each run's rigid-inertia load ({load[model]}; "
+                         f"{load[reference_model]}); name one load model in the output (e.g. model = \"classic\") "
+                         "to compare like with like")
+    return out
+
+
+#: the output kinds of a joint's coordinate
+JOINT_KINDS = ("joint_angle", "joint_speed", "joint_acceleration")
+
+
+def _frames_differ(mech, joint: str) -> bool:
+    """A revolute or weld joint on a flexible link that no kinematic drive moves: its coordinate is the
+    rigid-body solution's frames in the superposition models, the chords in the coupled ones."""
+    j = mech.joint(joint)
+    drive = mech.drive_of(joint)
+    if j.kind == "prismatic" or (drive is not None and drive.kinematic):
+        return False
+    return any(p.body is not None and p.body.kind == "link" and not p.body.rigid for p in mech.joint_points(j))

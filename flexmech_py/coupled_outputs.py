@@ -12,10 +12,12 @@ import numpy as np
 from . import kernels
 from .coupled import CON_ANGLE, CON_POINT, CoupledModel
 from .mechanism.motion import LinkMotion
-from .outputs import _axial_output, _load_output
+from .mechanism.placement import point_state
+from .outputs import _axial_output, _load_output, point_components, wrap_angle
 
 __all__ = ["ModelFrames", "model_frames", "chord_motion", "body_angles", "node_state", "deviation", "curvature",
-           "axial_forces", "joint_angles", "evaluate", "reaction", "drive_force", "Diagnostics"]
+           "axial_forces", "joint_angles", "joint_coordinate", "joint_at_joint", "joint_output", "evaluate", "reaction",
+           "drive_force", "Diagnostics"]
 
 
 @dataclass
@@ -224,6 +226,33 @@ def joint_coordinate(cm: CoupledModel, fr: ModelFrames, name: str) -> np.ndarray
     return val
 
 
+def joint_at_joint(cm: CoupledModel, fr: ModelFrames, rm, name: str) -> np.ndarray:
+    """(3, nf) [coordinate, rate, acceleration] of a joint measured at the joint, as its constraint rows
+    and drive measure it: the relative angle of the two bodies' tangents there (a flexible link's, a
+    rigid body's frame), unwrapped and on the rigid-body solution's turn at the first frame, or a
+    prismatic joint's slide.  A kinematic drive's law, exactly, for a driven joint."""
+    jm = cm.joints[name]
+    val = np.array(fr.measure(jm.coordinate), float)
+    if jm.kind != "prismatic":
+        val[0] = np.unwrap(val[0])
+        val[0] += 2 * np.pi * np.round((rm.joint(name)[0, 0] - val[0, 0]) / (2 * np.pi))
+    return val
+
+
+def joint_output(cm: CoupledModel, fr: ModelFrames, rm, name: str) -> np.ndarray:
+    """(3, nf) a joint's ``joint_*`` outputs: a kinematically driven joint at the joint (its law), any
+    other the model's rigid coordinate (:func:`joint_coordinate`: its bodies' chords and frames; a
+    prismatic joint's slide), the turn aligned with the rigid-body solution's at the first frame."""
+    drive = cm.case.mechanism.drive_of(name)
+    if drive is not None and drive.kinematic:
+        return joint_at_joint(cm, fr, rm, name)
+    val = np.array(joint_coordinate(cm, fr, name), float)
+    if cm.joints[name].kind != "prismatic":
+        val[0] = np.unwrap(val[0])
+        val[0] += 2 * np.pi * np.round((rm.joint(name)[0, 0] - val[0, 0]) / (2 * np.pi))
+    return val
+
+
 def _lam(fr: ModelFrames, jm, role: str) -> np.ndarray:
     return fr.lf[jm.rows[role]] if role in jm.rows else np.zeros(fr.t.size)
 
@@ -298,17 +327,17 @@ def drive_force(cm: CoupledModel, fr: ModelFrames, name: str) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- outputs
 def evaluate(cm: CoupledModel, specs: dict, fr: ModelFrames, rm, ref: LinkMotion, u_dev, axial,
-             superposition_fe=None) -> dict:
+             superposition_fe=None, z_ref=None) -> dict:
     """Every named output over the model's frames; rm the rigid-body solution at the frames (its
     reactions for ``source = "rigid"``, its positions for displacements), ref its LinkMotion;
-    superposition_fe: callable giving the FE model (inertia loads only)."""
+    superposition_fe: callable giving the FE model (inertia loads only); z_ref (nf, n) the rigid
+    mechanism at the model's own coordinates (deflections; None: rm, every degree of freedom driven)."""
     out = {}
     for name, sp in specs.items():
         kind = sp["kind"]
         if kind in ("joint_angle", "joint_displacement", "joint_speed", "joint_acceleration"):
             k = {"joint_angle": 0, "joint_displacement": 0, "joint_speed": 1, "joint_acceleration": 2}[kind]
-            val = joint_coordinate(cm, fr, sp["joint"])[k]
-            out[name] = np.unwrap(val) if kind == "joint_angle" else val.copy()
+            out[name] = joint_output(cm, fr, rm, sp["joint"])[k].copy()
         elif kind == "link_angle":
             out[name] = np.unwrap(fr.chord.phi[:, cm.mesh.link_names.index(sp["link"])])
         elif kind in ("strain", "curvature"):
@@ -317,8 +346,8 @@ def evaluate(cm: CoupledModel, specs: dict, fr: ModelFrames, rm, ref: LinkMotion
             out[name] = kap * cm.case["links"][li]["half_depth"] if kind == "strain" else kap
         elif kind == "axial_force":
             out[name] = _axial_output(cm.mesh, axial, sp, name)
-        elif kind in ("displacement", "position"):
-            out[name] = _point_output(cm, fr, rm, ref, sp, name)
+        elif kind in ("displacement", "deflection", "position"):
+            out[name] = _point_output(cm, fr, rm, sp, name, z_ref)
         elif kind == "inertia_load":
             fe = superposition_fe()
             model = "classic" if sp["model"] == "run" else sp["model"]
@@ -337,29 +366,20 @@ def evaluate(cm: CoupledModel, specs: dict, fr: ModelFrames, rm, ref: LinkMotion
     return out
 
 
-def _point_output(cm: CoupledModel, fr: ModelFrames, rm, ref: LinkMotion, sp: dict, name: str) -> np.ndarray:
+def _point_output(cm: CoupledModel, fr: ModelFrames, rm, sp: dict, name: str, z_ref=None) -> np.ndarray:
     """Position of a named point of a body in the model, or its displacement from the rigid-body
-    solution (x, y; axial, transverse in the rigid-body solution's link frame; rotation of a link's
-    tangent from its rigid-body-solution angle)."""
-    mech = cm.case.mechanism
+    solution (``displacement``) or from the rigid mechanism at the model's coordinates z_ref
+    (``deflection``): x, y; axial, transverse in that configuration's link frame; rotation of a link's
+    tangent from its angle there."""
     mk = cm.output_marker(sp["at"], f"outputs.{name}.at")
     if mk >= fr.post["markers"].shape[1]:
         raise AssertionError("output markers are added before the run")
     st = fr.post["markers"][:, mk]
-    comp = sp["component"]
     if sp["kind"] == "position":
-        return st["xy".index(comp)].copy()
-    pr = mech.point(sp["at"])
-    bi = mech.body_index(pr.body)
-    s = pr.body.marker(pr.point)
-    phi = rm.z[:, 3 * bi + 2]
-    c, sn = np.cos(phi), np.sin(phi)
-    rig = rm.z[:, 3 * bi:3 * bi + 2].T + np.array([c * s[0] - sn * s[1], sn * s[0] + c * s[1]])
-    d = st[0:2] - rig
-    if comp == "rotation":
-        dphi = st[2] - phi
-        return np.arctan2(np.sin(dphi), np.cos(dphi))
-    return {"x": d[0], "y": d[1], "axial": c * d[0] + sn * d[1], "transverse": -sn * d[0] + c * d[1]}[comp]
+        return st["xy".index(sp["component"])].copy()
+    z = z_ref if sp["kind"] == "deflection" and z_ref is not None else rm.z
+    pos, phi = point_state(cm.case.mechanism, z, cm.case.mechanism.point(sp["at"]))
+    return point_components(st[0:2] - pos, wrap_angle(st[2] - phi), phi, sp["component"])
 
 
 # ----------------------------------------------------------------------------- diagnostics

@@ -1,6 +1,12 @@
 """Named outputs of a run, evaluated from the elastic frames and the rigid motion.
 
-Every output kind is documented in ``docs/cases.md``.  Strains are the
+Every output kind is documented in ``docs/cases.md``; docs/theory.md section 8.1 says what each
+means in each model family: a kinematically driven joint reads its law, other joints the model's
+rigid coordinates (here the rigid-body solution's frames), a link angle is its chord's,
+``displacement`` is measured from the rigid-body solution and ``deflection`` from the rigid
+mechanism at the model's own joint coordinates.  The coupled and nonlinear models evaluate the same
+kinds on their frames (flexmech_py.coupled_outputs).
+Strains are the
 bending strain ``eps = c * kappa`` with ``kappa = v''`` the curvature of the
 element's Hermite field in the link frame and ``c`` the link's half depth
 (the strain of the fibre at ``eta = -c``); at an interior mesh node the
@@ -14,8 +20,10 @@ import numpy as np
 from . import kernels
 from .case import UNITS
 from .errors import CaseError
+from .mechanism.placement import Placement, point_state
 
-__all__ = ["evaluate_outputs", "output_unit"]
+__all__ = ["evaluate_outputs", "output_unit", "point_components", "wrap_angle", "joint_at_joint",
+           "DeflectionReference"]
 
 
 def output_unit(spec: dict, case: dict) -> str:
@@ -28,23 +36,29 @@ def output_unit(spec: dict, case: dict) -> str:
         return {"joint_speed": ("rad/s", "m/s"), "joint_acceleration": ("rad/s^2", "m/s^2"),
                 "drive_force": ("N m", "N")}[kind][0 if angular else 1]
     comp = spec["component"]
-    if kind == "displacement":
+    if kind in ("displacement", "deflection"):
         return "rad" if comp == "rotation" else "m"
     if kind == "reaction":
         return "N m" if comp == "moment" else "N"
     return "N m" if comp == "rotation" else "N"  # inertia_load
 
 
-def _joint_from_links(fe, motion, name, k):
-    """A revolute joint's angle (k = 0), speed (1) or acceleration (2) from link motion: phi_b - phi_a
-    of its FE joint, in the mechanism's orientation."""
-    j = fe.joint(name)
-    attr = ("phi", "omega", "alpha")[k]
-    val = getattr(motion, attr)[:, j.outboard]
-    if j.inboard is not None:
-        val = val - getattr(motion, attr)[:, j.inboard]
-    val = j.sign * val
-    return np.unwrap(val) if k == 0 else val
+class DeflectionReference:
+    """A run's reference configuration of its ``deflection`` outputs, block after block: the rigid
+    mechanism at the model's own generalized coordinates (the primary joints' coordinates measured at
+    the joints; flexmech_py.mechanism.placement).  None (the rigid-body solution is that configuration)
+    when the case has no deflection output or every degree of freedom is driven kinematically."""
+
+    def __init__(self, case, setup):
+        needed = setup.mode == "dynamic" and any(sp["kind"] == "deflection" for sp in case["outputs"].values())
+        self.placement = Placement(setup) if needed else None
+        self.primary = setup.primary
+
+    def __call__(self, t, coordinate):
+        """z (nf, n) at the frames t; ``coordinate(joint)`` the model's (nf,) coordinate of a primary joint."""
+        if self.placement is None:
+            return None
+        return self.placement(t, np.column_stack([coordinate(p) for p in self.primary]))
 
 
 def link_curvature(fe, u_all: np.ndarray, phi: np.ndarray, li: int, frac: float) -> np.ndarray:
@@ -104,19 +118,18 @@ def _element_at(fe, li: int, frac: float) -> list[tuple[int, float]]:
 
 
 def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run_model: str, rm=None,
-                     load_cache: dict | None = None, joint_motion=None, curvature=None,
-                     axial=None, rates=None, reactions=None) -> dict[str, np.ndarray]:
+                     load_cache: dict | None = None, axial=None, rates=None, reactions=None,
+                     z_ref=None) -> dict[str, np.ndarray]:
     """Evaluate every named output over the frames.
 
     u_all (ndof, nf) elastic DOFs (displacements from the rigid motion ``motion``, a LinkMotion);
     rig_frames (5, nlinks, nf) the kernel rigid samples (for inertia loads); rm the RigidMotion at the
-    frames (joint coordinates, reactions, drive forces of the rigid-body solution).
-    joint_motion: LinkMotion the joint and link angles come from instead (the coupled models pass
-    their own chord motion); curvature: callable(link, fraction) -> kappa (default: from u_all);
+    frames (joint coordinates, reactions, drive forces of the rigid-body solution);
     axial: (nel, nf) element axial forces [N] for ``axial_force`` outputs; rates: (v_all, a_all) the
     elastic velocities and accelerations (a prismatic joint's elastic slide adds to its rigid one);
     reactions: callable(joint) -> (nf, 3) the model's joint reactions (``source = "model"``; without
-    it the rigid-body reactions).
+    it the rigid-body reactions); z_ref (nf, n): the rigid mechanism at the model's coordinates (the
+    reference of ``deflection``; None: the rigid-body solution rm, every degree of freedom driven).
     """
     out = {}
     loads = {} if load_cache is None else load_cache
@@ -125,20 +138,17 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run
         kind = sp["kind"]
         if kind in ("joint_angle", "joint_displacement", "joint_speed", "joint_acceleration"):
             k = {"joint_angle": 0, "joint_displacement": 0, "joint_speed": 1, "joint_acceleration": 2}[kind]
-            out[name] = (_joint_from_links(fe, joint_motion, sp["joint"], k) if joint_motion is not None
-                         else rm.joint(sp["joint"])[:, k] + _elastic_slide(fe, sp["joint"], k, u_all, rates))
+            out[name] = rm.joint(sp["joint"])[:, k] + _elastic_slide(fe, sp["joint"], k, u_all, rates)
         elif kind == "link_angle":
-            lm = motion if joint_motion is None else joint_motion
-            out[name] = np.unwrap(lm.phi[:, fe.link_names.index(sp["link"])])
+            out[name] = np.unwrap(_chord_angle(fe, u_all, motion, fe.link_names.index(sp["link"])))
         elif kind in ("strain", "curvature"):
             li = fe.link_names.index(sp["link"])
-            kap = (link_curvature(fe, u_all, motion.phi[:, li], li, sp["at"]) if curvature is None
-                   else curvature(li, sp["at"]))
+            kap = link_curvature(fe, u_all, motion.phi[:, li], li, sp["at"])
             out[name] = kap * links[li]["half_depth"] if kind == "strain" else kap
         elif kind == "axial_force":
             out[name] = _axial_output(fe, axial, sp, name)
-        elif kind in ("displacement", "position"):
-            out[name] = _point_output(fe, u_all, motion, sp, name, rm)
+        elif kind in ("displacement", "deflection", "position"):
+            out[name] = _point_output(fe, u_all, motion, sp, name, rm, z_ref)
         elif kind == "inertia_load":
             model = run_model if sp["model"] == "run" else sp["model"]
             if model not in loads:
@@ -175,40 +185,78 @@ def _elastic_slide(fe, joint: str, k: int, u_all, rates) -> np.ndarray | float:
     return 0.0 if x is None else x[dof]
 
 
-def _rigid_point_output(fe, u_all, rm, part, ref, sp: dict) -> np.ndarray:
-    """Position or displacement of a point of a rigid link or body: rigid + d + dtheta z x s (linearized)."""
+def joint_at_joint(fe, rm, name: str, k: int, u_all, rates=None) -> np.ndarray:
+    """A joint's coordinate (k = 0), rate (1) or acceleration (2) measured at the joint (the reference of
+    ``deflection``): the rigid-body solution's plus the elastic part there (the relative elastic rotation
+    of the two bodies at a revolute or weld joint, zero where they share it; a prismatic joint's
+    elastic slide)."""
     mech = fe.case.mechanism
-    i = 3 * mech.body_index(part.body)
-    phi = rm.z[:, i + 2]
+    j = mech.joint(name)
+    if j.kind == "prismatic":
+        return rm.joint(name)[:, k] + _elastic_slide(fe, name, k, u_all, rates)
+    x = u_all if k == 0 else (None if rates is None else rates[k - 1])
+    ra, rb = (fe.rotation_dof(p) for p in mech.joint_points(j))
+    if x is None:
+        return rm.joint(name)[:, k].copy()
+    return rm.joint(name)[:, k] + (0.0 if rb is None else x[rb]) - (0.0 if ra is None else x[ra])
+
+
+def _chord_angle(fe, u_all, motion, li: int) -> np.ndarray:
+    """(nf,) angle [rad] of link li's chord, the line through its end points (a rigid link: its frame,
+    turned by its small elastic rotation)."""
+    phi = motion.phi[:, li]
+    name = fe.link_names[li]
+    if name in getattr(fe, "parts", {}):
+        return phi + u_all[fe.parts[name].dofs[2]]
+    du = u_all[fe.trans_dof[fe.node_of[li][-1]]] - u_all[fe.trans_dof[fe.node_of[li][0]]]
     c, s = np.cos(phi), np.sin(phi)
-    m = part.body.marker(ref.point)
-    sx, sy = c * m[0] - s * m[1], s * m[0] + c * m[1]
-    dx, dy, dth = (u_all[d] for d in part.dofs)
-    ux, uy = dx - sy * dth, dy + sx * dth
-    comp = sp["component"]
-    if sp["kind"] == "position":
-        return (rm.z[:, i] + sx + ux) if comp == "x" else (rm.z[:, i + 1] + sy + uy)
+    return phi + np.arctan2(-s * du[0] + c * du[1], fe.case["links"][li]["length"] + c * du[0] + s * du[1])
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Angles [rad] in (-pi, pi]."""
+    return np.arctan2(np.sin(a), np.cos(a))
+
+
+def point_components(d: np.ndarray, rot: np.ndarray, phi: np.ndarray, comp: str) -> np.ndarray:
+    """One component of a point's displacement d (2, nf) and rotation rot (nf,): ``x``, ``y``, ``axial``
+    and ``transverse`` along and across the frame angle phi (nf,), ``rotation``."""
     if comp == "rotation":
-        return dth.copy()
-    ca, sa = (c, s) if part.body.kind == "link" else (np.ones_like(c), np.zeros_like(s))
-    return {"x": ux, "y": uy, "axial": ca * ux + sa * uy, "transverse": -sa * ux + ca * uy}[comp]
+        return np.array(rot, float)
+    c, s = np.cos(phi), np.sin(phi)
+    return {"x": d[0], "y": d[1], "axial": c * d[0] + s * d[1], "transverse": -s * d[0] + c * d[1]}[comp].copy()
 
 
-def _point_output(fe, u_all, motion, sp: dict, name: str, rm=None) -> np.ndarray:
+def _rigid_point_motion(fe, u_all, rm, part, ref):
+    """Rigid position (2, nf), small displacement d + dtheta z x s (2, nf), rotation dtheta and frame angle
+    of a point of a rigid link or body."""
+    mech = fe.case.mechanism
+    pos, phi = point_state(mech, rm.z, ref)
+    i = 3 * mech.body_index(part.body)
+    sx, sy = pos[0] - rm.z[:, i], pos[1] - rm.z[:, i + 1]
+    dx, dy, dth = (u_all[d] for d in part.dofs)
+    frame = phi if part.body.kind == "link" else np.zeros_like(phi)
+    return pos, np.array([dx - sy * dth, dy + sx * dth]), dth, frame
+
+
+def _point_output(fe, u_all, motion, sp: dict, name: str, rm=None, z_ref=None) -> np.ndarray:
+    """Position, displacement or deflection of a node or of a rigid link's or body's point."""
     kind, where = fe.point_ref(sp["at"], f"outputs.{name}.at")
     if kind == "rigid":
-        return _rigid_point_output(fe, u_all, rm, *where, sp)
-    li, node, zeta = where
-    comp = sp["component"]
-    ux, uy = u_all[fe.trans_dof[node, 0]], u_all[fe.trans_dof[node, 1]]
-    phi = motion.phi[:, li]
-    c, s = np.cos(phi), np.sin(phi)
+        pos, d, rot, phi = _rigid_point_motion(fe, u_all, rm, *where)
+    else:
+        li, node, zeta = where
+        phi = motion.phi[:, li]
+        pos = np.array([motion.ox[:, li] + zeta * np.cos(phi), motion.oy[:, li] + zeta * np.sin(phi)])
+        d, rot = u_all[fe.trans_dof[node]], u_all[fe.rot_dof[(node, li)]]
     if sp["kind"] == "position":
-        rigid = (motion.ox[:, li] + zeta * c) if comp == "x" else (motion.oy[:, li] + zeta * s)
-        return rigid + (ux if comp == "x" else uy)
-    if comp == "rotation":
-        return u_all[fe.rot_dof[(node, li)]]
-    return {"x": ux, "y": uy, "axial": c * ux + s * uy, "transverse": -s * ux + c * uy}[comp]
+        return (pos + d)["xy".index(sp["component"])]
+    if sp["kind"] == "deflection" and z_ref is not None:   # from the rigid mechanism at the model's coordinates
+        ref = fe.case.mechanism.point(sp["at"])
+        p_rs, phi_rs = point_state(fe.case.mechanism, rm.z, ref)
+        p_ref, phi = point_state(fe.case.mechanism, z_ref, ref)
+        d, rot = d + (p_rs - p_ref), rot + wrap_angle(phi_rs - phi)
+    return point_components(d, rot, phi, sp["component"])
 
 
 def _load_output(fe, f: np.ndarray, sp: dict, name: str) -> np.ndarray:

@@ -87,17 +87,24 @@ def coincidences(series, tol: float = COINCIDE) -> dict:
     return out
 
 
-def _coincide_text(d: float) -> str:
-    return "identical" if d == 0 else f"max |diff| {100 * d:.2g} % of the peak"
+def _coincide_text(k: np.ndarray, ref: np.ndarray, ref_label: str) -> str:
+    """How far series k lies from the series ``ref`` it is drawn on, relative to the reference's own peak
+    (not the panel's: a small reference curve in a panel of large ones keeps its true relative difference)."""
+    diff = float(np.nanmax(np.abs(np.asarray(k, float) - np.asarray(ref, float))))
+    if diff == 0:
+        return "identical"
+    peak = float(np.nanmax(np.abs(ref)))
+    return f"max |diff| {100 * diff / peak:.2g} % of {ref_label}'s peak" if peak > 0 else f"max |diff| {diff:.2g}"
 
 
 def _mark_coincident(series, tol=COINCIDE):
     """Series with a second label line on every curve drawn over an earlier one, dashed when unstyled."""
     out = list(series)
-    for k, (j, d) in coincidences(series, tol).items():
+    for k, (j, _) in coincidences(series, tol).items():
         label, y, style = out[k]
         if label and series[j][0]:
-            label = f"{label}\n   on {_short(series[j][0])}: {_coincide_text(d)}"
+            ref = _short(series[j][0])
+            label = f"{label}\n   on {ref}: {_coincide_text(y, series[j][1], ref)}"
         if not style:
             style = {"ls": "--", "lw": 1.2}
         out[k] = (label, y, style)

@@ -35,8 +35,9 @@ ORDER = ("hac", "classic", "classic-translational", "nonlinear", "coupled")
 NEEDED = {"fourbar_hac": ("crank_angle", "crank_speed", "strain_coupler_mid", "strain_follower_mid",
                           "load_coupler_mid_x", "load_coupler_mid_y", "load_joint_b_x", "load_joint_b_y", "load_norm"),
           "fourbar_constant_speed": ("strain_coupler_mid", "strain_follower_mid"),
-          "manipulator_bricout": ("tip_dx_elastic", "tip_dy_elastic", "tip_transverse_elastic", "alpha", "beta"),
-          "manipulator_bricout_no_payload": ("tip_dx_elastic", "tip_dy_elastic", "tip_transverse_elastic")}
+          "manipulator_bricout": ("tip_dx_elastic", "tip_dy_elastic", "tip_dx_deflection", "tip_dy_deflection",
+                                  "tip_transverse_deflection", "alpha", "beta"),
+          "manipulator_bricout_no_payload": ("tip_dx_deflection", "tip_dy_deflection", "tip_transverse_deflection")}
 SEED_CASES = ("fourbar_hac", "fourbar_constant_speed", "manipulator_bricout", "manipulator_bricout_no_payload")
 #: yield strength and Young's modulus [Pa] of two structural aluminium alloys (ASM Handbook Vol. 2 values:
 #: 6061-T6 276 MPa, 68.9 GPa; 7075-T6 503 MPa, 71.7 GPa): the seed gives E = 71 GPa and no alloy
@@ -84,7 +85,7 @@ def _series(rr: dict, col: str, models=ORDER, scale: float = 1.0) -> list:
 
 
 GAP_CASES = {"fourbar_hac": ("strain_coupler_mid", 0.15), "fourbar_constant_speed": ("strain_coupler_mid", 0.1),
-             "manipulator_bricout": ("tip_dy_elastic", 0.15)}
+             "manipulator_bricout": ("tip_dy_deflection", 0.15)}
 
 
 def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS, t_end=None, gap=True) -> Path:
@@ -146,8 +147,9 @@ def _fourbar_figures(out: Path, fb: dict, sup: list, dvec: dict) -> dict:
              ("load_norm", "norm over the free DOFs [N]"))
     figs[7] = _fig(out, "fig7_inertia_force.png",
                    [{"x": ang, "ylabel": lab, "series": _series(fb, c, sup)} for c, lab in comps if c in fb["hac"].columns],
-                   "Fig. 7: rigid-inertia force F_c0 = M0 x0'' (case I) and F_c = M x0'' (case II)\n"
-                   "(the curves coincide at this scale; their differences: Fig. 8)", "crank angle [deg]")
+                   "Fig. 7: rigid-inertia force F_c0 = M0 x0'' (case I) and F_c = M x0'' (case II); the curves coincide\n"
+                   "(legends: the curves' differences, of the norms in the last panel; the norm of F_c - F_c0: Fig. 8)",
+                   "crank angle [deg]")
     # Fig. 8: the difference vectors.  At interior nodes of equal elements the element
     # differences cancel (theory.md, section 4), so the joint components are shown.
     panels = [{"x": ang, "ylabel": "norm of F_c - F [N]",
@@ -163,18 +165,20 @@ def _fourbar_figures(out: Path, fb: dict, sup: list, dvec: dict) -> dict:
 
 
 def _manipulator_figures(out: Path, runs: dict) -> dict:
-    """The seed's Figs. 9-12 (the tip's elastic displacement in mm) and the constant-speed four-bar."""
+    """The seed's Figs. 9-12 (the tip's elastic deflection in mm: from the rigid arm at each model's own joint
+    angles, the same quantity in every model) and the constant-speed four-bar."""
     man = runs["manipulator_bricout"]
     figs = {9: _sketch(out, "fig9_manipulator.png", man["hac"], "Fig. 9: the two-link manipulator at t = 0, "
                                                                 "flexmech's nodes, elbow mass and hub, payload")}
-    for fig, name, col, what in ((10, "manipulator_bricout", "tip_dx_elastic", "X (horizontal), with payload"),
-                                 (11, "manipulator_bricout", "tip_dy_elastic", "Y (vertical), with payload"),
-                                 (12, "manipulator_bricout_no_payload", "tip_dy_elastic", "Y (vertical), no payload")):
+    for fig, name, col, what in ((10, "manipulator_bricout", "tip_dx_deflection", "X (horizontal), with payload"),
+                                 (11, "manipulator_bricout", "tip_dy_deflection", "Y (vertical), with payload"),
+                                 (12, "manipulator_bricout_no_payload", "tip_dy_deflection", "Y (vertical), no payload")):
         rr = runs[name]
         figs[fig] = _fig(out, f"fig{fig}_{name}_{col}.png",
-                         [{"x": rr["hac"].t, "ylabel": f"elastic tip displacement {col[5].upper()} [mm]",
+                         [{"x": rr["hac"].t, "ylabel": f"elastic tip deflection {col[5].upper()} [mm]",
                            "series": _series(rr, col, scale=1e3)}],
-                         f"Fig. {fig}: elastic displacement of the manipulator tip in {what}", "t [s]")
+                         f"Fig. {fig}: elastic deflection of the manipulator tip in {what}\n"
+                         "(from the rigid arm at each model's own joint angles)", "t [s]")
     cs = runs["fourbar_constant_speed"]
     figs["cs"] = _fig(out, "fourbar_constant_speed_strains.png",
                       [{"x": cs["hac"].t, "ylabel": f"{what} midspan strain [-]", "series": _series(cs, col)}
@@ -205,8 +209,8 @@ def _coupled_figures(out: Path, runs: dict) -> dict:
                          [{"x": rr["hac"].t, "ylabel": f"{c} [rad]",
                            "series": [(LABEL["rigid"], rr["hac"].columns[c], STYLE["rigid"])] + _series(rr, c, own)}
                           for c in ("alpha", "beta")]
-                         + [{"x": rr["hac"].t, "ylabel": f"elastic tip displ. {c[5].upper()} [mm]",
-                             "series": _series(rr, c, scale=1e3)} for c in ("tip_dx_elastic", "tip_dy_elastic")],
+                         + [{"x": rr["hac"].t, "ylabel": f"tip deflection {c[5].upper()} [mm]",
+                             "series": _series(rr, c, scale=1e3)} for c in ("tip_dx_deflection", "tip_dy_deflection")],
                          f"{name}: coupled and nonlinear models against the superposition models", "t [s]")
     return figs
 
@@ -225,7 +229,8 @@ def _gap_section(cases_dir, t_end, say) -> list[str]:
     from .gap import gap_study, gap_table
 
     lines = ["", "## The model gap: linear configurations against the nonlinear model", "",
-             "Coupler midspan strain (four-bars) or elastic tip Y displacement (manipulator), max |error| over "
+             "Coupler midspan strain (four-bars) or the tip's Y deflection from the rigid arm at each model's own "
+             "joint angles (manipulator), max |error| over "
              "[0, T] relative to the nonlinear model's peak there; 8 elements per link, the nonlinear "
              "reference 16.  K_σ: geometric stiffness source (theory.md §13); driven joints `torque`: left "
              "free in the elastic problem (§14).  Regenerate: `flexmech reproduce`.", ""]

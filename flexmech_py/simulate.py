@@ -17,7 +17,8 @@ from .coupled import CoupledModel
 from .mechanism import MotionSource, prepare_motion
 from .mechanism.motion import RigidMotion
 from .model import FEModel
-from .outputs import evaluate_outputs, link_curvature, link_node_curvatures, output_unit
+from .outputs import DeflectionReference, evaluate_outputs, joint_at_joint, link_curvature, link_node_curvatures, \
+    output_unit
 from .reactions import ModelReactions
 from .frames import continue_angles, select_frames
 from .results import Result
@@ -368,6 +369,7 @@ class Prepared:
         am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
         acc = _Accumulated()
         state, prev = {"u0": u0, "v0": v0}, None
+        acc.deflection = DeflectionReference(self.case, self.setup)
         for i0, i1, rm in self._chunks(3 * fe.nfree + 4 * fe.ndof + fe.nel, acc.clock):
             ts, cs = time.perf_counter(), time.thread_time()
             rig, q_free, q_val = self._loads(i0, i1, rm)
@@ -414,8 +416,9 @@ class Prepared:
         if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
             nf = (fe.el_prop[3] / fe.el_prop[0])[:, None] * _axial_stretch(fe, u_all, motion_f)
         reactions = ModelReactions(fe, model, rmf, rig_f, (u_all, v_all, a_all), sol, nf)
+        z_ref = acc.deflection(rmf.t, lambda p: joint_at_joint(fe, rmf, p, 0, u_all))
         columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rmf, axial=nf,
-                                   rates=(v_all, a_all), reactions=reactions)
+                                   rates=(v_all, a_all), reactions=reactions, z_ref=z_ref)
         extra = {"integrator": integrator_summary(sol)}
         if sol["geometric_stiffness"] != "none":
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": acc.geo_iters,
@@ -442,6 +445,7 @@ class Prepared:
         am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
         acc, diag = _Accumulated(), cpl_out.Diagnostics(cm)
         state, prev, first = None, None, None
+        acc.deflection = DeflectionReference(case, self.setup)
         for i0, i1, rm in self._chunks(6 * cm.ndof + 3 * len(cm.markers), acc.clock):
             first = rm.select(slice(0, 1)) if first is None else first
             cval = cm.constraint_values(rm, first)
@@ -482,7 +486,9 @@ class Prepared:
         fr = cpl_out.model_frames(cm, qf, vf, af, lf, rmf.t, self.gravity, sol["rayleigh"])
         u_dev = cpl_out.deviation(cm, qf, ref)
         axial = cpl_out.axial_forces(cm, qf)
-        columns = cpl_out.evaluate(cm, case["outputs"], fr, rmf, ref, u_dev, axial, superposition_fe=lambda: self.fe)
+        z_ref = acc.deflection(rmf.t, lambda p: cpl_out.joint_at_joint(cm, fr, rmf, p)[0])
+        columns = cpl_out.evaluate(cm, case["outputs"], fr, rmf, ref, u_dev, axial, superposition_fe=lambda: self.fe,
+                                   z_ref=z_ref)
         units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
         for k, y in {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}.items():
             columns[k], units[k] = y, "J"
@@ -524,6 +530,7 @@ class _Accumulated:
                                     "kernel_cpu_s"), 0.0)
         self.geo_iters = 0
         self.reaction_residual = 0.0
+        self.deflection = None          # the run's DeflectionReference
 
     def add_time(self, what: str, t0: float, c0: float) -> None:
         self.clock[f"{what}_s"] += time.perf_counter() - t0

@@ -54,8 +54,21 @@ def test_coincident_curves_are_said_to_coincide():
     assert found[1][0] == 0 and found[1][1] == pytest.approx(2e-3 / np.max(np.abs(a + 2e-3)), rel=1e-6)
     assert 2 not in found and found[3] == (0, 0.0)
     marked = plots._mark_coincident(series)
-    assert "on case I: max |diff| 0.2 % of the peak" in marked[1][0] and marked[1][2]["ls"] == "--"
+    assert "on case I: max |diff| 0.2 % of case I's peak" in marked[1][0] and marked[1][2]["ls"] == "--"
     assert marked[3][0].endswith("on case I: identical") and marked[2] == series[2]
+
+
+def test_coincidence_label_divides_by_the_reference_curves_peak():
+    """A small reference curve drawn in a panel with a ten times larger one: the curve on it is said to
+    differ by its difference over the reference's own peak (1.5 %), not over the panel's (0.15 %)."""
+    t = np.linspace(0, 1, 500)
+    ref = 0.1 * np.sin(7 * t)
+    series = [("big", np.sin(7 * t) + 0.5, None), ("reference (model A)", ref, None),
+              ("other (model B)", ref + 0.015 * np.max(np.abs(ref)) * np.cos(3 * t), None)]
+    found = plots.coincidences(series)
+    assert found[2][0] == 1 and found[2][1] < 0.0016              # coincide at the panel's scale
+    marked = plots._mark_coincident(series)
+    assert "on reference: max |diff| 1.5 % of reference's peak" in marked[2][0], marked[2][0]
 
 
 def test_legend_goes_to_an_empty_corner_or_beside_the_axes():

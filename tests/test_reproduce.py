@@ -95,8 +95,8 @@ def test_figures_have_units_distinct_titles_and_say_what_coincides(reduced):
     _, _, drawn = reduced
     titles = [kw["title"] for _, kw in drawn.values()]
     assert len(titles) == len(set(titles))                           # Figs. 10 and 11 no longer share one
-    assert "in X (horizontal)" in drawn["fig10_manipulator_bricout_tip_dx_elastic.png"][1]["title"]
-    assert "in Y (vertical)" in drawn["fig11_manipulator_bricout_tip_dy_elastic.png"][1]["title"]
+    assert "in X (horizontal)" in drawn["fig10_manipulator_bricout_tip_dx_deflection.png"][1]["title"]
+    assert "in Y (vertical)" in drawn["fig11_manipulator_bricout_tip_dy_deflection.png"][1]["title"]
     for name, (panels, kw) in drawn.items():
         assert re.search(r"\[[^]]+\]$", kw["xlabel"]), name
         for p in panels:
@@ -113,7 +113,7 @@ def test_figures_have_units_distinct_titles_and_say_what_coincides(reduced):
 
 def test_coupled_drawn_over_nonlinear(reduced):
     _, _, drawn = reduced
-    labels = [lab for lab, _, _ in drawn["fig11_manipulator_bricout_tip_dy_elastic.png"][0][0]["series"]]
+    labels = [lab for lab, _, _ in drawn["fig11_manipulator_bricout_tip_dy_deflection.png"][0][0]["series"]]
     assert labels.index(rp.LABEL["coupled"]) > labels.index(rp.LABEL["nonlinear"])
 
 
