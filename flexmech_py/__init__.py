@@ -8,6 +8,10 @@ Python API::
     res.t, res["strain_coupler_mid"]            # numpy arrays
     res.write("out/")                           # timeseries.csv, summary.json
 
+A run's warnings (``res.extra["warnings"]``) are issued as Python warnings of the classes
+``fm.ValidityWarning``, ``fm.AccuracyWarning``, ``fm.MechanismWarning``, ``fm.StabilityWarning``
+(all ``fm.FlexmechWarning``, a ``UserWarning``): filter them with :mod:`warnings`.
+
 The bundled cases: ``fm.case_names()``, ``fm.case_path("fourbar_hac")``.  The compiled kernels are
 in :mod:`flexmech_py.kernels`.
 """
@@ -41,10 +45,12 @@ __version__ = "0.1.0"
 
 from .bundled import case_names, case_path  # noqa: E402
 from .case import MODELS, SUPERPOSITION_MODELS, Case, apply_overrides, load_case, validate_case  # noqa: E402
-from .errors import CaseError, FlexmechError, Interrupted, MechanismError, SolverError  # noqa: E402
+from .errors import (AccuracyWarning, CaseError, FlexmechError, FlexmechWarning, Interrupted,  # noqa: E402
+                     MechanismError, MechanismWarning, SolverError, StabilityWarning, ValidityWarning)
 from .mechanism import Mechanism  # noqa: E402
 from .simulate import simulate  # noqa: E402
 
 __all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "Case", "Mechanism", "MODELS",
            "SUPERPOSITION_MODELS", "FlexmechError", "CaseError", "MechanismError", "SolverError", "Interrupted", "case_path",
-           "case_names", "__version__"]
+           "case_names", "FlexmechWarning", "ValidityWarning", "AccuracyWarning", "MechanismWarning", "StabilityWarning",
+           "__version__"]

@@ -45,6 +45,7 @@ import numpy as np
 
 from .case import MODELS, apply_overrides, read_case_file, validate_case
 from .errors import CaseError
+from .notices import silenced
 from .parallel import run_tasks
 from .results import _atomic_write, _json_default
 
@@ -153,6 +154,7 @@ def _integrator_label(sol: dict) -> str:
 
 
 # ----------------------------------------------------------------------------- one run (a task)
+@silenced()      # a point of the study: its error is measured, its warnings are not issued
 def run_point(task: dict) -> dict:
     """One run of the study (a :func:`run_tasks` task): the outputs on the common frames and the timings.
 

@@ -32,6 +32,7 @@ import os
 import sys
 from pathlib import Path
 
+from . import notices
 from .case import MODELS as MODELS_ALL
 from .errors import FlexmechError, MechanismError, SolverError
 
@@ -661,13 +662,18 @@ def _cmd_reproduce(args) -> int:
     return 0
 
 
+def _commands() -> dict:
+    return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
+            "steady": _cmd_steady, "modes": _cmd_modes, "draw": _cmd_draw, "sweep": _cmd_sweep, "bench": _cmd_bench,
+            "accuracy": _cmd_accuracy}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
-                "steady": _cmd_steady, "modes": _cmd_modes, "draw": _cmd_draw, "sweep": _cmd_sweep, "bench": _cmd_bench,
-                "accuracy": _cmd_accuracy}[args.command](args)
+        with notices.silenced():   # each command prints the runs' warnings itself, once
+            return _commands()[args.command](args)
     except FlexmechError as exc:
         print(f"flexmech: error: {exc}", file=sys.stderr)
         return 2

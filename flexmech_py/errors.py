@@ -1,9 +1,10 @@
-"""Exception classes of flexmech.
+"""Exception and warning classes of flexmech.
 
 Every error a user can cause derives from :class:`FlexmechError`; the CLI turns
 any of them into one line on stderr and exit code 2.  Compiled-kernel status
 codes are translated into these exceptions in exactly one place
-(:func:`flexmech_py.kernels.check_status`).
+(:func:`flexmech_py.kernels.check_status`).  Every warning a run gives derives from
+:class:`FlexmechWarning` (issued by :mod:`flexmech_py.notices`).
 """
 
 __all__ = [
@@ -12,6 +13,11 @@ __all__ = [
     "MechanismError",
     "SolverError",
     "Interrupted",
+    "FlexmechWarning",
+    "ValidityWarning",
+    "AccuracyWarning",
+    "MechanismWarning",
+    "StabilityWarning",
 ]
 
 
@@ -69,3 +75,28 @@ class Interrupted(KeyboardInterrupt):
     def __init__(self, message: str, partial=None):
         self.partial = partial
         super().__init__(message)
+
+
+class FlexmechWarning(UserWarning):
+    """Base class of the warnings of a run (``res.extra["warnings"]``), issued by the Python API
+    (``fm.simulate``, ``Prepared.run``, ...) with :mod:`warnings`: filter them by class, e.g.
+    ``warnings.filterwarnings("ignore", category=fm.ValidityWarning)``."""
+
+
+class ValidityWarning(FlexmechWarning):
+    """The model is used outside its range: a deflection, strain or compression past its limit
+    (docs/stability.md, validity)."""
+
+
+class AccuracyWarning(FlexmechWarning):
+    """An estimated numerical error (time step, mesh) above its threshold (docs/stability.md, error
+    estimate)."""
+
+
+class MechanismWarning(FlexmechWarning):
+    """Something about the mechanism as described that may not be what was meant (a free degree of
+    freedom with no drive and no gravity)."""
+
+
+class StabilityWarning(FlexmechWarning):
+    """A periodic steady state that is unstable or ill-conditioned (flexmech steady, Floquet)."""

@@ -29,6 +29,7 @@ import numpy as np
 
 from .case import load_case
 from .errors import FlexmechError
+from .notices import silenced
 from .floquet import PeriodicCase, floquet
 from .simulate import Prepared
 
@@ -618,6 +619,7 @@ QUICK = {
 }
 
 
+@silenced()      # the table records each run's warnings (its "warnings" entries)
 def run_all(only=None, quick=False, progress=print) -> dict:
     """Run the studies (all, or the names in ``only``); returns {name: (rows, data)}."""
     out = {}

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from . import notices
 from .case import SUPERPOSITION_MODELS, Case
 from .errors import CaseError
 from .regions import default_resolution, multiplier_type, refinement_speeds
@@ -220,13 +221,16 @@ def steady_state(pc: PeriodicCase, fr: FloquetResult | None = None):
     (the usual outputs of ``flexmech run``), with the multipliers in ``extra["floquet"]``."""
     fr = floquet(pc) if fr is None else fr
     n = pc.n
-    res = pc.prep.run(pc.model, pc.geometric, u0=fr.x_star[:n], v0=fr.x_star[n:], estimate=False)
+    with notices.silenced():      # its warnings are issued with the Floquet ones below
+        res = pc.prep.run(pc.model, pc.geometric, u0=fr.x_star[:n], v0=fr.x_star[n:], estimate=False)
     x_end = np.concatenate([pc.fe.restrict(res.u[:, -1]), pc.fe.restrict(res.v[:, -1])])
     scale = max(float(np.max(np.abs(fr.x_star[:n]))), 1e-300)
     info = fr.summary()
     info["periodicity_residual"] = float(np.max(np.abs(x_end[:n] - fr.x_star[:n])) / scale)
     res.extra["floquet"] = info
-    res.extra["warnings"] = res.extra.get("warnings", []) + info["warnings"]   # validity, then Floquet
+    for m in info["warnings"]:                                   # validity, then Floquet
+        notices.add(res.extra, m, "stability")
+    notices.issue(res.extra)
     return res
 
 

@@ -12,6 +12,7 @@ import time
 import numpy as np
 
 from .guards import THRESHOLDS, deflection_over_length
+from .notices import silenced
 from .simulate import Prepared
 
 __all__ = ["CONFIGS", "gap_study", "validity_time", "gap_table"]
@@ -51,6 +52,7 @@ def _driven_torque_case(case):
     return c
 
 
+@silenced()      # the study measures the errors itself
 def gap_study(case: dict, column: str, windows, elements=8, ref_elements=16, configs=CONFIGS, progress=None) -> dict:
     """Run the configurations and the nonlinear reference on one case; returns a dict with rows.
 

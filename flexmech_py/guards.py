@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from . import coupled, kernels
+from . import coupled, kernels, notices
 from .errors import MechanismError, SolverError
 from .model import squared_frequencies
 
@@ -178,6 +178,7 @@ class ValidityTracker:
         res.extra["validity"] = {k: dict(v) for k, v in self.links.items()}
         res.extra["validity_overall"] = overall
         res.extra["warnings"] = _validity_warnings(res, events, limiting, model, geo, self.speeds)
+        res.extra["warning_kinds"] = notices.kinds_of(res.extra["warnings"], "validity")
         return overall
 
 

@@ -18,6 +18,7 @@ import numpy as np
 from .bundled import cases_dir as cases_dir_bundled
 from .case import MODELS, SUPERPOSITION_MODELS, load_case
 from .errors import CaseError
+from .notices import silenced
 from .plots import line_figure, mechanism_sketch
 from .reproduce_modes import modes_section
 from .simulate import simulate_models
@@ -88,6 +89,7 @@ GAP_CASES = {"fourbar_hac": ("strain_coupler_mid", 0.15), "fourbar_constant_spee
              "manipulator_bricout": ("tip_dy_deflection", 0.15)}
 
 
+@silenced()      # the report states each run's validity; its runs' warnings are not issued one by one
 def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS, t_end=None, gap=True) -> Path:
     """Run the seed cases with every model, write figures, run folders and ``report.md``.
 

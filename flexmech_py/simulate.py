@@ -11,7 +11,7 @@ import numpy as np
 
 from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients
 from .errors import CaseError, MechanismError, SolverError
-from . import guards, step_doubling
+from . import guards, notices, step_doubling
 from . import coupled_outputs as cpl_out
 from .coupled import CoupledModel
 from .mechanism import MotionSource, prepare_motion
@@ -272,7 +272,8 @@ class Prepared:
         ``solver.geometric_stiffness`` for a superposition model; ``u0``, ``v0`` (nfree,) an
         initial elastic state other than rest, superposition models only).
 
-        Every run gets the validity report and warnings (:mod:`flexmech_py.guards`);
+        Every run gets the validity report and warnings (:mod:`flexmech_py.guards`), issued as Python
+        warnings of the classes of :mod:`flexmech_py.notices` (``fm.ValidityWarning``, ...);
         ``estimate`` (default: ``solver.error_estimate != "none"``) adds the step-doubling error
         estimate (the run at 2 dt, made alongside).  A failed run raises SolverError carrying the partial
         result and, with ``diagnose``, the likely cause (which may cost a short run at dt/2); a run
@@ -281,8 +282,10 @@ class Prepared:
         ``solver.output_every``): :meth:`stream` writes any length to files."""
         from .runner import MemorySink, execute
 
-        return execute(self, model, MemorySink(self.frames), geometric=geometric, estimate=estimate,
-                       diagnose=diagnose, u0=u0, v0=v0)
+        res = execute(self, model, MemorySink(self.frames), geometric=geometric, estimate=estimate,
+                      diagnose=diagnose, u0=u0, v0=v0)
+        notices.issue(res.extra)      # as Python warnings of their kind (flexmech_py.notices)
+        return res
 
     def stream(self, out_dir, model: str | None = None, geometric: str | None = None, *,
                estimate: bool | None = None, diagnose: bool = True, progress=None, force: bool = False) -> Result:
@@ -296,8 +299,9 @@ class Prepared:
         from .runner import FileSink, execute
 
         sink = FileSink(out_dir, frames_total=self.frames, force=force)
-        return execute(self, model, sink, geometric=geometric, estimate=estimate, diagnose=diagnose,
-                       progress=progress)
+        res = execute(self, model, sink, geometric=geometric, estimate=estimate, diagnose=diagnose, progress=progress)
+        notices.issue(res.extra)
+        return res
 
     def blocks(self, model: str | None = None, geometric: str | None = None, *, u0=None, v0=None):
         """The run of one model as blocks of frames: Results over consecutive frames, the first from
@@ -519,6 +523,7 @@ class Prepared:
                                                "moved_m": {k: v for k, v in st.moved.items() if v > floor}},
                                   "rigid_steps": self.source.stats.get("steps", 0)}
         res.extra["warnings"] = list(st.warnings) + list(res.extra.get("warnings", []))
+        res.extra["warning_kinds"] = {**notices.kinds_of(st.warnings, "mechanism"), **res.extra.get("warning_kinds", {})}
 
 
 class _Accumulated:

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from . import notices
 from .errors import MechanismError, SolverError
 from .guards import fmt_time
 
@@ -198,9 +199,9 @@ class StepDoubling:
         if cmp.failed is not None:
             exc = cmp.failed
             out.update(failed=f"the run at 2 dt stopped at t = {fmt_time(exc.time)} s", columns={}, worst_column=None)
-            res.extra.setdefault("warnings", []).append(
-                f"error estimate: the same run at 2 dt = {self.pc.dt:.3g} s stopped at t = {fmt_time(exc.time)} s, so "
-                "the step dt is close to the limit of this model; check with a smaller solver.dt")
+            notices.add(res.extra,
+                        f"error estimate: the same run at 2 dt = {self.pc.dt:.3g} s stopped at t = {fmt_time(exc.time)} s, "
+                        "so the step dt is close to the limit of this model; check with a smaller solver.dt", "accuracy")
             return out
         out.update(kernel_s=cmp.kernel_s, wall_s=cmp.wall_s, frames_compared=cmp.frames)
         fac = 1.0 / (2 ** ORDER - 1)
@@ -217,7 +218,7 @@ class StepDoubling:
         if over:
             name = max(over, key=over.get)
             out["warning"] = _estimate_warning(self.prep.dt, name, over, self._observed_order(name))
-            res.extra.setdefault("warnings", []).append(out["warning"]["message"])
+            notices.add(res.extra, out["warning"]["message"], "accuracy")
         return out
 
     def _observed_order(self, name: str) -> float | None:

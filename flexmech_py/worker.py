@@ -9,6 +9,7 @@ import socket
 import time
 
 from .errors import FlexmechError
+from .notices import silenced
 
 __all__ = ["call_task", "default_jobs", "worker_lost", "worker_name"]
 
@@ -31,7 +32,8 @@ def call_task(func, task):
     stopped) is a result ``{"error": message, "error_type": name}``, not a crash."""
     t0 = time.perf_counter()
     try:
-        res = func(task)
+        with silenced():           # a batch reports its runs' warnings from their results
+            res = func(task)
     except FlexmechError as exc:
         res = {"error": str(exc), "error_type": type(exc).__name__}
     return res, time.perf_counter() - t0, worker_name()
