@@ -183,14 +183,14 @@ def _write(metrics: dict, out_dir: Path, x: str, title: str, labels=("result", "
         u, k = units.get(c), 1.0
         if u == "m" and max(np.max(np.abs(m["_ref"])), np.max(np.abs(m["_res"]))) < 0.1:
             u, k = "mm", 1e3   # small lengths in mm, as the reports quote them
-        note = " - definitions differ, see compare.json" if m.get("definition_note") else ""
+        note = "\nnot the same quantity in the two models (compare.json: definition_note)" if m.get("definition_note") else ""
         p = line_figure(out_dir / f"compare_{c}.png",
                         [{"x": m["_x"], "ylabel": _axis_label(c, u),
                           "series": [(labels[1], k * m["_ref"], {"color": "k", "lw": 1.4}),
                                      (labels[0], k * m["_res"], {"color": "C3", "lw": 1.0})]},
                          {"x": m["_x"], "ylabel": _axis_label(f"{labels[0]} - {labels[1]}", u),
                           "series": [("", k * (m["_res"] - m["_ref"]), {"color": "C3", "lw": 0.8})]}],
-                        title=f"{title}: {c} (max error {100 * m['max_error']:.3g} % of the reference peak{note})",
+                        title=f"{title}: {c} (max error {100 * m['max_error']:.3g} % of the reference peak){note}",
                         xlabel=xlabel)
         if p:
             paths.append(p)
