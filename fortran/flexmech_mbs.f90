@@ -216,7 +216,7 @@ contains
   subroutine mbs_constraints(sys, z, zd, t)
     type(mbs_system), intent(inout) :: sys
     real(dp), intent(in) :: z(:), zd(:), t
-    integer :: j, r, i, k, ia, ib, cols(6)
+    integer :: j, r, i, ia, ib, cols(6)
     real(dp) :: rp(2), wp(2), vp(2), ap(2), rq(2), wq(2), vq(2), aq(2), g, grad(6), gd, gq, f(3)
     sys%jac = 0.0_dp; sys%nu = 0.0_dp
     do j = 1, sys%nj
@@ -252,9 +252,7 @@ contains
       if (r == 0) cycle
       j = sys%dv_joint(i)
       call joint_coordinate(sys, j, z, zd, .false., g, cols, grad, gd, gq)
-      k = sys%dv_tab(1, i)
-      f = kinematic_law(sys%dv_kind(i), sys%dv_par(:, i), sys%tab_t(k:k + max(sys%dv_tab(2, i), 1) - 1), &
-                        sys%tab_c(:, k:k + max(sys%dv_tab(2, i), 1) - 1), t)
+      f = drive_law(sys, i, t)
       call put_row(r, g - f(1), f(3) - gq)
       sys%nu(r) = f(2)
     end do
@@ -581,23 +579,26 @@ contains
     type(mbs_system), intent(in) :: sys
     real(dp), intent(in) :: t0, t1
     real(dp) :: change, f0(3), f1(3)
-    integer :: i, k, nk
+    integer :: i
     change = 0.0_dp
     do i = 1, sys%nd
       if (sys%dv_row(i) == 0) cycle
-      k = sys%dv_tab(1, i); nk = max(sys%dv_tab(2, i), 1)
-      f0 = kinematic_law(sys%dv_kind(i), sys%dv_par(:, i), sys%tab_t(k:k + nk - 1), sys%tab_c(:, k:k + nk - 1), t0)
-      f1 = kinematic_law(sys%dv_kind(i), sys%dv_par(:, i), sys%tab_t(k:k + nk - 1), sys%tab_c(:, k:k + nk - 1), t1)
+      f0 = drive_law(sys, i, t0)
+      f1 = drive_law(sys, i, t1)
       change = max(change, abs(f1(1) - f0(1))*sys%rscale(sys%dv_row(i))/sys%lref)
     end do
   end function mbs_drive_change
 
-  !> Coordinates of every joint [value, rate, acceleration] (3, nj) at (z, zd, zdd).
-  pure subroutine mbs_joint_coordinates(sys, z, zd, zdd, jq)
+  !> Coordinates of every joint [value, rate, acceleration] (3, nj) at (z, zd, zdd) and time t [s].  A
+  !> kinematically driven joint's are its law's [f, f', f''] at t: the position solve meets the law only
+  !> to its tolerance (1e-12 of the mechanism's size, drifting between Newton corrections), and the
+  !> coupled models prescribe these values in their drive rows, where an error of 1e-13 m is a
+  !> multiplier kick of m 1e-13 / (beta h^2) (docs/theory.md section 15.4).
+  pure subroutine mbs_joint_coordinates(sys, z, zd, zdd, t, jq)
     type(mbs_system), intent(in) :: sys
-    real(dp), intent(in) :: z(:), zd(:), zdd(:)
+    real(dp), intent(in) :: z(:), zd(:), zdd(:), t
     real(dp), intent(out) :: jq(:, :)
-    integer :: j, c, cols(6)
+    integer :: i, j, c, cols(6)
     real(dp) :: g, grad(6), gd, gq, acc
     do j = 1, sys%nj
       call joint_coordinate(sys, j, z, zd, .false., g, cols, grad, gd, gq)
@@ -607,6 +608,21 @@ contains
       end do
       jq(:, j) = [g, gd, acc]
     end do
+    do i = 1, sys%nd
+      if (sys%dv_row(i) > 0) jq(:, sys%dv_joint(i)) = drive_law(sys, i, t)
+    end do
   end subroutine mbs_joint_coordinates
+
+  !> [f, f', f''] of kinematic drive i's law at time t [s].
+  pure function drive_law(sys, i, t) result(f)
+    type(mbs_system), intent(in) :: sys
+    integer, intent(in) :: i
+    real(dp), intent(in) :: t
+    real(dp) :: f(3)
+    integer :: k
+    k = sys%dv_tab(1, i)
+    f = kinematic_law(sys%dv_kind(i), sys%dv_par(:, i), sys%tab_t(k:k + max(sys%dv_tab(2, i), 1) - 1), &
+                      sys%tab_c(:, k:k + max(sys%dv_tab(2, i), 1) - 1), t)
+  end function drive_law
 
 end module flexmech_mbs

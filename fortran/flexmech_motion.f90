@@ -64,7 +64,7 @@ contains
         return
       end if
       zf(:, i) = z; zdf(:, i) = zd; zddf(:, i) = zdd; lamf(:, i) = lam
-      call mbs_joint_coordinates(sys, z, zd, zdd, jqf(:, :, i))
+      call mbs_joint_coordinates(sys, z, zd, zdd, ts(i), jqf(:, :, i))
       call mbs_drive_values(sys, z, zd, ts(i), lam, dvf(:, i))
       nvalid = i
     end do
@@ -196,7 +196,7 @@ contains
         exit
       end if
       zf(:, i) = y(1:n); zdf(:, i) = y(n + 1:); lamf(:, i) = lam
-      call mbs_joint_coordinates(sys, y(1:n), y(n + 1:), zddf(:, i), jqf(:, :, i))
+      call mbs_joint_coordinates(sys, y(1:n), y(n + 1:), zddf(:, i), ts(i), jqf(:, :, i))
       call mbs_drive_values(sys, y(1:n), y(n + 1:), ts(i), lam, dvf(:, i))
       nvalid = i
     end do
