@@ -15,7 +15,7 @@ module flexmech_coupled_corot
   use flexmech_coupled_system, only: coupled_system, wrap
   implicit none
   private
-  public :: one_element_residual, one_element_eval, one_element_elastic, absolute_block, chord
+  public :: stretch_damping_k, one_element_residual, one_element_eval, one_element_elastic, absolute_block, chord
 
   !> The chord frame of a segment and its chord-relative end angles: c = re - rs [m] and its rates,
   !> l2 = |c|^2, ell = |c|, e1 = c/ell, e2 = Omega e1, g = Omega c/l2 (d phi/d re), omega = g.c',
@@ -65,7 +65,7 @@ contains
     msum = 0.0_dp; csum = 0.0_dp
     call inertia_block(sys, l, fr, ccv, ckt, s6, msum, csum)
     call rotary_block(sys, l, fr, ccv, s6, msum)
-    call axial_block(sys, l, fr, ckt, f, ath, s6)
+    call axial_block(sys, l, fr, ccv, ckt, f, ath, s6)
     call bending_block(sys, l, ccv, ckt, s6, csum)
     if (sys%absang(l) == 1) call absolute_block(s6, fr%c, fr%cd, fr%cdd, sr, ccv, ckt, msum, csum)
   end subroutine one_element_eval
@@ -93,7 +93,7 @@ contains
     s6 = 0.0_dp
     if (.not. want) return
     call rotary_block(sys, l, fr, ccv, s6, msum)
-    call axial_block(sys, l, fr, ckt, f, ath, s6)
+    call axial_block(sys, l, fr, ccv, ckt, f, ath, s6)
     call bending_block(sys, l, ccv, ckt, s6, csum)
   end subroutine one_element_elastic
 
@@ -206,23 +206,26 @@ contains
   end subroutine rotary_residual
 
   !> Axial force f = EA eps [N], eps = (ell - L)/L (+ th^T A th/60 for a shallow arch, A = [4 -1; -1 4],
-  !> ath = d eps/d th): -f e1 at the start, +f e1 at the end, f L ath on the angles (arch).
+  !> ath = d eps/d th): -f' e1 at the start, +f' e1 at the end, f L ath on the angles (arch), where
+  !> f' = f + a_K EA (e1 . c')/L adds the stiffness-proportional Rayleigh damping of the chord's stretch.
   pure subroutine axial_residual(sys, l, fr, r, f, ath)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
     type(chord_frame), intent(in) :: fr
     real(dp), intent(inout) :: r(:)
     real(dp), intent(out) :: f, ath(2)
-    real(dp) :: len, eps
+    real(dp) :: len, eps, epsd, ft
     len = sys%prop(1, l)
     eps = (fr%ell - len)/len
+    epsd = dot_product(fr%e1, fr%cd)/len         ! the chord's stretch rate [1/s]
     ath = 0.0_dp
     if (sys%arch(l) == 1) then
       ath = [4.0_dp*fr%th(1) - fr%th(2), 4.0_dp*fr%th(2) - fr%th(1)]/30.0_dp
       eps = eps + 0.5_dp*dot_product(fr%th, ath)
     end if
     f = sys%prop(3, l)*eps
-    r(1:2) = r(1:2) - f*fr%e1; r(3:4) = r(3:4) + f*fr%e1
+    ft = f + sys%ray(2)*sys%prop(3, l)*epsd      ! with the stiffness-proportional damping a_K EA of the stretch
+    r(1:2) = r(1:2) - ft*fr%e1; r(3:4) = r(3:4) + ft*fr%e1
     if (sys%arch(l) == 1) r(5:6) = r(5:6) + f*len*ath
   end subroutine axial_residual
 
@@ -409,12 +412,13 @@ contains
   end subroutine rotary_block
 
   !> Axial stiffness ckt d2U/dq2: (EA/L) u u^T + (f/ell)(I - u u^T) between the ends (u = e1) and,
-  !> for a shallow arch, EA u ath^T between the ends and the angles and EA L ath ath^T + f L A/30.
-  pure subroutine axial_block(sys, l, fr, ckt, f, ath, s6)
+  !> for a shallow arch, EA u ath^T between the ends and the angles and EA L ath ath^T + f L A/30; and
+  !> the chord stretch's damping ccv a_K (EA/L) u u^T between the ends.
+  pure subroutine axial_block(sys, l, fr, ccv, ckt, f, ath, s6)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
     type(chord_frame), intent(in) :: fr
-    real(dp), intent(in) :: ckt, f, ath(2)
+    real(dp), intent(in) :: ccv, ckt, f, ath(2)
     real(dp), intent(inout) :: s6(6, 6)
     real(dp) :: len, ea, cc(2, 2), ua(2, 2)
     integer :: j
@@ -422,8 +426,9 @@ contains
     do j = 1, 2
       cc(:, j) = fr%e1*fr%e1(j)
     end do
-    cc = ckt*(ea/len - f/fr%ell)*cc
+    cc = (ckt*(ea/len - f/fr%ell) + ccv*sys%ray(2)*ea/len)*cc    ! + the stretch damping's C_v
     cc(1, 1) = cc(1, 1) + ckt*f/fr%ell; cc(2, 2) = cc(2, 2) + ckt*f/fr%ell
+    if (sys%ray(2) /= 0.0_dp) cc = cc + ckt*stretch_damping_k(sys%ray(2)*ea/len, fr%e1, fr%cd, fr%ell)
     s6(1:2, 1:2) = s6(1:2, 1:2) + cc; s6(3:4, 3:4) = s6(3:4, 3:4) + cc
     s6(1:2, 3:4) = s6(1:2, 3:4) - cc; s6(3:4, 1:2) = s6(3:4, 1:2) - cc
     if (sys%arch(l) == 0) return
@@ -436,6 +441,21 @@ contains
       s6(5:6, 4 + j) = s6(5:6, 4 + j) + ckt*(ea*len*ath*ath(j) + f*len*merge([4.0_dp, -1.0_dp], [-1.0_dp, 4.0_dp], j == 1)/30.0_dp)
     end do
   end subroutine axial_block
+
+  !> d(fd e1)/dc [N/m] of the stretch damping force fd = ck (e1 . c') along e1 = c/ell (ck = a_K EA/L
+  !> [N s/m]): ck/ell (e1 c'^T + (e1 . c') I)(I - e1 e1^T), the part of K_t between the chord's ends.
+  pure function stretch_damping_k(ck, e1, cd, ell) result(d)
+    real(dp), intent(in) :: ck, e1(2), cd(2), ell
+    real(dp) :: d(2, 2), p(2, 2)
+    integer :: j
+    do j = 1, 2
+      p(:, j) = -e1*e1(j)
+      p(j, j) = p(j, j) + 1.0_dp
+      d(:, j) = e1*cd(j)
+      d(j, j) = d(j, j) + dot_product(e1, cd)
+    end do
+    d = ck/ell*matmul(d, p)
+  end function stretch_damping_k
 
   !> Bending and damping: ckt K_th + ccv C_th on the angles; csum gets C_th's angle-column sums.
   pure subroutine bending_block(sys, l, ccv, ckt, s6, csum)

@@ -9,7 +9,7 @@ module flexmech_coupled_element
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap, elem_index, shape_fn, th_index, gx, gw
   use flexmech_coupled_storage, only: link_mats, lm_add, lm_add_block, lm_block_get, lm_block_put, lm_put_one
   use flexmech_coupled_corot, only: one_element_residual, one_element_eval, one_element_elastic, absolute_block, &
-                                    chord
+                                    chord, stretch_damping_k
   implicit none
   private
   public :: link_eval, segment_residual, coupled_set_inertia, INERTIA_CLOSED, INERTIA_GAUSS
@@ -128,7 +128,7 @@ contains
     end if
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
     call rotary_inertias(sys, l, q, v, a, want, ccv, ell, g, om, al, r, lm, ekin, msum)
-    call axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
+    call axial_strain(sys, l, q, v, ell, want, ccv, ckt, r, lm, epot)
     call bending_forces(sys, l, q, v, want, ccv, ckt, r, lm, epot, csum)
   end subroutine link_eval_rel
 
@@ -401,27 +401,30 @@ contains
     end do
   end subroutine rotary_inertias
 
-  !> Axial strain energy of a segment l of several elements, U = 1/2 EA L eps^2 [J], its residual and
-  !> (if want) ckt times its stiffness. eps = (|c| - L)/L, c = re - rs the chord [m], L the segment's
-  !> length (one-element segments, whose strain may hold the shallow arch's term: flexmech_coupled_corot).
-  subroutine axial_strain(sys, l, q, ell, want, ckt, r, lm, epot)
+  !> Axial strain energy of a segment l of several elements, U = 1/2 EA L eps^2 [J], its residual with
+  !> the stiffness-proportional damping a_K EA eps' of the stretch and (if want) ckt times its stiffness
+  !> plus ccv times that damping. eps = (|c| - L)/L, c = re - rs the chord [m], L the segment's length
+  !> (one-element segments, whose strain may hold the shallow arch's term: flexmech_coupled_corot).
+  subroutine axial_strain(sys, l, q, v, ell, want, ccv, ckt, r, lm, epot)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: l
-    real(dp), intent(in) :: q(:), ell, ckt
+    real(dp), intent(in) :: q(:), v(:), ell, ccv, ckt
     logical, intent(in) :: want
     real(dp), intent(inout) :: r(:), epot
     type(link_mats), intent(inout) :: lm
-    real(dp) :: len, ea, u(2), eps, f, cc(2, 2)
+    real(dp) :: len, ea, u(2), eps, f, ft, cc(2, 2)
     len = sys%prop(1, l); ea = sys%prop(3, l)
     u = (q(3:4) - q(1:2))/ell
     eps = (ell - len)/len
     f = ea*eps                               ! axial force [N]
-    r(1:2) = r(1:2) - f*u
-    r(3:4) = r(3:4) + f*u
+    ft = f + sys%ray(2)*ea*dot_product(u, v(3:4) - v(1:2))/len     ! with the damping of the stretch
+    r(1:2) = r(1:2) - ft*u
+    r(3:4) = r(3:4) + ft*u
     epot = epot + 0.5_dp*ea*len*eps**2
     if (.not. want) return
     cc(:, 1) = u*u(1); cc(:, 2) = u*u(2)
-    cc = ckt*(ea/len*cc - f/ell*cc)
+    cc = (ckt*(ea/len - f/ell) + ccv*sys%ray(2)*ea/len)*cc
+    if (sys%ray(2) /= 0.0_dp) cc = cc + ckt*stretch_damping_k(sys%ray(2)*ea/len, u, v(3:4) - v(1:2), ell)
     cc(1, 1) = cc(1, 1) + ckt*f/ell; cc(2, 2) = cc(2, 2) + ckt*f/ell
     lm%bb(1:2, 1:2, l) = lm%bb(1:2, 1:2, l) + cc; lm%bb(3:4, 3:4, l) = lm%bb(3:4, 3:4, l) + cc
     lm%bb(1:2, 3:4, l) = lm%bb(1:2, 3:4, l) - cc; lm%bb(3:4, 1:2, l) = lm%bb(3:4, 1:2, l) - cc
