@@ -83,8 +83,12 @@ def _apply(raw: dict, it) -> dict:
 
 def _has_integrator_key(raw: dict) -> bool:
     """Does this flexmech know ``solver.integrator``?"""
+    sol = dict(raw.get("solver", {}))
+    if "integrator" not in sol:
+        sol = {k: x for k, x in sol.items() if k not in ("beta", "gamma", "hht_alpha", "rho_inf")}
+        sol["integrator"] = "newmark"
     try:
-        return "integrator" in validate_case(raw)["solver"]
+        return "integrator" in validate_case(dict(raw, solver=sol))["solver"]
     except CaseError:
         return False
 
@@ -143,7 +147,11 @@ def parse_integrators(spec, raw: dict) -> list[Integrator]:
 
 
 def _integrator_label(sol: dict) -> str:
-    kind = sol.get("integrator", "newmark")
+    """The integrator a resolved solver table names; ``default`` when it names none (each model then
+    runs its family's default, flexmech_py.case.DEFAULT_INTEGRATORS)."""
+    kind = sol.get("integrator")
+    if kind is None:
+        return "default"
     if kind == "hht":
         return f"hht(alpha={sol['hht_alpha']:g})"
     if kind == "generalized-alpha":

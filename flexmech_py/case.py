@@ -29,7 +29,8 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
 __all__ = ["Case", "load_case", "validate_case", "apply_overrides", "MODELS", "SUPERPOSITION_MODELS", "OUTPUT_KINDS",
-           "INTEGRATORS", "integrator_coefficients", "DIVERGENCE_FACTOR"]
+           "INTEGRATORS", "integrator_coefficients", "integrator_of", "DEFAULT_INTEGRATORS",
+           "DIVERGENCE_FACTOR"]
 
 SUPERPOSITION_MODELS = ("hac", "classic", "classic-translational")
 MODELS = SUPERPOSITION_MODELS + ("coupled", "nonlinear")
@@ -42,6 +43,12 @@ NODE_ANGLES = ("relative", "shared")
 INTEGRATOR_PARAMS = {"newmark": ("beta", "gamma"), "hht": ("hht_alpha",), "generalized-alpha": ("rho_inf",)}
 HHT_ALPHA_DEFAULT, HHT_ALPHA_MAX = 0.05, 1.0 / 3.0
 RHO_INF_DEFAULT = 0.8
+#: the integrator of a run whose case names none, by model family (docs/theory.md section 15.4): the
+#: superposition models keep average acceleration (no multipliers in their loop; their golden
+#: numbers); the coupled and nonlinear models' constraint multipliers need numerical dissipation
+#: (under average acceleration their period-2 dt error grows without bound, whatever the step)
+DEFAULT_INTEGRATORS = {"superposition": {"integrator": "newmark", "beta": 0.25, "gamma": 0.5},
+                       "constrained": {"integrator": "generalized-alpha", "rho_inf": RHO_INF_DEFAULT}}
 DIVERGENCE_FACTOR = 1.0   # default solver.divergence_limit = DIVERGENCE_FACTOR x the longest link length
 OUTPUT_KINDS = {
     # kind: (required keys, optional keys with defaults)
@@ -148,9 +155,22 @@ def integrator_coefficients(integrator: str, params: dict | None = None) -> tupl
     raise CaseError("solver.integrator", f"must be one of {', '.join(map(repr, INTEGRATORS))}, got {integrator!r}")
 
 
+def integrator_of(sol: dict, model: str) -> dict:
+    """The integrator entries (``integrator`` and its parameters) a run of ``model`` uses: the case's
+    (a resolved ``case["solver"]``) or, when it names none, DEFAULT_INTEGRATORS of the model's family."""
+    if "integrator" in sol:
+        return {k: sol[k] for k in ("integrator",) + INTEGRATOR_PARAMS[sol["integrator"]] if k in sol}
+    return dict(DEFAULT_INTEGRATORS["superposition" if model in SUPERPOSITION_MODELS else "constrained"])
+
+
 def _integrator(sol: dict) -> dict:
-    """Validate solver.integrator and its parameters; the resolved entries (only the keys that apply)."""
-    name = v.text(sol, "integrator", "solver", default="newmark", choices=INTEGRATORS)
+    """Validate solver.integrator and its parameters; the resolved entries (only the keys that apply).
+    A case that names no integrator but gives one integrator's parameters names that integrator; one
+    that gives neither resolves to no entries (the model family's default, :func:`integrator_of`)."""
+    given = [name for name, keys in INTEGRATOR_PARAMS.items() if any(k in sol for k in keys)]
+    if "integrator" not in sol and not given:
+        return {}
+    name = v.text(sol, "integrator", "solver", default=(given or ["newmark"])[0], choices=INTEGRATORS)
     for other, keys in INTEGRATOR_PARAMS.items():
         if other == name:
             continue

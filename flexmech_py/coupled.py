@@ -152,7 +152,8 @@ class CoupledModel:
         this one continues (its ``q, v, a, p, carry``; q0, v0 and p0 are then not used): the steps are
         those of one uninterrupted run.  ``div_limit`` [m]: the divergence guard (default
         DIVERGENCE_FACTOR x the longest flexible link).  After the call ``self.last_run`` holds the
-        frames, ``frames_valid``, the final state ``q, v, a, p, carry``, ``status`` and ``fail_step``
+        frames, ``la`` (nc, nframes) the multipliers' largest step-to-step alternating part since the
+        last frame (fortran/flexmech_alternation.f90), ``frames_valid``, the final state ``q, v, a, p, carry``, ``status`` and ``fail_step``
         (also when the run failed)."""
         from .case import DIVERGENCE_FACTOR
 
@@ -178,15 +179,17 @@ class CoupledModel:
             div_limit = DIVERGENCE_FACTOR * max(self.case["links"][li]["length"] for li, _, _ in self.segments)
         seg_link = np.array([li + 1 for li, _, _ in self.segments], np.int32)
         ispec, rspec = self._spec(gravity, rayleigh, kernel=True)
-        qf, vf, af, lk, ef, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
+        qf, vf, af, lk, lka, ef, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
             nframes, ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
             out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry)
         lf = np.zeros((nc, nframes))      # the interior welds of shared node angles carry none
         lf[keep] = lk[:keep.size]
+        la = np.zeros((nc, nframes))
+        la[keep] = lka[:keep.size]
         if self.shared is not None:         # the valid frames (a failed run leaves zeros after them)
             qf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid] = self.shared.from_kernel(
                 qf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid])
-        self.last_run = {"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "frames_valid": int(nvalid),
+        self.last_run = {"qf": qf, "vf": vf, "af": af, "lf": lf, "la": la, "ef": ef, "frames_valid": int(nvalid),
                          "q": q, "v": v, "a": a, "p": p, "carry": carry, "status": int(status), "fail_step": int(fail),
                          "factorizations": int(newton[3])}
         detail = ""

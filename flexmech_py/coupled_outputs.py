@@ -17,7 +17,7 @@ from .outputs import _axial_output, _load_output, point_components, wrap_angle
 
 __all__ = ["ModelFrames", "model_frames", "chord_motion", "body_angles", "node_state", "deviation", "curvature",
            "axial_forces", "joint_angles", "joint_coordinate", "joint_at_joint", "joint_output", "evaluate", "reaction",
-           "drive_force", "Diagnostics"]
+           "drive_force", "Diagnostics", "multiplier_alternation"]
 
 
 @dataclass
@@ -488,3 +488,26 @@ def constraint_violation(cm: CoupledModel, fr: ModelFrames, cval) -> dict:
                                                                   "guide_normal_m" if r.role == "normal" else "slide_m")
         out[key] = max(out[key], float(np.max(np.abs(err))))
     return out
+
+
+def multiplier_alternation(cm: CoupledModel, la, lf, t, columns: dict) -> dict:
+    """The step-to-step alternation of a block's multipliers (the kernel's ``la``: per row and frame
+    the largest alternating part since the last frame, fortran/flexmech_alternation.f90) for the run's
+    alternation check (flexmech_py/alternation.py): per joint row ``"joint.role"`` its unit, largest
+    alternating part, the frame time of it and the row's largest |multiplier| at the frames; and, per
+    output column built on a joint's multipliers (a kinematic drive's force, a joint reaction from its
+    rows), that joint.  ``columns``: the block's column names of the automatic drive columns, by joint."""
+    rows = {}
+    for i, r in enumerate(cm.rows):
+        if r.joint is None or la.shape[1] == 0:
+            continue
+        k = int(np.argmax(la[i]))
+        rows[f"{r.joint}.{r.role}"] = {"joint": r.joint, "unit": "N m" if r.kind == CON_ANGLE else "N",
+                                       "amplitude": float(la[i, k]), "t": float(t[k]),
+                                       "peak": float(np.max(np.abs(lf[i])))}
+    built = dict(columns)
+    for name, sp in cm.case["outputs"].items():
+        if sp["kind"] == "drive_force" or (sp["kind"] == "reaction" and sp.get("source", "model") == "model"
+                                           and cm.joints[sp["joint"]].shared is None):
+            built[name] = sp["joint"]
+    return {"rows": rows, "columns": built}

@@ -39,7 +39,7 @@ __all__ = ["STUDIES", "case_path", "load", "integrator_overrides", "sawtooth", "
 
 # integrator label -> solver overrides
 INTEGRATORS = {
-    "newmark": [],   # average acceleration, the default
+    "newmark": ["solver.integrator=newmark"],   # average acceleration (the superposition models' default)
     "hht-0.05": ["solver.integrator=hht", "solver.hht_alpha=0.05"],
     "hht-0.3": ["solver.integrator=hht", "solver.hht_alpha=0.3"],
     **{f"galpha-{r}": ["solver.integrator=generalized-alpha", f"solver.rho_inf={r}"]
@@ -409,7 +409,7 @@ def spinup_study(rates=(4.0, 6.0, 10.0), t_end=20.0, dt=None, elements=None, con
         sets = [f"drive.final_speed={ws}", f"solver.t_end={t_end}"] + ([f"solver.dt={dt}"] if dt else [])
         if divergence_limit is not None:
             sets.append(f"solver.divergence_limit={divergence_limit}")
-        prep = Prepared(load("spinup_beam", sets), **kw)
+        prep = Prepared(load("spinup_beam", sets + integrator_overrides("newmark")), **kw)
         T = next(d for d in prep.case["drives"] if d["law"] == "spinup")["spinup_time"]
         w1 = spinup_first_frequency(prep.case)
         series[ws] = {}

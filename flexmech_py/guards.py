@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from . import coupled, kernels, notices
+from .case import integrator_of
 from .errors import MechanismError, SolverError
 from .model import squared_frequencies
 
@@ -357,8 +358,9 @@ def _undamped_constraints(prep, model: str, data) -> bool:
     integrated without numerical dissipation (Newmark, gamma = 1/2): its multipliers are undamped."""
     sol = prep.case["solver"]
     cm = (data or {}).get("cm")
-    return (model not in LINEAR_MODELS and sol.get("integrator", "newmark") == "newmark"
-            and abs(sol.get("gamma", 0.5) - 0.5) < 1e-12 and cm is not None and len(cm.rows) > 0)
+    integ = integrator_of(sol, model)
+    return (model not in LINEAR_MODELS and integ["integrator"] == "newmark"
+            and abs(integ.get("gamma", 0.5) - 0.5) < 1e-12 and cm is not None and len(cm.rows) > 0)
 
 
 def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True) -> SolverError:

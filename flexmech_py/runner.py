@@ -1,7 +1,8 @@
 """One run carried out: a model's blocks of frames (:meth:`flexmech_py.simulate.Prepared.blocks`)
 through the guards into a sink, and how the run ended (docs/theory.md section 19).
 
-:func:`execute` feeds every block to the validity tracker, to the step-doubling estimate (its
+:func:`execute` feeds every block to the validity tracker, to the check for a period-2 dt
+oscillation (:class:`flexmech_py.alternation.AlternationCheck`), to the step-doubling estimate (its
 run at 2 dt advances block by block beside the run) and to a sink: :class:`MemorySink` keeps every
 frame (``Prepared.run``), :class:`FileSink` writes them to timeseries.csv as they come and keeps only
 the last block, the column statistics and a bounded envelope for the plots (``Prepared.stream``, the
@@ -16,7 +17,7 @@ import shutil
 import time
 from pathlib import Path
 
-from . import guards, step_doubling
+from . import alternation, guards, step_doubling
 from .case import MODELS
 from .errors import CaseError, Interrupted, MechanismError, SolverError
 from .frames import ColumnStats, Envelope, join
@@ -190,6 +191,8 @@ def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | N
     if estimate is None:
         estimate = prep.case["solver"].get("error_estimate", "time") != "none"
     validity = guards.ValidityTracker()
+    alternating = alternation.AlternationCheck(prep, model)
+    observers = (*observers, alternating)
     doubling = step_doubling.StepDoubling(prep, model, geometric) if estimate else None
     total = prep.nsteps + (doubling.coarse_steps if doubling else 0)
     stop = None
@@ -214,7 +217,7 @@ def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | N
             stop.partial = None
             raise stop
         raise Interrupted("interrupted before the first frame")
-    return _finish(prep, model, geometric, res, sink, stop, validity, doubling, diagnose, t_start)
+    return _finish(prep, model, geometric, res, sink, stop, (validity, alternating), doubling, diagnose, t_start)
 
 
 def _work_done(block, doubling) -> int:
@@ -224,10 +227,11 @@ def _work_done(block, doubling) -> int:
     return done
 
 
-def _finish(prep, model, geometric, res, sink, stop, validity, doubling, diagnose, t_start):
+def _finish(prep, model, geometric, res, sink, stop, checks, doubling, diagnose, t_start):
     """Guards, estimate and files of a run that ended (or stopped: raise after the files are written)."""
     res.timing["total_s"] = prep.t_prepare + time.perf_counter() - t_start
-    validity.finish(res)
+    for check in checks:      # validity, then the period-2 dt alternation
+        check.finish(res)
     prep._report_mechanism(res)
     if isinstance(stop, SolverError):
         stop.partial = res

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients
+from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients, integrator_of
 from .errors import CaseError, MechanismError, SolverError
 from . import guards, notices, step_doubling
 from . import coupled_outputs as cpl_out
@@ -370,7 +370,8 @@ class Prepared:
         sol = dict(self.case["solver"])
         if geometric is not None:
             sol["geometric_stiffness"] = geometric
-        am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
+        integ = integrator_of(sol, model)
+        am, af_, beta, gamma = integrator_coefficients(integ["integrator"], integ)
         acc = _Accumulated()
         state, prev = {"u0": u0, "v0": v0}, None
         acc.deflection = DeflectionReference(self.case, self.setup)
@@ -423,7 +424,7 @@ class Prepared:
         z_ref = acc.deflection(rmf.t, lambda p: joint_at_joint(fe, rmf, p, 0, u_all))
         columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rmf, axial=nf,
                                    rates=(v_all, a_all), reactions=reactions, z_ref=z_ref)
-        extra = {"integrator": integrator_summary(sol)}
+        extra = {"integrator": integrator_summary(sol, model)}
         if sol["geometric_stiffness"] != "none":
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": acc.geo_iters,
                                             "mean_per_step": acc.geo_iters / max(steps_done, 1)}
@@ -446,7 +447,8 @@ class Prepared:
         if model not in self.coupled:
             self.coupled[model] = CoupledModel.from_case(case, split=(model == "nonlinear"))
         cm = self.coupled[model]
-        am, af_, beta, gamma = integrator_coefficients(sol.get("integrator", "newmark"), sol)
+        integ = integrator_of(sol, model)
+        am, af_, beta, gamma = integrator_coefficients(integ["integrator"], integ)
         acc, diag = _Accumulated(), cpl_out.Diagnostics(cm)
         state, prev, first = None, None, None
         acc.deflection = DeflectionReference(case, self.setup)
@@ -499,7 +501,9 @@ class Prepared:
         columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
         columns.update(_drive_columns(cm, fr, units))
         diag.add(fr, ef, rmf, iters, cval[:, :, idx])
-        extra = {"integrator": integrator_summary(sol), "coupled": diag.summary(steps_done)}
+        extra = {"integrator": integrator_summary(sol, model), "coupled": diag.summary(steps_done),
+                 "step_alternation": cpl_out.multiplier_alternation(cm, cm.last_run["la"][:, :qf.shape[1]], lf,
+                                                                    rmf.t, _drive_column_joints(cm))}
         rig_chord = np.asfortranarray(np.stack([fr.chord.phi, fr.chord.omega, fr.chord.alpha,
                                                 fr.chord.ax - self.gravity[0],
                                                 fr.chord.ay - self.gravity[1]]).transpose(0, 2, 1))
@@ -577,30 +581,40 @@ def _coupled_curvature(cm, res: Result, li: int, frac: float) -> np.ndarray:
     return cpl_out.curvature(cm, res.state, li, frac)
 
 
-def _drive_columns(cm, fr, units: dict) -> dict:
-    """The kinematic drives' torque (force on a prismatic joint) from the model's multipliers, as extra
-    columns: ``drive_torque`` (``drive_force``) for a single drive, ``drive_torque_<joint>`` for
-    several; a name the case's outputs already use is left to them."""
+def _drive_column_joints(cm) -> dict:
+    """{column: joint} of the kinematic drives' extra columns: ``drive_torque`` (``drive_force`` on a
+    prismatic joint) for a single drive, ``drive_torque_<joint>`` for several; a name the case's
+    outputs already use is left to them."""
     kin = [d for d in cm.case.mechanism.drives if d.kinematic]
     out = {}
     for d in kin:
         angular = cm.case.mechanism.joint(d.joint).angular
         name = ("drive_torque" if angular else "drive_force") + ("" if len(kin) == 1 else f"_{d.joint}")
-        if name in cm.case["outputs"]:
-            continue
-        out[name] = cpl_out.drive_force(cm, fr, d.joint)
-        units[name] = "N m" if angular else "N"
+        if name not in cm.case["outputs"]:
+            out[name] = d.joint
     return out
 
 
-def integrator_summary(sol: dict) -> dict:
+def _drive_columns(cm, fr, units: dict) -> dict:
+    """The kinematic drives' torque (force on a prismatic joint) from the model's multipliers, as extra
+    columns (names: :func:`_drive_column_joints`)."""
+    out = {}
+    for name, joint in _drive_column_joints(cm).items():
+        out[name] = cpl_out.drive_force(cm, fr, joint)
+        units[name] = "N m" if cm.case.mechanism.joint(joint).angular else "N"
+    return out
+
+
+def integrator_summary(sol: dict, model: str) -> dict:
     """summary.json's ``integrator`` entry: the name, its case parameter(s) and the kernel's
-    (am, af, beta, gamma), and the divergence limit [m]."""
-    name = sol.get("integrator", "newmark")
-    am, af, beta, gamma = integrator_coefficients(name, sol)
-    params = {k: sol[k] for k in ("hht_alpha", "rho_inf") if k in sol}
+    (am, af, beta, gamma), whether it is the model family's default (the case names none), and the
+    divergence limit [m]."""
+    integ = integrator_of(sol, model)
+    name = integ["integrator"]
+    am, af, beta, gamma = integrator_coefficients(name, integ)
+    params = {k: integ[k] for k in ("hht_alpha", "rho_inf") if k in integ}
     return {"name": name, **params, "am": am, "af": af, "beta": beta, "gamma": gamma,
-            "divergence_limit_m": sol.get("divergence_limit")}
+            "default": "integrator" not in sol, "divergence_limit_m": sol.get("divergence_limit")}
 
 
 def _axial_stretch(fe, u_all, motion) -> np.ndarray:

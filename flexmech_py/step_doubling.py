@@ -14,8 +14,10 @@ from types import SimpleNamespace
 import numpy as np
 
 from . import notices
+from .alternation import alternation_cause
 from .errors import MechanismError, SolverError
 from .guards import fmt_time
+from .ringing import DifferenceFrequency, ringing_cause
 
 __all__ = ["StepDoubling", "error_estimate", "coarse_grid", "ORDER", "ERROR_WARN"]
 
@@ -80,6 +82,7 @@ class StepComparison:
         self.kernel_s, self.wall_s = 0.0, 0.0
         self._fine, self._coarse = _Frames(), _Frames()
         self.kept = _Frames() if keep else None
+        self.spectrum = DifferenceFrequency()     # the differences' frequency (ringing, flexmech_py/ringing.py)
 
     def kept_block(self):
         """The coarse run's kept frames as one block (steps on its own grid), or None when not kept."""
@@ -140,7 +143,9 @@ class StepComparison:
             for name, y in f.cols.items():
                 if name not in c.cols:
                     continue
-                d = np.abs(y[fi] - c.cols[name][ci])
+                sd = y[fi] - c.cols[name][ci]
+                self.spectrum.add(name, c.t[ci], sd)
+                d = np.abs(sd)
                 k = int(np.argmax(d))
                 if not (self.diff.get(name, -1.0) >= d[k]):
                     self.diff[name], self.t_at[name] = float(d[k]), float(c.t[ci[k]])
@@ -217,7 +222,10 @@ class StepDoubling:
         over = {n: c["relative"] for n, c in cols.items() if np.isfinite(c["relative"]) and c["relative"] > ERROR_WARN}
         if over:
             name = max(over, key=over.get)
-            out["warning"] = _estimate_warning(self.prep.dt, name, over, self._observed_order(name))
+            order = self._observed_order(name)
+            cause = alternation_cause(res, name) or ringing_cause(
+                name, cmp.spectrum.frequency(name), cmp.spectrum.span(name), order, self.prep.dt)
+            out["warning"] = _estimate_warning(self.prep.dt, name, over, order, cause)
             notices.add(res.extra, out["warning"]["message"], "accuracy")
         return out
 
@@ -251,17 +259,21 @@ def _round_down(x: float, digits: int = 2) -> float:
     return math.floor(x / scale * (1 + 1e-12)) * scale
 
 
-def _estimate_warning(dt: float, name: str, over: dict, order: float | None) -> dict:
+def _estimate_warning(dt: float, name: str, over: dict, order: float | None, cause: dict | None = None) -> dict:
     """The warning of an estimate past ERROR_WARN: the worst column, and the step that would meet the
     threshold, dt (ERROR_WARN / estimate)^(1/p), p = min(observed order, ORDER).  Promised only when the
     observed order is within ORDER_TOLERANCE of ORDER (the runs are in the asymptotic range); otherwise the
-    order-2 step is a first guess (none when the error does not shrink with the step, p < 1)."""
+    order-2 step is a first guess (none when the error does not shrink with the step, p < 1).  ``cause``:
+    what the difference is when it is not a time-step error (undamped ringing, flexmech_py.ringing; a
+    period-2 dt oscillation, flexmech_py.alternation): the warning names it and what would remove it."""
     rel = over[name]
     more = f" ({len(over)} outputs above it)" if len(over) > 1 else ""
     head = (f"error estimate: the time-step error of {name} is about {100 * rel:.3g} % of its peak (step doubling), "
             f"above the {100 * ERROR_WARN:g} % threshold{more}; ")
     seen = f"observed order {order:.2g} from runs at dt, 2 dt and 4 dt" if order is not None else "no run at 4 dt"
     out = {"column": name, "observed_order": order, "suggested_dt": None}
+    if cause is not None:     # not a time-step error: ringing (flexmech_py/ringing.py) or a period-2 dt oscillation
+        return dict(out, **{k: x for k, x in cause.items() if k != "message"}, message=head + cause["message"])
     if order is not None and abs(order - ORDER) <= ORDER_TOLERANCE:
         dt_new = _round_down(dt * (ERROR_WARN / rel) ** (1.0 / min(order, ORDER)))
         out["suggested_dt"] = dt_new

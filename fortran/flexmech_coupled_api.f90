@@ -40,12 +40,13 @@ contains
   !> (q, v, a, pa, carry) (the same steps as one uninterrupted run).  div_limit [m] > 0: the run stops
   !> with status 6 when coupled_elastic_measure (flexmech_coupled_run) exceeds it; seg_link(nseg) is the
   !> mechanism link of each segment (segments of a link listed consecutively from its start).  Frames: qf, vf, af (ndof, nframes), lf (nc1, nframes)
-  !> the multipliers (constraint forces), ef (4, nframes) [kinetic, potential, work of the inputs, max
+  !> the multipliers (constraint forces), la (nc1, nframes) their largest step-to-step alternating part
+  !> since the last frame (flexmech_alternation), ef (4, nframes) [kinetic, potential, work of the inputs, max
   !> Newton iterations since the last frame]; nvalid: number of valid frames; newton(4): the last
   !> iteration's residual, correction and acceleration norms, factorizations (coupled_run).
   subroutine cpl_run(ni, nr, ndof, nc1, nsteps, nframes, nseg, ispec, rspec, cval, t0, dt, alpha_m, alpha_f, &
                      beta, gamma, out_every, tol, maxit, start, div_limit, seg_link, q, v, a, pa, carry, &
-                     qf, vf, af, lf, ef, status, fail_step, iters, nvalid, newton)
+                     qf, vf, af, lf, la, ef, status, fail_step, iters, nvalid, newton)
     integer, intent(in) :: ni, nr, ndof, nc1, nsteps, nframes, nseg
     integer, intent(in) :: ispec(ni)
     real(dp), intent(in) :: rspec(nr)
@@ -55,17 +56,17 @@ contains
     integer, intent(in) :: seg_link(nseg)
     real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof), pa(ndof), carry(nc1 + 2)
     real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
-    real(dp), intent(out) :: lf(nc1, nframes)
+    real(dp), intent(out) :: lf(nc1, nframes), la(nc1, nframes)
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
     type(coupled_system) :: sys
-    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
+    qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; la = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
     newton = 0.0_dp
     call build_checked(ispec, rspec, ndof, nc1, sys, status)
     if (status /= STATUS_OK) return
     call coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, start, &
-                     div_limit, seg_link, q, v, a, pa, carry, qf, vf, af, lf, ef, status, fail_step, iters, nvalid, &
-                     newton)
+                     div_limit, seg_link, q, v, a, pa, carry, qf, vf, af, lf, la, ef, status, fail_step, iters, &
+                     nvalid, newton)
   end subroutine cpl_run
 
   !> Linear solver of every later cpl_run in this process: mode -1 (default) automatic, 1 condensed

@@ -19,6 +19,7 @@ module flexmech_coupled_run
   use flexmech_coupled_storage, only: link_mats, lm_setup, lm_band_setup, lm_band_finish, lm_factor, lm_solve
   use flexmech_coupled_assembly, only: assemble, assemble_residual
   use flexmech_saddle_band, only: saddle_system, saddle_setup, saddle_factor, saddle_solve, saddle_flops
+  use flexmech_alternation, only: alternation_monitor, alt_setup, alt_step, alt_take
   implicit none
   private
   public :: coupled_run, coupled_elastic_measure
@@ -156,13 +157,15 @@ contains
   !> Frames at steps 0, out_every, ...: qf, vf, af (ndof, nframes), lf (nc, nframes) multipliers,
   !> ef(4, nframes) = [kinetic, potential (strain + gravity), work of the inputs (force drives and
   !> moving constraint rows), max Newton iterations since the last frame]; nvalid frames are valid.
+  !> la (nc, nframes): the largest step-to-step alternating part of every multiplier since the last
+  !> frame (flexmech_alternation; 0 where none), in the multipliers' units.
   !> Divergence guard: coupled_elastic_measure > div_limit [m] after a step stops the run with
   !> STATUS_DIVERGED (fail_step = that step).  newton(4) on return: [norm of the residual (free DOFs,
   !> with the constraint forces) before the last iteration, norm of its acceleration correction, norm
   !> of the accelerations, number of factorizations of the iteration matrix].
   subroutine coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
-                         start, div_limit, seg_link, q, v, a, p, carry, qf, vf, af, lf, ef, status, fail_step, &
-                         iters, nvalid, newton)
+                         start, div_limit, seg_link, q, v, a, p, carry, qf, vf, af, lf, la, ef, status, &
+                         fail_step, iters, nvalid, newton)
     type(coupled_system), intent(in) :: sys
     real(dp), intent(in) :: cval(:, :, :)        !< (3, >= nc, nsteps+1) [value, rate, acceleration] of the rows
     real(dp), intent(in) :: t0, dt, tol
@@ -172,7 +175,7 @@ contains
     integer, intent(in) :: seg_link(:)             !< (nseg) link of each segment
     real(dp), intent(inout) :: q(:), v(:), a(:), p(:)
     real(dp), intent(inout) :: carry(:)            !< (nc1 + 2) [multipliers, lref [m], work [J]]
-    real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
+    real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), la(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
     real(dp), allocatable :: res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
@@ -186,6 +189,7 @@ contains
     logical :: converged, refactor, use_cond, refresh, second, use_saddle, kept
     type(link_mats) :: lm
     type(saddle_system) :: sd
+    type(alternation_monitor) :: alt     ! the multipliers' step-to-step alternation
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
     nsteps = size(cval, 3) - 1
     nf = sys%nfree
@@ -193,7 +197,8 @@ contains
     refactor = .false.
     restart_kept = 0
     if (out_every < 1 .or. dt <= 0.0_dp .or. nsteps < 0 .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
-        size(cval, 2) < nc .or. size(lf, 1) < nc .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
+        size(cval, 2) < nc .or. size(lf, 1) < nc .or. size(la, 1) < nc .or. size(la, 2) /= size(qf, 2) .or. &
+        beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
         alpha_m >= 1.0_dp .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. &
         size(seg_link) /= sys%nseg .or. size(p) /= sys%ndof .or. size(carry) < max(1, nc) + 2 .or. &
         start < 0 .or. start > 2) then
@@ -229,6 +234,9 @@ contains
     frame = 1
     qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; lf(1:nc, 1) = lam(1:nc)
     ef(:, 1) = [energy(1), energy(2), work, 0.0_dp]
+    call alt_setup(alt, nc)
+    call alt_step(alt, lam(1:nc))
+    la = 0.0_dp
     nvalid = 1
     call save_carry()
     itmax_frame = 0
@@ -253,10 +261,12 @@ contains
         return
       end if
       call step_work(t)
+      call alt_step(alt, lam(1:nc))
       if (mod(n, out_every) == 0) then
         call assemble(sys, q, v, a, t, .false., 0.0_dp, 0.0_dp, res, lm, energy)
         frame = frame + 1
         qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a; lf(1:nc, frame) = lam(1:nc)
+        call alt_take(alt, la(1:nc, frame))
         ef(:, frame) = [energy(1), energy(2), work, real(itmax_frame, dp)]
         nvalid = frame
         itmax_frame = 0

@@ -73,13 +73,18 @@ def test_kernel_matrices_are_the_derivatives_of_the_residual(cases_dir, name, ov
 # ----------------------------------------------------------------------------- energy balance
 @pytest.mark.parametrize("name, bound", [("fourbar_hac", 1e-5), ("manipulator_bricout", 1e-7)])
 def test_energy_balance_seed_runs(cases_dir, name, bound):
-    """No damping: kinetic + strain energy = work of the input torques over the whole seed run."""
-    res = fm.simulate(fm.load_case(cases_dir / f"{name}.toml"), model="coupled")
-    e = res["energy_kinetic"] + res["energy_potential"] - res["work_inputs"]
-    drift = np.max(np.abs(e - e[0])) / np.max(res["work_inputs"])
-    print(f"\n{name}: energy drift {drift:.2e} (reported {res.extra['coupled']['energy_balance']['relative_drift']:.2e})")
-    assert res["work_inputs"][-1] > 1.0          # J: real work was done
-    assert drift < bound
+    """No damping: kinetic + strain energy = work of the input torques over the whole seed run, under
+    average acceleration (which conserves energy); the coupled model's default, generalized-alpha
+    rho_inf = 0.8, removes only the unresolved modes' energy: within 10x the bound."""
+    for integrator, tol in (("newmark", bound), ("generalized-alpha", 10 * bound)):
+        res = fm.simulate(fm.load_case(cases_dir / f"{name}.toml", overrides=[f"solver.integrator='{integrator}'"]),
+                          model="coupled")
+        e = res["energy_kinetic"] + res["energy_potential"] - res["work_inputs"]
+        drift = np.max(np.abs(e - e[0])) / np.max(res["work_inputs"])
+        print(f"\n{name} {integrator}: energy drift {drift:.2e} "
+              f"(reported {res.extra['coupled']['energy_balance']['relative_drift']:.2e})")
+        assert res["work_inputs"][-1] > 1.0          # J: real work was done
+        assert drift < tol
 
 
 def test_energy_conserved_in_free_motion_under_gravity():
@@ -192,9 +197,9 @@ def test_weld_keeps_the_relative_angle(cases_dir):
     """A non-driven locked joint welds the two tangents: the relative angle at the joint stays at its
     initial value (the elbow torque is removed; the base torque turns the welded arm)."""
     case = fm.load_case(cases_dir / "manipulator_bricout.toml",
-                        overrides=["solver.t_end=0.05", "drive.torques.1.constant=0.0"])
+                        overrides=["solver.t_end=0.05", "drive.torques.1.constant=0.0", "solver.integrator='newmark'"])
     case["drives"] = case["drives"][:1]
-    res = fm.simulate(case, model="coupled")
+    res = fm.simulate(case, model="coupled")        # average acceleration: the energy balance holds to 1e-6
     c = res.extra["coupled"]
     beta_ref = res["beta"][0]
     assert beta_ref == pytest.approx(0.5)

@@ -112,7 +112,7 @@ def cpl_steps(h, coef, u, v, p, nsteps=1):
     q, vv, a, pp = CPL_Q0.copy(), np.zeros(6), np.zeros(6), np.zeros(6)
     q[4], vv[4], pp[4] = u, v, p
     zeros3 = np.zeros((3, 1, nsteps + 1), order="F")
-    qf, vf, af, lf, ef, status, _, _, nvalid, _ = kernels.cpl.cpl_run(
+    qf, vf, af, lf, _, ef, status, _, _, nvalid, _ = kernels.cpl.cpl_run(
         nsteps + 1, *CPL_SDOF, zeros3, 0.0, h, *coef, 1, 1e-14, 25, 0, 1e300, np.array([1], np.int32), q, vv, a, pp,
         np.zeros(3))
     check_status(status, "cpl_run")
@@ -391,7 +391,7 @@ def test_integrator_coefficients():
     ({"integrator": "hht", "beta": 0.3}, "solver.beta", "applies to integrator = 'newmark'"),
     ({"integrator": "generalized-alpha", "gamma": 0.6}, "solver.gamma", "applies to integrator = 'newmark'"),
     ({"integrator": "generalized-alpha", "hht_alpha": 0.1}, "solver.hht_alpha", "applies to integrator = 'hht'"),
-    ({"rho_inf": 0.5}, "solver.rho_inf", "set solver.integrator = 'generalized-alpha'"),
+    ({"rho_inf": 0.5, "beta": 0.3}, "solver.rho_inf", "set solver.integrator = 'generalized-alpha'"),
     ({"integrator": "hht", "hht_alpha": 0.5}, "solver.hht_alpha", "[0, 1/3]"),
     ({"integrator": "hht", "hht_alpha": -0.1}, "solver.hht_alpha", "[0, 1/3]"),
     ({"integrator": "generalized-alpha", "rho_inf": 1.2}, "solver.rho_inf", "[0, 1]"),
@@ -406,8 +406,10 @@ def test_integrator_case_errors(solver, field, words):
 
 def test_resolved_solver_and_summary():
     case = beam_case(length=0.7)
-    assert case["solver"]["integrator"] == "newmark" and case["solver"]["divergence_limit"] == 0.7
+    assert "integrator" not in case["solver"] and case["solver"]["divergence_limit"] == 0.7   # the family's default
     assert "rho_inf" not in case["solver"] and "hht_alpha" not in case["solver"]
+    assert beam_case(rho_inf=0.6)["solver"]["integrator"] == "generalized-alpha"   # a parameter names its integrator
+    assert beam_case(gamma=0.6, beta=0.3025)["solver"]["integrator"] == "newmark"
     ga = beam_case(integrator="generalized-alpha")
     assert ga["solver"]["rho_inf"] == 0.8 and "beta" not in ga["solver"]
     assert fm.validate_case(_raw_from(ga))["solver"] == ga["solver"]   # a resolved case validates as itself

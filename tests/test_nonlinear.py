@@ -298,9 +298,9 @@ def _seed_newton(cases_dir, epl, dt, t_end, start, mode):
     from flexmech_py import kernels
     from flexmech_py.simulate import Prepared
 
-    case = fm.load_case(cases_dir / "fourbar_hac.toml",
+    case = fm.load_case(cases_dir / "fourbar_hac.toml",       # the iteration counts of theory.md 12.2: Newmark
                         overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'",
-                                   "solver.node_angles='shared'"])
+                                   "solver.node_angles='shared'", "solver.integrator='newmark'"])
     try:
         assert kernels.cpl.cpl_set_start(start) == 0 and kernels.cpl.cpl_set_newton(mode) == 0
         return Prepared(case, elements_per_link=epl).run("nonlinear").extra["coupled"]["newton"]
