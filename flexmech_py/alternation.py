@@ -10,7 +10,8 @@ and show a smooth curve.  It reads
 
 - the kernel's step-level watch of the multipliers (coupled and nonlinear models: a block's
   ``extra["step_alternation"]``, :func:`flexmech_py.coupled_outputs.multiplier_alternation`), which
-  carries the reactions and drive forces;
+  carries the reactions and drive forces (the watch starts again with every chunk of the run, so the
+  first ALT_FLIPS steps of a chunk arm it and are not watched);
 - every output column at the frames when the frames are the steps (``output_every = 1``); at a
   coarser output a frame-to-frame alternation may be the aliasing of a resolved vibration, so it is
   not read there.
