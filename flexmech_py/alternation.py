@@ -140,7 +140,7 @@ class AlternationCheck:
                "largest": ({k: seen[0][k] for k in ("quantity", "relative", "t_s")} if seen else None)}
         if found:
             out["warning"] = _warning(found, rho, self.model, self.dt)
-            notices.add(res.extra, out["warning"], "stability")
+            notices.add(res.extra, out["warning"], "accuracy")
         res.extra["alternation"] = out
         return out
 
