@@ -46,8 +46,10 @@ import numpy as np
 from .case import MODELS, apply_overrides, read_case_file, validate_case
 from .errors import CaseError
 from .notices import silenced
+from .outdir import ResultFolder
 from .parallel import run_tasks
 from .results import _atomic_write, _json_default
+from .sizes import MAX_STEPS, check_elements, format_count
 
 __all__ = ["accuracy_study", "run_point", "richardson", "successive_orders", "parse_integrators", "Integrator",
            "Study", "INTEGRATORS", "DEFAULT_KINDS"]
@@ -305,7 +307,9 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
                    columns=None, tolerances=(0.1, 0.01, 0.001), repeat: int = 1, jobs: int | None = None,
                    out_dir="accuracy", progress: bool = True, consistency: float = 0.3, plots: bool = True,
                    clock: str = "cpu", scheduler=None) -> Study:
-    """Run the error-against-time study of one case file and write its files into ``out_dir``.
+    """Run the error-against-time study of one case file and write its files into ``out_dir``
+    (through a :class:`~flexmech_py.outdir.ResultFolder`: whole or not at all; the runs cached in
+    ``out_dir/cache`` as they finish).
 
     ``models``: list (default: the case's ``solver.model``); ``integrators``: list for
     :func:`parse_integrators` (default: the case's own); ``dt_levels``: steps dt_0 * 2^k,
@@ -316,6 +320,30 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
     ``strain`` and ``displacement`` outputs); ``tolerances``: relative errors for the
     cheapest-run table.  Returns a :class:`Study`.
     """
+    kw = dict(locals())
+    with ResultFolder(out_dir, "accuracy") as rf:
+        study = _study(stage=rf.stage, **kw)
+        rf.commit()
+    study.paths = [rf.where(p) for p in study.paths]
+    return study
+
+
+def _check_ladder_sizes(case, models, steps: int, t_end: float, elements: list, n_ref: int, dt_field: str) -> None:
+    """Refuse a ladder whose finest run has too many steps, or whose meshes would not fit in memory."""
+    if steps > MAX_STEPS:
+        raise CaseError(dt_field, f"the reference run would take about {format_count(steps)} steps (dt {t_end / steps:.3g} s), "
+                                       f"more than the {format_count(MAX_STEPS)} one run can take: lower --dt-levels or "
+                                       "--ref-dt-factor")
+    links = sum(1 for ln in case["links"] if not ln.get("rigid"))
+    for field, n in (("--elements", max(elements)), ("--ref-elements", n_ref)):
+        for m in models:
+            check_elements(n * links, links, m, field)
+
+
+def _study(case_path, *, overrides, models, integrators, dt_levels, elements, grid, ref_dt_factor, ref_elements,
+           columns, tolerances, repeat, jobs, out_dir, progress, consistency, plots, clock, scheduler, stage) -> Study:
+    """The study of :func:`accuracy_study`, its runs cached in ``out_dir/cache`` and its files written
+    into ``stage``."""
     if clock not in ("cpu", "wall"):
         raise CaseError("--clock", f"must be cpu or wall, got {clock!r}")
     raw0, source = read_case_file(case_path), str(case_path)
@@ -335,6 +363,11 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
     r = int(round(math.log2(ref_dt_factor))) if ref_dt_factor >= 1 else -1
     if r < 0 or 2 ** r != ref_dt_factor:
         raise CaseError("--ref-dt-factor", f"must be a power of 2 (1, 2, 4, ...), got {ref_dt_factor}")
+    if kmax + r < 3:     # the reference's time family reaches 8 dt_ref, which must not pass the coarsest step
+        raise CaseError("--ref-dt-factor", f"the reference runs at dt_ref .. 8 dt_ref must not be coarser than the "
+                                           f"coarsest ladder step: needs --dt-levels K and --ref-dt-factor F with K - 1 "
+                                           f"+ log2 F >= 3, got K = {kmax + 1}, F = {ref_dt_factor}; e.g. --ref-dt-factor "
+                                           f"{2 ** (3 - kmax)}")
     case_mesh = _uniform_mesh(case)
     n_ref = int(ref_elements) if ref_elements else 2 * max(elements + [max(ln["elements"] for ln in case["links"] if not ln.get("rigid"))])
     n_ref = 8 * math.ceil(n_ref / 8) if not ref_elements else n_ref
@@ -360,6 +393,7 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
     t_end, dt_case = sol["t_end"], sol["dt"]
     n_coarse = max(1, math.ceil(t_end / (dt_case * 2 ** kmax) - 1e-9))
     N0 = n_coarse * 2 ** kmax                              # dt_0 = t_end / N0 <= dt_case
+    _check_ladder_sizes(case, models, N0 * 2 ** r, t_end, elements, n_ref, "--dt-levels" if kmax >= r else "--ref-dt-factor")
     from . import __version__
 
     def task(model, it: Integrator, nsteps, n_el, reps=1):
@@ -401,7 +435,6 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
     keys = sorted(points, key=lambda k: -points[k]["nsteps"] * (points[k]["elements"] or case_mesh or 2)
                   * (8 if points[k]["model"] in ("coupled", "nonlinear") else 1))
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     batch = run_tasks(run_point, [points[k]["task"] for k in keys], jobs=jobs, cache_dir=out_dir / "cache",
                       progress=progress, label="accuracy runs", scheduler=scheduler)
     res = dict(zip(keys, batch.results))
@@ -571,7 +604,7 @@ def accuracy_study(case_path, *, overrides=(), models=None, integrators=None, dt
                   "jobs": batch.jobs, "wall_s": batch.wall_s, "retries": batch.retries, "executor": batch.executor}
     study = Study(rows=rows, orders=orders, reference=reference, cheapest=cheapest, columns=columns,
                   batch=batch_info, settings=settings)
-    study.paths = _write(study, out_dir, plots, points, keys, ladders)
+    study.paths = _write(study, stage, plots, points, keys, ladders)
     return study
 
 

@@ -36,6 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import FlexmechError
+from .inputs import checked_file, checked_folder
+from .outdir import ResultFolder
+from .plots import save_figure
+
 __all__ = ["run_bench", "flops_superposition", "flops_newton", "fit_exponent"]
 
 MODELS = ("hac", "classic", "classic-translational", "coupled", "nonlinear")
@@ -108,7 +113,10 @@ def _timed_subprocess(args, reps: int, env=None) -> tuple[float, float]:
     wall = cpu = math.inf
     for _ in range(reps):
         t0, c0 = time.perf_counter(), _children_cpu()
-        subprocess.run(args, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=_NEUTRAL_CWD)
+        r = subprocess.run(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=_NEUTRAL_CWD)
+        if r.returncode:
+            last = (r.stderr or b"").decode("utf-8", "replace").strip().splitlines()[-1:] or ["no message"]
+            raise FlexmechError(f"bench: `{' '.join(map(str, args[-4:]))}` failed (exit {r.returncode}): {last[0]}")
         wall, cpu = min(wall, time.perf_counter() - t0), min(cpu, _children_cpu() - c0)
     return wall, cpu
 
@@ -465,7 +473,7 @@ def _plot(path: Path, ladder: list[dict], solves: list[dict]) -> Path | None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -551,10 +559,22 @@ def _exudyn_rows(exudyn: list[dict], exudyn_manipulator: list[dict]) -> list[dic
 
 
 def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=print) -> dict:
-    """Run every measurement; write the CSV files and the PNG into out_dir; return all results."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Run every measurement; write the CSV files and the PNG into out_dir (a
+    :class:`~flexmech_py.outdir.ResultFolder`: whole or not at all); return all results."""
     cases = _seed_dir(cases_dir)
+    hint = f"give a folder holding {SEED}, fourbar_constant_speed.toml and manipulator_bricout.toml (or leave out --cases)"
+    checked_folder(cases, "--cases", "case files", hint)
+    for name in (SEED, "fourbar_constant_speed.toml", "manipulator_bricout.toml"):
+        checked_file(cases / name, "--cases", "case file", hint)
+    with ResultFolder(out_dir, "bench") as rf:
+        res = _measure(rf.stage, cases, quick, progress)
+        rf.commit()
+    res["paths"] = [rf.where(p) for p in res["paths"]]
+    return res
+
+
+def _measure(out: Path, cases: Path, quick: bool, progress) -> dict:
+    """Every measurement of :func:`run_bench`, its files written into ``out``."""
     seed = cases / SEED
     reps = 1 if quick else 3
     t_all = time.perf_counter()

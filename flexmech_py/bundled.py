@@ -54,7 +54,10 @@ def resolve_case_path(path) -> Path:
     """``path`` when it is a file or absolute; else the bundled case of that name, if there is one; else
     ``path`` unchanged (the reader then says it does not exist)."""
     p = Path(path)
-    if p.is_file() or p.is_absolute():
+    try:
+        if p.is_absolute() or p.is_file() or ".." in p.parts:
+            return p
+        cand = cases_dir() / f"{_name(str(path))}.toml"
+        return cand if cand.is_file() else p
+    except OSError:                       # a name too long, ...: the reader says what is wrong
         return p
-    cand = cases_dir() / f"{_name(str(path))}.toml"
-    return cand if cand.is_file() else p

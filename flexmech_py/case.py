@@ -18,9 +18,11 @@ from pathlib import Path
 from . import validate as v
 from .bundled import resolve_case_path
 from .errors import CaseError
+from .inputs import read_text
 from .mechanism import mechanism_from_spec
 from .mechanism.schema import mechanism_spec
 from .mechanism.templates import expand_template
+from .sizes import check_mesh
 from .tomlfile import dumps_toml
 
 try:  # Python >= 3.11
@@ -246,6 +248,7 @@ def validate_case(raw: dict, source: str = "<case>") -> Case:
         ln["length"] = link.length
         if not link.rigid and ln.get("elements") is None:
             ln["elements"] = r["mesh"]["elements_per_link"]
+    check_mesh(r)      # before any array of the mesh exists (docs/cli.md, sizes)
     r["bodies"] = spec.get("bodies", [])
     r["joints"] = spec.get("joints", [])
     for j, joint in zip(r["joints"], mech.joints):
@@ -376,16 +379,35 @@ def _output_point(spec: dict, d: dict, kind: str, w: str, mech) -> None:
     d["at"] = spec["at"]
 
 
+#: tables and arrays inside each other, at most (a case file needs four)
+MAX_NESTING = 32
+
+
 def read_case_file(path) -> dict:
-    """The raw (unvalidated) table of a TOML case file; CaseError when it is missing or not TOML."""
+    """The raw (unvalidated) table of a TOML case file; CaseError when it is missing, not a readable
+    file, not UTF-8, not TOML, or nested past MAX_NESTING levels."""
     path = resolve_case_path(path)
-    if not path.is_file():
-        raise CaseError("case file", f"{str(path)!r} does not exist; give the path of a .toml case file or the "
-                                     "name of a bundled one (flexmech_py.case_names())")
+    text = read_text(path, "case file", "case file", "give the path of a .toml case file or the name of a "
+                                                     "bundled one (flexmech_py.case_names())")
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        return _shallow(tomllib.loads(text), f"case file {path}")
+    except tomllib.TOMLDecodeError as exc:
         raise CaseError("case file", f"{path}: not valid TOML ({exc}); fix the syntax") from None
+    except RecursionError:
+        raise CaseError("case file", f"{path}: arrays or tables nested past what flexmech reads ({MAX_NESTING} "
+                                     "levels); flatten them") from None
+
+
+def _shallow(value, where: str):
+    """``value`` when no array or table in it lies more than MAX_NESTING levels deep; CaseError otherwise
+    (deeper values would exhaust the recursion of the code that copies and validates them)."""
+    level = [value]
+    for _ in range(MAX_NESTING + 1):
+        level = [x for v in level for x in (v.values() if isinstance(v, dict) else v if isinstance(v, list) else ())]
+        if not level:
+            return value
+    raise CaseError(where.split(" ")[0] if where.startswith("--set") else "case file",
+                    f"{where}: arrays or tables nested more than {MAX_NESTING} levels deep; flatten them")
 
 
 def load_case(path, overrides: list[str] | None = None) -> dict:
@@ -402,9 +424,11 @@ def load_case(path, overrides: list[str] | None = None) -> dict:
 
 def _parse_value(text: str):
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        return _shallow(tomllib.loads(f"v = {text}")["v"], "--set value")
     except tomllib.TOMLDecodeError:
         return text  # a bare string
+    except RecursionError:
+        raise CaseError("--set", f"a value nested more than {MAX_NESTING} levels deep; flatten it") from None
 
 
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:
@@ -424,6 +448,9 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         parts = [p for p in key.strip().split(".") if p]
         if not parts:
             raise CaseError("--set", f"{ov!r} has an empty key")
+        if len(parts) != len(key.strip().split(".")):
+            raise CaseError("--set", f"{key.strip()!r} has an empty part (two dots in a row, or a dot at an end); "
+                                     "write the key as e.g. solver.dt or links.coupler.area")
         remove = not text.strip()
         node = _override_parent(raw, parts, key, create=not remove)
         if remove:

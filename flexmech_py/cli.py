@@ -34,7 +34,7 @@ from pathlib import Path
 
 from . import notices
 from .case import MODELS as MODELS_ALL
-from .errors import FlexmechError, MechanismError, SolverError
+from .errors import FlexmechError
 
 __all__ = ["main"]
 
@@ -246,36 +246,54 @@ def _warn(messages) -> None:
         print(f"flexmech: warning: {m}", file=sys.stderr)
 
 
+def _out(args, suffix: str):
+    """--out as given (a string: an empty one is refused by the result folder), else
+    results/<case file stem>-<suffix> (the stem made a safe file name)."""
+    from .names import safe_name
+
+    return args.out if args.out is not None else Path("results") / f"{safe_name(Path(args.case).stem)}-{suffix}"
+
+
 def _cmd_stability(args) -> int:
     from .case import load_case
-    from .floquet import REFINE_ROUNDS, STABLE_RATE, parse_range, stability_chart, write_stability_csv
-    from .regions import unstable_regions, write_regions_csv
+    from .floquet import REFINE_ROUNDS, parse_range, stability_chart
+    from .outdir import ResultFolder
 
     case = load_case(args.case, overrides=args.set)
     speeds = parse_range(args.speed, "--speed")
-    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-stability"
+    out = _out(args, "stability")
     model = args.model or case["solver"]["model"]
     geometric = args.geometric or case["solver"]["geometric_stiffness"]
-    rows, runs = stability_chart(case, speeds, model=model, geometric=geometric, nmodes=args.modes, jobs=args.jobs,
-                                 cache_dir=out / "cache", resolution=args.resolution,
-                                 refine_rounds=REFINE_ROUNDS if args.refine_rounds is None else args.refine_rounds,
-                                 scheduler=_scheduler(args))
-    out.mkdir(parents=True, exist_ok=True)
+    with ResultFolder(out, "stability") as rf:
+        rows, runs = stability_chart(case, speeds, model=model, geometric=geometric, nmodes=args.modes, jobs=args.jobs,
+                                     cache_dir=rf.out / "cache", resolution=args.resolution,
+                                     refine_rounds=REFINE_ROUNDS if args.refine_rounds is None else args.refine_rounds,
+                                     scheduler=_scheduler(args))
+        paths, regions = _write_chart(rows, case, model, geometric, rf.stage, plots=not args.no_plots)
+        rf.commit()
+    return _report_chart(rows, runs, regions, [rf.where(p) for p in paths])
+
+
+def _write_chart(rows, case, model, geometric, folder: Path, plots: bool):
+    """stability.csv, stability_regions.csv and stability.png of a chart; (paths, regions)."""
+    from .floquet import STABLE_RATE, write_stability_csv
+    from .regions import unstable_regions, write_regions_csv
+
     head = (f"case {case['case']['title']!r}; model {model}; geometric_stiffness {geometric}; "
             f"rayleigh {list(case['solver']['rayleigh'])}; dt <= {case['solver']['dt']:g} s; average acceleration; "
             f"unstable: growth rate > {STABLE_RATE:g} 1/s")
     regions = unstable_regions(rows)
-    paths = [out / "stability.csv", out / "stability_regions.csv"]
+    paths = [folder / "stability.csv", folder / "stability_regions.csv"]
     write_stability_csv(rows, paths[0], head)
     write_regions_csv(regions, paths[1], head)
-    if not args.no_plots:
+    if plots:
         from .plots import plot_stability
 
-        p = plot_stability(rows, out / "stability.png", regions=regions, stable_rate=STABLE_RATE,
+        p = plot_stability(rows, folder / "stability.png", regions=regions, stable_rate=STABLE_RATE,
                            title=f"{case['case']['title']}\nmodel {model}, geometric stiffness {geometric}, "
                                  f"Rayleigh {list(case['solver']['rayleigh'])}")
         paths += [p] if p else []
-    return _report_chart(rows, runs, regions, paths)
+    return paths, regions
 
 
 def _report_chart(rows, runs, regions, paths) -> int:
@@ -308,49 +326,53 @@ def _report_chart(rows, runs, regions, paths) -> int:
 def _cmd_steady(args) -> int:
     from .case import load_case
     from .floquet import PeriodicCase, floquet, steady_state
+    from .outdir import ResultFolder
 
     case = load_case(args.case, overrides=args.set)
     pc = PeriodicCase(case, args.model, geometric=args.geometric)
-    fr = floquet(pc)
-    res = steady_state(pc, fr)
-    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{res.model}-steady"
-    paths = res.write(out)
-    if not args.no_plots:
-        from .plots import plot_result
+    with ResultFolder(_out(args, f"{pc.model}-steady"), "steady") as rf:
+        fr = floquet(pc)
+        res = steady_state(pc, fr)
+        paths = res.write(rf.stage)
+        if not args.no_plots:
+            from .plots import plot_result
 
-        paths += plot_result(res, out)
+            paths += plot_result(res, rf.stage)
+        rf.commit()
     print(res.table())
     f = res.extra["floquet"]
     print(f"period {pc.period:.6g} s in {pc.nsteps} steps; largest Floquet multiplier |mu| = {f['max_abs_multiplier']:.8g} "
           f"({'stable' if f['stable'] else 'UNSTABLE'}); cond(I - Phi) = {f['cond_I_minus_Phi']:.3g}; "
           f"periodicity residual {f['periodicity_residual']:.2g}")
     _warn(res.extra.get("warnings", []))
-    print("wrote " + ", ".join(str(p) for p in paths))
+    print("wrote " + ", ".join(str(rf.where(p)) for p in paths))
     return 0
 
 
 def _cmd_modes(args) -> int:
     from .case import load_case
     from .modes import frequencies_along, modes
+    from .outdir import ResultFolder
 
     case = load_case(args.case, overrides=args.set)
     kw = {"count": args.count, "model": args.model, "geometric": args.geometric,
           "elements_per_link": args.elements_per_link}
     ms = modes(case, at=args.at, crank_angle=args.crank_angle, **kw)
-    al = frequencies_along(case, args.along_cycle, **kw) if args.along_cycle is not None else None
-    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{ms.model}-modes"
-    paths = ms.write(out) + (al.write(out) if al is not None else [])
-    if not args.no_plots:
-        from .drawing import draw_modes, plot_along
+    with ResultFolder(_out(args, f"{ms.model}-modes"), "modes") as rf:
+        al = frequencies_along(case, args.along_cycle, **kw) if args.along_cycle is not None else None
+        paths = ms.write(rf.stage) + (al.write(rf.stage) if al is not None else [])
+        if not args.no_plots:
+            from .drawing import draw_modes, plot_along
 
-        paths += [p for p in (draw_modes(out / "mode_shapes.png", ms),
-                              plot_along(out / "frequencies_along.png", al) if al is not None else None) if p]
+            paths += [p for p in (draw_modes(rf.stage / "mode_shapes.png", ms),
+                                  plot_along(rf.stage / "frequencies_along.png", al) if al is not None else None) if p]
+        rf.commit()
     print(ms.table())
     if al is not None:
         print(f"along {al.span}: " + "; ".join(f"mode {k + 1} {al.hz[:, k].min():.4g}..{al.hz[:, k].max():.4g} Hz"
                                                for k in range(al.hz.shape[1]))
               + f"; {len(al.crossings())} crossings with the crank speed harmonics (frequencies_along.json)")
-    print("wrote " + ", ".join(str(p) for p in paths))
+    print("wrote " + ", ".join(str(rf.where(p)) for p in paths))
     return 0
 
 
@@ -364,7 +386,7 @@ def _cmd_sweep(args) -> int:
         raise FlexmechError("--samples: goes with --sample KEY.PATH=DIST, not with a --param grid")
     from .sweep import sweep
 
-    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-sweep"
+    out = _out(args, "sweep")
     sw = sweep(args.case, args.param, model=args.model, overrides=args.set, jobs=args.jobs, out_dir=out,
                scheduler=_scheduler(args))
     print(_batch_line(sw["batch"]))
@@ -377,7 +399,7 @@ def _cmd_sample(args) -> int:
 
     if args.samples is None:
         raise FlexmechError("--samples: give the number of samples N with --sample, e.g. --samples 64")
-    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-samples"
+    out = _out(args, "samples")
     st = sample_study(args.case, args.sample, n=args.samples, seed=args.seed, method=args.method, model=args.model,
                       overrides=args.set, jobs=args.jobs, out_dir=out, scheduler=_scheduler(args),
                       plots=not args.no_plots)
@@ -448,7 +470,7 @@ def _cmd_accuracy(args) -> int:
     models = args.models
     if models and [m.strip() for m in models] == ["all"]:
         models = list(MODELS_ALL)
-    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-accuracy"
+    out = _out(args, "accuracy")
     st = accuracy_study(args.case, overrides=args.set, models=models, integrators=args.integrators,
                         dt_levels=args.dt_levels, elements=args.elements, grid=args.grid, ref_dt_factor=args.ref_dt_factor,
                         ref_elements=args.ref_elements, columns=args.columns, tolerances=args.tolerances,
@@ -502,7 +524,8 @@ def _cmd_compare(args) -> int:
         if bad:
             raise FlexmechError(f"--model-list: unknown model(s) {', '.join(bad)}; choose from {', '.join(MODELS_ALL)}")
         out, runs, paths = compare_models(case, models, args.reference_model, x=args.x, columns=args.columns,
-                                          out_dir=args.out or "compare", jobs=args.jobs, scheduler=_scheduler(args))
+                                          out_dir="compare" if args.out is None else args.out, jobs=args.jobs,
+                                          scheduler=_scheduler(args))
         for m, metrics in out.items():
             print(f"{m} against {args.reference_model} (kernel {runs[m].timing['kernel_s']:.3f} s):")
             print(table(metrics))
@@ -516,143 +539,6 @@ def _cmd_compare(args) -> int:
     return 0
 
 
-def integrator_overrides(args) -> list[str]:
-    """The ``--set`` overrides that ``--integrator``, ``--rho-inf`` and ``--hht-alpha`` stand for."""
-    out = []
-    integrator = args.integrator
-    if integrator is None and args.rho_inf is not None:
-        integrator = "generalized-alpha"
-    elif integrator is None and args.hht_alpha is not None:
-        integrator = "hht"
-    if integrator is not None:
-        out.append(f'solver.integrator="{integrator}"')
-    if args.rho_inf is not None:
-        out.append(f"solver.rho_inf={args.rho_inf!r}")
-    if args.hht_alpha is not None:
-        out.append(f"solver.hht_alpha={args.hht_alpha!r}")
-    return out
-
-
-def _cmd_run(args) -> int:
-    from .case import load_case
-    from .errors import Interrupted
-    from .outdir import claim
-    from .progress import RunProgress
-    from .runner import FileSink, execute
-    from .shapes import ShapeCollector
-    from .simulate import Prepared
-
-    case = load_case(args.case, overrides=args.set + integrator_overrides(args))
-    prep = Prepared(case, dt=args.dt, elements_per_link=args.elements_per_link)
-    model = args.model or prep.case["solver"]["model"]
-    out = Path(args.out) if args.out else Path("results") / f"{Path(args.case).stem}-{model}"
-    sink = FileSink(out, frames_total=prep.frames, replace=claim(out, prep.case, args.overwrite), force=args.force)
-    progress = RunProgress(lambda: _run_cost(prep, model, sink), bar=True if args.progress else None,
-                           quiet=args.quiet)
-    if args.draw is not None and args.draw < 2:
-        raise FlexmechError(f"--draw: needs 2 frames or more, got {args.draw}")
-    shapes = ShapeCollector(prep.case.mechanism, prep.frames, model, args.draw, prep.coupled) if args.draw else None
-    try:
-        res = execute(prep, model, sink, progress=progress, observers=[shapes] if shapes else [])
-    except Interrupted as exc:
-        progress.close()
-        return _report_stopped(exc, sink, 130)
-    except (SolverError, MechanismError) as exc:   # the run stopped: its frames so far are written, marked
-        progress.close()
-        if exc.partial is None:
-            raise
-        return _report_stopped(exc, sink, 3)
-    progress.close(finished=True)
-    paths = list(sink.paths)
-    if shapes is not None:
-        paths += _write_drawing(res, shapes.result(), out, plots=not args.no_plots)
-    if not args.no_plots:
-        from .plots import plot_result
-
-        paths += plot_result(res.plot_view(), out)
-    if len(paths) > len(sink.paths):
-        res.extra["files"] = [p.name for p in paths]
-        res.write_summary(out)
-    print(res.table())
-    print("wrote " + ", ".join(str(p) for p in paths))
-    for w in res.extra.get("warnings", []):
-        print(f"flexmech: warning: {w}", file=sys.stderr)
-    return 0
-
-
-#: panels of the drawing.png of ``run --draw`` (more frames stay in shape.csv for ``flexmech draw --gif``)
-MAX_PANELS = 12
-
-
-def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
-    """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
-    from .shapes import spread, write_shape_csv
-
-    head = [f"flexmech run --draw; case {res.case['case']['title']!r}; model {res.model}",
-            "per frame (index, t [s]) every drawn point: x, y its rigid position [m]; dx, dy its elastic "
-            "displacement [m]; rot the elastic rotation of its body there [rad]"]
-    paths = [write_shape_csv(out / "shape.csv", sf, head, key="t")]
-    if plots:
-        from .drawing import draw_frames
-
-        p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, spread(sf.key.size, MAX_PANELS),
-                           title=f"{res.case['case']['title']} - model {res.model}")
-        paths += [p] if p else []
-    return paths
-
-
-def _cmd_draw(args) -> int:
-    import json
-
-    from .case import Case
-    from .drawing import animate_frames, draw_frames
-    from .shapes import read_shape_csv, spread
-
-    folder = Path(args.result)
-    if not (folder / "shape.csv").exists():
-        raise FlexmechError(f"{folder}: no shape.csv there; write one with `flexmech run CASE --draw --out {folder}`")
-    sf, key, _ = read_shape_csv(folder / "shape.csv")
-    try:
-        summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
-        case = Case(summary["input"])
-    except (OSError, ValueError, KeyError) as exc:
-        raise FlexmechError(f"{folder}/summary.json: cannot be read as a flexmech run's summary ({exc})") from None
-    frames = args.frames or (sf.key.size if args.gif else 6)
-    idx = spread(sf.key.size, frames)
-    path = Path(args.out) if args.out else folder / ("drawing.gif" if args.gif else "drawing.png")
-    title = f"{case['case']['title']} - model {summary.get('model', '')}"
-    if args.gif:
-        p, scale = animate_frames(path, sf, case.mechanism, idx, scale=args.scale, title=title)
-    else:
-        p, scale = draw_frames(path, sf, case.mechanism, idx, scale=args.scale, title=title)
-    if p is None:
-        raise FlexmechError("draw: needs matplotlib and Pillow (pip install matplotlib)")
-    print(f"wrote {p} ({idx.size} frames, deflection x {scale:g})")
-    return 0
-
-
-def _run_cost(prep, model: str, sink) -> str:
-    """The words of a run's cost line: steps, DOFs, the size of timeseries.csv."""
-    from .runner import format_bytes
-
-    dofs = prep.coupled[model].ndof if model in prep.coupled else prep.fe.nfree
-    return (f"{prep.nsteps:,} steps of {dofs} DOFs, {prep.frames:,} frames, about "
-            f"{format_bytes(sink.projected_bytes)} of timeseries.csv")
-
-
-def _report_stopped(exc, sink, code: int) -> int:
-    """Table, written files, warnings and the reason of a run that stopped (failed or interrupted)."""
-    res = exc.partial
-    if res is not None:
-        print(res.table())
-        print(f"wrote partial results (up to t = {res.all_stats().t_last:.6g} s): "
-              + ", ".join(str(p) for p in sink.paths))
-        for w in res.extra.get("warnings", []):
-            print(f"flexmech: warning: {w}", file=sys.stderr)
-    print(f"flexmech: {'error' if code == 3 else 'stopped'}: {exc}", file=sys.stderr)
-    return code
-
-
 def _cmd_reproduce(args) -> int:
     from .reproduce import reproduce
 
@@ -663,26 +549,32 @@ def _cmd_reproduce(args) -> int:
 
 
 def _commands() -> dict:
-    return {"run": _cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
-            "steady": _cmd_steady, "modes": _cmd_modes, "draw": _cmd_draw, "sweep": _cmd_sweep, "bench": _cmd_bench,
+    from .cli_run import cmd_draw, cmd_run
+
+    return {"run": cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
+            "steady": _cmd_steady, "modes": _cmd_modes, "draw": cmd_draw, "sweep": _cmd_sweep, "bench": _cmd_bench,
             "accuracy": _cmd_accuracy}
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .errors import one_line, signal_words
+    from .signals import exit_code, stop_on_signals
+
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        with notices.silenced():   # each command prints the runs' warnings itself, once
-            return _commands()[args.command](args)
-    except FlexmechError as exc:
-        print(f"flexmech: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # e.g. an output folder that cannot be created
-        print(f"flexmech: error: {exc.strerror or exc}: {exc.filename or ''} (choose another --out)", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:  # pragma: no cover
-        print("flexmech: interrupted", file=sys.stderr)
-        return 130
+    with stop_on_signals():     # SIGTERM and SIGHUP stop a command as Ctrl-C does (docs/cli.md, exit codes)
+        try:
+            with notices.silenced():   # each command prints the runs' warnings itself, once
+                return _commands()[args.command](args)
+        except FlexmechError as exc:
+            print(f"flexmech: error: {exc}", file=sys.stderr)
+            return exc.exit_code
+        except OSError as exc:  # an input file the checks let through (they read their files themselves)
+            print(f"flexmech: error: {one_line(exc.filename or '')}: {exc.strerror or exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt as exc:
+            print(f"flexmech: {signal_words(exc)}", file=sys.stderr)
+            return exit_code(exc)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -18,6 +18,7 @@ result (not cached).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import re
 import sys
@@ -27,7 +28,7 @@ from collections import Counter
 from .errors import CaseError, FlexmechError
 from .worker import call_task, default_jobs, worker_lost
 
-__all__ = ["DaskExecutor", "parse_scheduler", "CONNECT_TIMEOUT_S"]
+__all__ = ["DaskExecutor", "SchedulerLost", "parse_scheduler", "CONNECT_TIMEOUT_S"]
 
 #: seconds to wait for a scheduler to answer (a wrong address fails this quickly)
 CONNECT_TIMEOUT_S = 3.0
@@ -67,6 +68,27 @@ def _flexmech_version() -> str:
     return __version__
 
 
+def _quiet_logs() -> dict:
+    """Silence Dask's loggers below CRITICAL (its own levels per module included); {name: old level}."""
+    names = ["distributed"] + [n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]
+    levels = {n: logging.getLogger(n).level for n in names}
+    for n in names:
+        logging.getLogger(n).setLevel(logging.CRITICAL)
+    return levels
+
+
+class SchedulerLost(FlexmechError):
+    """The Dask scheduler went away during a batch (exit code 3: the batch started; every result that
+    had arrived is in the cache, so the same command goes on from there)."""
+
+    exit_code = 3
+
+    def __init__(self, address: str, done: int, total: int, why):
+        super().__init__(f"--scheduler {address}: the Dask scheduler stopped answering during the batch "
+                         f"({type(why).__name__}) after {done} of {total} tasks; the finished ones are cached: start "
+                         "the scheduler again (or leave out --scheduler) and run the same command to go on")
+
+
 class DaskExecutor:
     """Runs :func:`~flexmech_py.parallel.run_tasks` batches on a Dask cluster; connects when made."""
 
@@ -74,16 +96,19 @@ class DaskExecutor:
         kind, value = parse_scheduler(scheduler)
         distributed = _import_distributed()
         self._cluster = None
+        self._levels = _quiet_logs()   # a scheduler that goes away is one line of ours, not Dask's tracebacks
         if kind == "local":
             self._cluster = distributed.LocalCluster(n_workers=value, threads_per_worker=1, processes=True,
                                                      dashboard_address=None, silence_logs=logging.ERROR)
             address, self.description = self._cluster.scheduler_address, f"a Dask LocalCluster of {value} processes"
         else:
             address, self.description = value, f"the Dask scheduler {value}"
+        self.address = address
         try:
             self.client = distributed.Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
         except (OSError, TimeoutError) as exc:
             self._close_cluster()
+            self._restore_logs()
             raise FlexmechError(f"--scheduler {value}: no Dask scheduler answers there within "
                                 f"{CONNECT_TIMEOUT_S:g} s ({type(exc).__name__}); start one with `dask scheduler` "
                                 "or check the address") from None
@@ -141,19 +166,23 @@ class DaskExecutor:
         try:   # results are fetched in the background as tasks end (with_results), not one round trip each
             for fut, res in as_completed(list(futures), loop=self.client.loop, with_results=True, raise_errors=False):
                 i = futures.pop(fut)
-                if fut.status != "error":
+                if fut.status == "finished":
                     finish(i, *res)
-                elif isinstance(fut.exception(), KilledWorker):
+                elif fut.status == "error" and isinstance(fut.exception(), KilledWorker):
                     given_up += 1
                     finish(i, worker_lost(reruns[fut.key]), 0.0, "", store=False)
-                else:
+                elif fut.status == "error":
                     fut.result()   # a bug in the task: raise it here, with its traceback
+                else:              # cancelled or lost: the scheduler went away
+                    raise SchedulerLost(self.address, len(todo) - len(futures) - 1, len(todo), res)
                 fut.release()
         except BaseException:
-            self.client.cancel(list(futures))
+            with contextlib.suppress(Exception):
+                self.client.cancel(list(futures))
             raise
         finally:
-            self.client.unsubscribe_topic("all")
+            with contextlib.suppress(Exception):
+                self.client.unsubscribe_topic("all")
         return sum(reruns.values()) - given_up, len(self.client.nthreads())
 
     def _close_cluster(self) -> None:
@@ -162,8 +191,15 @@ class DaskExecutor:
             self._cluster = None
 
     def close(self) -> None:
-        self.client.close()
+        with contextlib.suppress(Exception):    # a scheduler that went away cannot be told goodbye
+            self.client.close(timeout=CONNECT_TIMEOUT_S)
         self._close_cluster()
+        self._restore_logs()
+
+    def _restore_logs(self) -> None:
+        for name, level in self._levels.items():
+            logging.getLogger(name).setLevel(level)
+        self._levels = {}
 
     def __enter__(self):
         return self

@@ -15,6 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CaseError, FlexmechError, MechanismError, SolverError
+from .inputs import read_text
+from .names import inside, safe_name
+from .outdir import ResultFolder
 from .plots import display_unit, line_figure
 from .results import _atomic_write
 
@@ -28,16 +31,12 @@ CONVERTED_UNITS = {"deg": ("rad", np.pi / 180.0), "deg/s": ("rad/s", np.pi / 180
 
 
 def _text(path: Path) -> str:
-    """The file as text; CaseError (one line, naming the first byte that is not text) for anything else."""
-    raw = path.read_bytes()
-    try:
-        text, bad = raw.decode("utf-8"), -1
-    except UnicodeDecodeError as exc:
-        text, bad = "", exc.start
-    nul = raw.find(b"\0")
-    if nul >= 0 or bad >= 0:
-        at = min(x for x in (nul, bad) if x >= 0)
-        raise CaseError("--reference", f"{path} is not a text CSV file (byte {raw[at]:#04x} at offset {at}); give a "
+    """The file as text (inputs.read_text: a readable regular UTF-8 file, byte-order mark dropped);
+    CaseError (one line, naming the first byte that is not text) for anything else."""
+    text = read_text(path, "--reference", "CSV file", "give a CSV file (format: docs/compare.md)")
+    nul = text.find("\0")
+    if nul >= 0:
+        raise CaseError("--reference", f"{path} is not a text CSV file (byte 0x00 at offset {nul}); give a "
                                        "comma-separated text file (format: docs/compare.md)")
     return text
 
@@ -68,8 +67,6 @@ _ERRORS = {"MechanismError": MechanismError, "SolverError": SolverError}
 def read_reference(path) -> tuple[dict, dict, str]:
     """({column: array}, {column: unit}, source) of a reference CSV; CaseError on a bad file."""
     path = Path(path)
-    if not path.is_file():
-        raise CaseError("--reference", f"{str(path)!r} does not exist; give a CSV file (format: docs/compare.md)")
     source, units, header, rows = "", [], None, []
     for lineno, line in enumerate(_text(path).splitlines(), start=1):
         if line.startswith("#"):
@@ -82,6 +79,10 @@ def read_reference(path) -> tuple[dict, dict, str]:
             continue
         elif header is None:
             header = [h.strip() for h in line.split(",")]
+            twice = sorted({h for h in header if header.count(h) > 1})
+            if twice:
+                raise CaseError("--reference", f"{path}, line {lineno}: the header names {twice[0]!r} twice; give "
+                                               "every column its own name")
         else:
             rows.append(_row(path, lineno, line, header))
     if header is None:
@@ -138,7 +139,12 @@ def compare_columns(res_cols: dict, ref_cols: dict, x: str = "t", columns=None, 
     xf = np.asarray(ref_cols[x], float) * _unit_factor(x, ref_units.get(x), res_units.get(x, "s" if x == "t" else "rad"))
     if np.any(np.diff(xr) <= 0):
         raise CaseError("--x", f"the result's {x!r} is not increasing (the crank turns backwards?); compare by time")
-    order = np.argsort(xf)
+    order = np.argsort(xf, kind="stable")
+    same = np.flatnonzero(np.diff(xf[order]) == 0)
+    if same.size:
+        rows = sorted(order[same[0]:same[0] + 2] + 1)
+        raise CaseError("--reference", f"{x} = {xf[order[same[0]]]:.10g} appears twice (data rows {rows[0]} and "
+                                       f"{rows[1]}); give each {x} once (remove or average the duplicates)")
     common = [c for c in ref_cols if c != x and c in res_cols] if columns is None else list(columns)
     if not common:
         raise CaseError("--columns", f"no column in common; result: {', '.join(res_cols)}; "
@@ -184,7 +190,7 @@ def _write(metrics: dict, out_dir: Path, x: str, title: str, labels=("result", "
         if u == "m" and max(np.max(np.abs(m["_ref"])), np.max(np.abs(m["_res"]))) < 0.1:
             u, k = "mm", 1e3   # small lengths in mm, as the reports quote them
         note = "\nnot the same quantity in the two models (compare.json: definition_note)" if m.get("definition_note") else ""
-        p = line_figure(out_dir / f"compare_{c}.png",
+        p = line_figure(inside(out_dir, f"compare_{safe_name(c)}.png"),
                         [{"x": m["_x"], "ylabel": _axis_label(c, u),
                           "series": [(labels[1], k * m["_ref"], {"color": "k", "lw": 1.4}),
                                      (labels[0], k * m["_res"], {"color": "C3", "lw": 1.0})]},
@@ -219,7 +225,8 @@ def table(metrics: dict) -> str:
 
 
 def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None):
-    """Compare a run folder (its timeseries.csv) with a reference CSV; writes compare.* into out_dir."""
+    """Compare a run folder (its timeseries.csv) with a reference CSV; writes compare.* into out_dir
+    (default RESULT_DIR/compare; a :class:`~flexmech_py.outdir.ResultFolder`: whole or not at all)."""
     from .results import read_timeseries
 
     result_dir = Path(result_dir)
@@ -227,12 +234,18 @@ def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None)
     if not ts.is_file():
         raise CaseError("RESULT_DIR", f"{str(result_dir)!r} holds no timeseries.csv; give a folder written by "
                                       "`flexmech run`")
-    res_cols, res_units = read_timeseries(ts)
+    try:
+        res_cols, res_units = read_timeseries(ts)
+    except (OSError, ValueError, UnicodeDecodeError) as exc:
+        raise CaseError("RESULT_DIR", f"{ts} cannot be read as a flexmech timeseries.csv ({exc}); run the case "
+                                      "again") from None
     ref_cols, ref_units, source = read_reference(reference)
     metrics = compare_columns(res_cols, ref_cols, x=x, columns=columns, ref_units=ref_units, res_units=res_units)
-    paths = _write(metrics, Path(out_dir) if out_dir else result_dir / "compare", x, "comparison",
-                   extra={"reference": str(reference), "source": source, "result": str(result_dir)}, units=res_units)
-    return metrics, paths
+    with ResultFolder(Path(out_dir) if out_dir is not None else result_dir / "compare", "compare") as rf:
+        paths = _write(metrics, rf.stage, x, "comparison", units=res_units,
+                       extra={"reference": str(reference), "source": source, "result": str(result_dir)})
+        rf.commit()
+    return metrics, [rf.where(p) for p in paths]
 
 
 def _case_units(case: dict) -> dict:
@@ -270,8 +283,16 @@ def compare_models(case: dict, models, reference_model="nonlinear", x="t", colum
     from .parallel import run_tasks
 
     models = list(dict.fromkeys(list(models) + [reference_model]))
-    batch = run_tasks(model_run, [{"case": case, "model": m} for m in models], jobs=jobs, scheduler=scheduler,
-                      progress=progress, label="models")
+    with ResultFolder(out_dir, "compare-models") as rf:
+        batch = run_tasks(model_run, [{"case": case, "model": m} for m in models], jobs=jobs, scheduler=scheduler,
+                          progress=progress, label="models")
+        out, runs, paths = _compare_runs(case, models, batch, reference_model, x, columns, rf.stage)
+        rf.commit()
+    return out, runs, [rf.where(p) for p in paths]
+
+
+def _compare_runs(case, models, batch, reference_model, x, columns, out_dir: Path):
+    """Each model's run against the reference model's: metrics, runs, and the files in out_dir/<model>/."""
     for m, r in zip(models, batch.results):
         if "error" in r:
             raise _ERRORS.get(r["error_type"], FlexmechError)(f"model {m}: {r['error']}")
@@ -290,7 +311,7 @@ def compare_models(case: dict, models, reference_model="nonlinear", x="t", colum
         for c, note in definition_notes(case, m, reference_model, free_motion).items():
             if c in out[m]:
                 out[m][c]["definition_note"] = note
-        paths += _write(out[m], Path(out_dir) / m, x, f"{m} against {reference_model}", labels=(m, reference_model),
+        paths += _write(out[m], inside(out_dir, safe_name(m)), x, f"{m} against {reference_model}", labels=(m, reference_model),
                         extra={"model": m, "reference_model": reference_model,
                                "kernel_s": runs[m].timing["kernel_s"], "reference_kernel_s": ref.timing["kernel_s"]},
                         units=_case_units(case))

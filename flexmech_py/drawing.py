@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .plots import _PNG, have_matplotlib
+from .plots import _PNG, have_matplotlib, save_figure
 
 __all__ = ["magnification", "deformed_lines", "draw_frames", "animate_frames", "draw_modes", "plot_along",
            "TARGET_FRACTION"]
@@ -235,7 +235,7 @@ def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str =
     _legend_line(fig, (legend or f"elastic deflection {factor_text(scale)} (magnified)")
                  + ", rigid configuration dashed; " + _symbols(marks))
     fig.tight_layout(rect=(0, 0.035, 1, 1))
-    fig.savefig(path, dpi=100, pil_kwargs=_PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=_PNG)
     return Path(path), scale
 
 
@@ -255,8 +255,17 @@ def animate_frames(path, sf, mech, idx, *, scale: float | None = None, title: st
     _, _, width, height = _panel_grid(1, hi - lo)
     fig = _figure(width * 1.35, height * 1.35)
     ax = fig.subplots()
-    marks, colours = _joint_marks(mech, sf), _colours(sf)
     writer = PillowWriter(fps=fps)
+    try:
+        _animate(writer, fig, ax, path, idx, sf, scale, mech, lo, hi, title)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    return Path(path), scale
+
+
+def _animate(writer, fig, ax, path, idx, sf, scale, mech, lo, hi, title) -> None:
+    """The frames of :func:`animate_frames`, written by ``writer``."""
+    marks, colours = _joint_marks(mech, sf), _colours(sf)
     with writer.saving(fig, str(path), dpi=80):
         for i in idx:
             ax.clear()
@@ -267,7 +276,6 @@ def animate_frames(path, sf, mech, idx, *, scale: float | None = None, title: st
             ax.set_title(f"{title}\nt = {sf.key[i]:.4f} s, elastic deflection {factor_text(scale)}", fontsize=8.5)
             fig.tight_layout()
             writer.grab_frame()
-    return Path(path), scale
 
 
 def draw_modes(path, ms, *, title: str | None = None):
@@ -330,5 +338,5 @@ def plot_along(path, al, *, title: str | None = None):
     fig.suptitle(title or f"{al.case['case']['title']}\nfrozen natural frequencies along the motion, model {al.model}"
                  + (", geometric stiffness" if al.geometric else ""), fontsize=9.5)
     fig.tight_layout()
-    fig.savefig(path, dpi=100, pil_kwargs=_PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=_PNG)
     return Path(path)

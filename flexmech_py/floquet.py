@@ -31,6 +31,7 @@ from . import notices
 from .case import SUPERPOSITION_MODELS, Case
 from .errors import CaseError
 from .regions import default_resolution, multiplier_type, refinement_speeds
+from .sizes import check_points
 from .simulate import Prepared, check_elastic_problem
 
 __all__ = ["PeriodicCase", "FloquetResult", "floquet", "steady_state", "frozen_frequencies", "stability_point",
@@ -269,13 +270,15 @@ def parse_range(text: str, where: str) -> list[float]:
     try:
         if ":" in text:
             a, b, n = text.split(":")
-            n = int(n)
+            a, b, n = float(a), float(b), int(n)
             if n < 1:
                 raise ValueError
-            return [float(x) for x in np.linspace(float(a), float(b), n)]
-        return [float(x) for x in text.split(",") if x.strip()]
+        else:
+            return [float(x) for x in text.split(",") if x.strip()]
     except ValueError:
         raise CaseError(where, f"{text!r} must be START:STOP:N (N >= 1 points) or a list a,b,c") from None
+    check_points(n, where, lambda k: f"give at most {k:,} speeds, e.g. {where} {a:g}:{b:g}:{min(k, 1000)}")
+    return [float(x) for x in np.linspace(a, b, n)]
 
 
 STABILITY_COLUMNS = ["speed", "max_abs_mu", "growth_rate", "stable", "mu_re", "mu_im", "multiplier", "round",

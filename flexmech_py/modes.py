@@ -24,6 +24,7 @@ import numpy as np
 from . import modal, shapes
 from .case import MODELS, SUPERPOSITION_MODELS, Case
 from .errors import CaseError
+from .sizes import check_count, format_count
 
 __all__ = ["ModeSet", "Along", "modes", "frequencies_along", "drive_joint", "turn_angle", "configuration_time",
            "cycle_times", "resonance_crossings", "DEFAULT_COUNT"]
@@ -31,6 +32,9 @@ __all__ = ["ModeSet", "Along", "modes", "frequencies_along", "drive_joint", "tur
 DEFAULT_COUNT = 4
 #: crank speed harmonics k Omega listed and drawn at most
 MAX_HARMONICS = 20
+#: memory of one position along the cycle [bytes]: its rigid motion sample and bookkeeping (besides
+#: 16 bytes a mode)
+POSITION_BYTES = 2_000
 
 
 #: angles closer than this [deg] to a whole turn are on it (round-off of the assembly and the drive law)
@@ -162,6 +166,7 @@ class _Frozen:
             self.fe, self.cm = None, CoupledModel.from_case(case, split=(model == "nonlinear"), hold_forced=True)
             node_frac = self.cm.mesh.node_frac
         self.bodies = shapes.body_points(case.mechanism, node_frac)
+        self.dofs = self.fe.nfree if self.cm is None else self.cm.ndof
         self._checked = False
 
     def eigen(self, rm, i: int, count: int | None) -> modal.Eigen:
@@ -432,7 +437,11 @@ def frequencies_along(case, positions: int = 36, *, count: int = DEFAULT_COUNT, 
         raise CaseError("--count", f"must be a whole number >= 1, got {count!r}")
     case = _prepared_case(case, elements_per_link)
     model, geometric = _model_and_geometric(case, model, geometric)
+    if isinstance(positions, (int, np.integer)) and positions >= 2:   # before any array of the positions
+        check_count(positions, POSITION_BYTES + 16 * min(count, 10 ** 6), "--along-cycle", "positions",
+                    lambda n: f"use at most {format_count(n)} positions (e.g. --along-cycle {min(n, 360)})")
     frozen = _Frozen(case, model, geometric)
+    count = min(count, frozen.dofs)       # no more modes than degrees of freedom
     t, span = cycle_times(case, positions)
     rm = motion_source(case)(t)
     omega = np.full((t.size, count), np.nan)

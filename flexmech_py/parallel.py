@@ -28,7 +28,9 @@ failure) is a result, not a crash: its entry is ``{"error": message, "error_type
 bug and stops the batch. A worker process that dies (killed, out of memory) loses no
 result: the tasks it held run again elsewhere (``Batch.retries`` counts them); a task
 whose workers died ``MAX_WORKER_DEATHS`` times becomes an error result of type
-``WorkerLost`` (not cached). Ctrl-C stops the batch; what finished stays cached.
+``WorkerLost`` (not cached). Ctrl-C (or SIGTERM, SIGHUP) stops the batch and its workers at once;
+what finished stays cached.  The local workers end with the process that started them, even when
+it is killed outright (:func:`~flexmech_py.signals.die_with_parent`).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import CaseError
+from .signals import die_with_parent
 from .worker import call_task, default_jobs, worker_lost, worker_name  # noqa: F401 (re-exported)
 from .results import _atomic_write, _json_default
 
@@ -192,7 +195,9 @@ def _pool_pass(func, queue: deque, finish, nproc: int) -> list:
     the tasks in flight when a worker died ([] when all finished).  At most one task per worker
     plus one waits in the pool, so few are run again after a death."""
     lost = []
-    with cf.ProcessPoolExecutor(max_workers=nproc, mp_context=multiprocessing.get_context("spawn")) as pool:
+    before = set(multiprocessing.active_children())
+    with cf.ProcessPoolExecutor(max_workers=nproc, mp_context=multiprocessing.get_context("spawn"),
+                                initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
         flying, broken = {}, False
         try:
             while (queue or flying) and not (lost or broken):
@@ -214,8 +219,10 @@ def _pool_pass(func, queue: deque, finish, nproc: int) -> list:
                     finish(i, *fut.result())
                 else:
                     lost.append((i, task))
-        except BaseException:
+        except BaseException:   # Ctrl-C, SIGTERM, a bug: stop the workers now, not after their tasks
             pool.shutdown(wait=False, cancel_futures=True)
+            for proc in set(multiprocessing.active_children()) - before:
+                proc.terminate()
             raise
     return lost
 

@@ -39,6 +39,15 @@ def have_matplotlib() -> bool:
         return False
 
 
+def save_figure(fig, path, **kw) -> None:
+    """``fig.savefig(path, **kw)``; a write that fails (a full disk) raises OSError naming ``path`` (the
+    image writer itself does not, and removes the file it began)."""
+    try:
+        fig.savefig(path, **kw)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+
+
 def decimate(x, y, max_points: int = MAX_POINTS):
     """(x, y) reduced to at most ``max_points`` points for drawing: the samples are cut into
     ``max_points // 2 - 1`` consecutive buckets and each keeps its smallest and largest value (in
@@ -251,7 +260,7 @@ def line_figure(path, panels, *, title=None, xlabel="t [s]"):
         fig.suptitle(title, fontsize=10.5, x=0.5 * (left + right))
     # fixed margins (tight_layout measures every text and doubles the drawing time)
     fig.subplots_adjust(left=left, right=right, bottom=bottom, top=top, hspace=hspace)
-    fig.savefig(path, dpi=100, pil_kwargs=_PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=_PNG)
     return Path(path)
 
 
@@ -452,7 +461,7 @@ def plot_stability(rows: list, path, *, title: str = "", regions=None, stable_ra
     if title:
         fig.suptitle(title, fontsize=10)
     fig.subplots_adjust(left=0.08, right=0.88, top=0.92, bottom=0.07, hspace=0.08)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return Path(path)
 
@@ -510,7 +519,7 @@ def work_precision_figure(path, panels, *, title=None):
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout(rect=(0, 0, (7.2 * ncol) / width, 0.97))
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return Path(path)
 
@@ -558,7 +567,7 @@ def plot_samples(path, inputs: dict, outputs: dict, corr: list, *, title: str = 
     if title:
         fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     return Path(path)
 
 
@@ -642,5 +651,5 @@ def mechanism_sketch(path, res, *, title=None):
     if title:
         fig.suptitle(title, fontsize=9.5)
     fig.subplots_adjust(left=0.12, right=0.97, bottom=0.6 / fig.get_figheight(), top=1 - 0.55 / fig.get_figheight())
-    fig.savefig(path, dpi=100, pil_kwargs=_PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=_PNG)
     return Path(path)

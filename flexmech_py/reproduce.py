@@ -19,6 +19,8 @@ from .bundled import cases_dir as cases_dir_bundled
 from .case import MODELS, SUPERPOSITION_MODELS, load_case
 from .errors import CaseError
 from .notices import silenced
+from .inputs import checked_file, checked_folder
+from .outdir import ResultFolder
 from .plots import line_figure, mechanism_sketch
 from .reproduce_modes import modes_section
 from .simulate import simulate_models
@@ -91,15 +93,27 @@ GAP_CASES = {"fourbar_hac": ("strain_coupler_mid", 0.15), "fourbar_constant_spee
 
 @silenced()      # the report states each run's validity; its runs' warnings are not issued one by one
 def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS, t_end=None, gap=True) -> Path:
-    """Run the seed cases with every model, write figures, run folders and ``report.md``.
+    """Run the seed cases with every model, write figures, run folders and ``report.md`` into ``out_dir``
+    (a :class:`~flexmech_py.outdir.ResultFolder`: the earlier report stays until the new one is whole).
 
     ``t_end`` (s) shortens every run (for quick checks); default: the case files' values.
     """
+    if cases_dir is not None:     # every seed case there, before anything starts
+        hint = f"give a folder holding {', '.join(n + '.toml' for n in SEED_CASES)} (or leave out --cases)"
+        checked_folder(cases_dir, "--cases", "case files", hint)
+        for name in SEED_CASES:
+            checked_file(seed_case_path(name, cases_dir), "--cases", "case file", hint)
+    with ResultFolder(out_dir, "reproduce") as rf:
+        report = _reproduce_into(rf.stage, cases_dir, progress, models, t_end, gap)
+        rf.commit()
+    return rf.where(report)
+
+
+def _reproduce_into(out: Path, cases_dir, progress, models, t_end, gap) -> Path:
+    """What :func:`reproduce` writes, into ``out``."""
     from .seed_report import report_text
 
     say = progress or (lambda msg: None)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     runs, timings = {}, {}
     for name in SEED_CASES:
         path = seed_case_path(name, cases_dir)

@@ -255,7 +255,9 @@ class TimeseriesWriter:
     head and the rows go to ``timeseries.csv.part``, whose first line says the run is still going;
     :meth:`finish` writes the run's final status over that line (same length) and renames the file
     to ``timeseries.csv`` (no copy: the disk holds the rows once).  A run killed outright leaves
-    only the part file."""
+    only the part file.  A write that fails (a full disk) raises OSError naming the part file; the
+    rows of the block it was writing are cut off again by :meth:`finish`, so the file ends with the
+    last whole block."""
 
     def __init__(self, out_dir):
         self.path = Path(out_dir) / "timeseries.csv"
@@ -263,30 +265,44 @@ class TimeseriesWriter:
         self._file = None
         self.bytes = 0
         self.rows = 0
+        self._whole = 0           # bytes up to the end of the last block written whole
 
     def add(self, block) -> None:
         if block.t.size == 0:
             return
         if self._file is None:
-            self._file = open(self.part, "wb")
+            self._file = _opened(self.part, "wb", buffering=0)
             self._write("\n".join(block.csv_head(running=True)) + "\n")
         self._write(csv_rows(block.t, block.columns))
         self.rows += block.t.size
+        self._whole = self.bytes
 
     def _write(self, text: str) -> None:
-        raw = text.encode("utf-8")
-        self._file.write(raw)
-        self.bytes += len(raw)
+        view = memoryview(text.encode("utf-8"))
+        try:
+            while view:
+                n = self._file.write(view)
+                self.bytes += n
+                view = view[n:]
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, str(self.part)) from None
 
     def finish(self, res) -> Path | None:
         """timeseries.csv of the run ``res`` (its status line, then what was written); None when no
         frame came."""
         if self._file is None:
             return None
-        self._file.seek(0)
-        self._file.write(res.status_line().encode("utf-8"))
-        self._file.close()
-        self._file = None
+        try:
+            if self.bytes != self._whole:          # a block cut short by a failed write
+                self._file.truncate(self._whole)
+                self.bytes = self._whole
+            self._file.seek(0)
+            self._file.write(res.status_line().encode("utf-8"))
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, str(self.part)) from None
+        finally:
+            self._file.close()
+            self._file = None
         os.replace(self.part, self.path)
         return self.path
 
@@ -298,6 +314,13 @@ class TimeseriesWriter:
             self._file = None
 
 
+def _opened(path: Path, mode: str, **kw):
+    try:
+        return open(path, mode, **kw)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+
+
 def _json_default(o):
     if isinstance(o, np.generic):
         return o.item()
@@ -307,9 +330,17 @@ def _json_default(o):
 
 
 def _atomic_write(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` whole or not at all (a temporary file renamed); an OSError names ``path``."""
+    path = Path(path)
     tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise
 
 
 def read_timeseries(path) -> tuple[dict, dict]:

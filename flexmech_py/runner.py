@@ -13,42 +13,24 @@ or the user's Ctrl-C (:class:`~flexmech_py.errors.Interrupted`).
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import time
 from pathlib import Path
 
 from . import alternation, guards, step_doubling
 from .case import MODELS
-from .errors import CaseError, Interrupted, MechanismError, SolverError
+from .errors import CaseError, Interrupted, MechanismError, OutputError, SolverError, signal_words
 from .frames import ColumnStats, Envelope, join
+from .outdir import PARTIAL_DIR, ResultFolder, claim, release_reserve
 from .results import TimeseriesWriter, csv_rows
+from .signals import held_signals
+from .sizes import MEMORY_SHARE, available_memory, format_bytes, format_count
 
-__all__ = ["execute", "MemorySink", "FileSink", "available_memory", "format_bytes"]
+__all__ = ["execute", "stream_to_folder", "MemorySink", "FileSink", "available_memory", "format_bytes"]
 
-#: share of the available memory a run held in memory may take
-MEMORY_SHARE = 0.8
 #: share of the free disk space a streamed run's timeseries.csv may take
 DISK_SHARE = 0.9
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation (Linux /proc/meminfo), or None when unknown."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        return None
-    return None
-
-
-def format_bytes(n: float) -> str:
-    for unit in ("B", "kB", "MB", "GB", "TB"):
-        if abs(n) < 1000 or unit == "TB":
-            return f"{n:.3g} {unit}"
-        n /= 1000.0
-    return f"{n:.3g} TB"
 
 
 def _block_bytes(block) -> int:
@@ -80,7 +62,8 @@ class MemorySink:
             every = block.case["solver"]["output_every"] * int(need / (0.5 * MEMORY_SHARE * avail) + 1)
             raise CaseError("solver.output_every",
                             f"keeping every frame of this run in memory takes about {format_bytes(need)} "
-                            f"({self.frames_total} frames of {format_bytes(per_frame)}) and {format_bytes(avail)} is "
+                            f"({format_count(self.frames_total)} frames of {format_bytes(per_frame)}) and "
+                            f"{format_bytes(avail)} is "
                             f"available: raise solver.output_every (e.g. --set solver.output_every={every}), or write "
                             "the frames to files as they come (flexmech run, Prepared.stream)")
 
@@ -94,16 +77,15 @@ class MemorySink:
 class FileSink:
     """Frames written to ``out_dir``/timeseries.csv as they come (:class:`TimeseriesWriter`); kept: the
     last block (what the guards read of a stopped run), the statistics of every column and an
-    :class:`Envelope` for the plots.  Nothing is created before the first block; then the files of
-    ``replace`` (an earlier run's, :func:`flexmech_py.outdir.claim`) are removed.  With
+    :class:`Envelope` for the plots.  Nothing is created before the first block.  With
     ``frames_total``, the size of timeseries.csv is projected from the first block, and a run that
-    would not fit on the disk is refused (CaseError naming ``solver.output_every``; the part file is
-    removed) unless ``force``."""
+    would not fit on the disk is refused (CaseError naming ``solver.output_every``) unless ``force``.
+    ``out_dir`` is normally the staging folder of a :class:`~flexmech_py.outdir.ResultFolder`."""
 
-    def __init__(self, out_dir, *, frames_total: int | None = None, replace=(), force: bool = False):
+    def __init__(self, out_dir, *, frames_total: int | None = None, force: bool = False):
         self.out = Path(out_dir)
         self.frames_total = frames_total
-        self.replace, self.force = list(replace), force
+        self.force = force
         self.writer = None
         self.last = None
         self.stats, self.envelope = ColumnStats(), Envelope()
@@ -116,13 +98,12 @@ class FileSink:
             if self.frames_total and not self.force:
                 self._check_disk(block)
             self.out.mkdir(parents=True, exist_ok=True)
-            for p in self.replace:
-                p.unlink(missing_ok=True)
             self.writer = TimeseriesWriter(self.out)
-        self.writer.add(block)
-        self.stats.add(block.t, block.columns)
-        self.envelope.add(block.t, block.columns)
-        self.last = block
+        with held_signals():     # a block is in the file and in the statistics, or in neither
+            self.writer.add(block)
+            self.stats.add(block.t, block.columns)
+            self.envelope.add(block.t, block.columns)
+            self.last = block
 
     @property
     def projected_bytes(self) -> float:
@@ -138,19 +119,22 @@ class FileSink:
         need = per_row * self.frames_total
         folder = next((p for p in [self.out, *self.out.absolute().parents] if p.exists()), Path("."))
         free = shutil.disk_usage(folder).free
-        if need > DISK_SHARE * free:
-            every = block.case["solver"]["output_every"] * int(need / (0.5 * DISK_SHARE * free) + 1)
-            raise CaseError("solver.output_every",
-                            f"this run writes about {format_bytes(need)} to {self.out / 'timeseries.csv'} "
-                            f"({self.frames_total} frames of {per_row:.0f} B) and {format_bytes(free)} is free there: "
-                            f"raise solver.output_every (e.g. --set solver.output_every={every}), shorten "
-                            "solver.t_end, choose another --out, or run anyway with --force")
+        if need <= DISK_SHARE * free:
+            return
+        sol = block.case["solver"]
+        every = sol["output_every"] * max(2, int(need / (0.5 * DISK_SHARE * max(free, 1.0)) + 1))
+        fix = (f"raise solver.output_every (e.g. --set solver.output_every={format_count(every)}), shorten "
+               "solver.t_end, choose another --out, or run anyway with --force") if free > 0 else \
+            "free some space on that disk or choose another --out"
+        raise CaseError("solver.output_every",
+                        f"this run writes about {format_bytes(need)} to timeseries.csv "
+                        f"({format_count(self.frames_total)} frames of {per_row:.0f} B, one every "
+                        f"{sol['output_every']} of its steps of {block.dt:.3g} s) and {format_bytes(free)} is free "
+                        f"on the disk of {self.out.parent if self.out.name == PARTIAL_DIR else self.out}: {fix}")
 
     def result(self):
         if self.last is None:
             return None
-        import dataclasses
-
         return dataclasses.replace(self.last, stats=self.stats, envelope=self.envelope)
 
     def close(self, res) -> list[Path]:
@@ -208,15 +192,18 @@ def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | N
         stop = exc
     except MechanismError as exc:
         stop = exc
-    except KeyboardInterrupt:
-        stop = "interrupted"
+    except KeyboardInterrupt as exc:   # Ctrl-C, or SIGTERM/SIGHUP (errors.Terminated)
+        stop = exc
+    except OSError as exc:             # writing the frames failed (a full disk)
+        stop = exc
     res = sink.result()
     if res is None:               # nothing to keep: the stop happened before the first frame
         sink.close(None)
-        if isinstance(stop, Exception):
+        if isinstance(stop, KeyboardInterrupt):
+            raise Interrupted(f"{signal_words(stop)} before the first frame", signum=getattr(stop, "signum", None))
+        if isinstance(stop, (SolverError, MechanismError)):
             stop.partial = None
-            raise stop
-        raise Interrupted("interrupted before the first frame")
+        raise stop if stop is not None else Interrupted("stopped before the first frame")
     return _finish(prep, model, geometric, res, sink, stop, (validity, alternating), doubling, diagnose, t_start)
 
 
@@ -238,13 +225,15 @@ def _finish(prep, model, geometric, res, sink, stop, checks, doubling, diagnose,
         err = guards.failed(prep, model, geometric, stop, diagnose=diagnose)
         sink.close(res)
         raise err
-    if stop == "interrupted":
-        raise _interrupted(res, sink, "during the run")
+    if isinstance(stop, KeyboardInterrupt):
+        raise _interrupted(res, sink, "during the run", stop)
+    if isinstance(stop, OSError):
+        raise _write_failed(res, sink, stop)
     try:
         res.extra["error_estimate"] = doubling.finish(res) if doubling else {"method": "none"}
-    except KeyboardInterrupt:
-        res.extra["error_estimate"] = {"method": "none", "reason": "interrupted by the user"}
-        raise _interrupted(res, sink, "during the error estimate (the run itself completed)") from None
+    except KeyboardInterrupt as exc:
+        res.extra["error_estimate"] = {"method": "none", "reason": signal_words(exc)}
+        raise _interrupted(res, sink, "during the error estimate (the run itself completed)", exc) from None
     res.timing["total_s"] = prep.t_prepare + time.perf_counter() - t_start
     if isinstance(stop, MechanismError):
         err = guards.rigid_failure(res, stop)
@@ -254,11 +243,48 @@ def _finish(prep, model, geometric, res, sink, stop, checks, doubling, diagnose,
     return res
 
 
-def _interrupted(res, sink, when: str) -> Interrupted:
-    """Mark ``res`` as stopped by the user, write it, and return the exception to raise."""
+def _interrupted(res, sink, when: str, stop) -> Interrupted:
+    """Mark ``res`` as stopped by the user or a signal, write it, and return the exception to raise."""
     t_last = res.all_stats().t_last
-    msg = f"interrupted by the user {when}; frames up to t = {t_last:.6g} s are kept"
+    msg = f"{signal_words(stop)} {when}; frames up to t = {t_last:.6g} s are kept"
     res.failure = {"cause": "interrupted", "time_s": t_last, "message": msg}
+    if getattr(stop, "signum", None):
+        res.failure["signal"] = stop.name
     res.extra.setdefault("error_estimate", {"method": "none", "reason": "the run was interrupted"})
     sink.close(res)
-    return Interrupted(msg, partial=res)
+    return Interrupted(msg, partial=res, signum=getattr(stop, "signum", None))
+
+
+def _write_failed(res, sink, exc: OSError) -> OutputError:
+    """Mark ``res`` as cut short by a failed write (a full disk): the file keeps its whole blocks, its
+    status line and summary.json say so (the staging folder's reserve gives the room)."""
+    t_last = res.all_stats().t_last
+    msg = (f"writing {exc.filename or 'timeseries.csv'} failed ({exc.strerror or exc}); frames up to t = "
+           f"{t_last:.6g} s are kept")
+    res.failure = {"cause": "write_failed", "time_s": t_last, "message": msg, "file": exc.filename}
+    res.extra.setdefault("error_estimate", {"method": "none", "reason": "writing the frames failed"})
+    release_reserve(sink.out)
+    sink.close(res)
+    return OutputError(msg, path=exc.filename, partial=res)
+
+
+def stream_to_folder(prep, out_dir, model: str | None = None, *, force: bool = False, **kw):
+    """:meth:`flexmech_py.simulate.Prepared.stream`: the run streamed into a
+    :class:`~flexmech_py.outdir.ResultFolder` ``out_dir`` -- in place of the folder's earlier run only
+    when it completes; a run that stops raises as :func:`execute` does, its frames so far written and
+    marked (in ``out_dir`` when it held no run, else beside it in ``out_dir/flexmech-partial``)."""
+    stopped = None
+    with ResultFolder(out_dir, "run", claim=lambda: claim(out_dir, prep.case, overwrite=True)) as rf:
+        sink = FileSink(rf.stage, frames_total=prep.frames, force=force)
+        try:
+            res = execute(prep, model, sink, **kw)
+        except (Interrupted, SolverError, MechanismError, OutputError) as exc:
+            if getattr(exc, "partial", None) is None:
+                raise
+            rf.stopped(str(exc), marked=True)
+            stopped = exc
+        else:
+            rf.commit()
+    if stopped is not None:
+        raise stopped
+    return res

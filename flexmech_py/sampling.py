@@ -32,6 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CaseError
+from .names import safe_name
+from .outdir import ResultFolder
+from .sizes import check_points
 
 __all__ = ["Distribution", "parse_sample", "unit_points", "draw", "statistics", "correlations", "sample_study",
            "METHODS", "PERCENTILES"]
@@ -188,20 +191,33 @@ def sample_study(case_path, samples: list[str], *, n: int, seed: int = 0, method
     inputs and outputs, as sweep.csv), ``statistics.csv``, ``correlations.csv``, ``samples.json`` and
     ``samples.png``.  Returns {"rows", "batch", "paths", "statistics", "correlations", "failures",
     "warnings", "key_outputs"}."""
-    from .case import validate_case
     from .parallel import using_executor
-    from .results import _atomic_write, _json_default, versions
-    from .sweep import check_first_point, failure_reasons, load_base, run_points, write_table
+    from .sweep import check_first_point, failure_reasons, load_base, run_points
 
     path, base = load_base(case_path, overrides)
     dists = [parse_sample(s) for s in samples]
+    check_points(n, "--samples", lambda k: f"draw at most {k:,} samples (e.g. --samples {min(k, 1024)})")
     points, notes = draw(dists, n, seed, method)
     check_first_point(base, path.name, points, "sample")
-    out = Path(out_dir) if out_dir is not None else Path("results") / f"{path.stem}-samples"
-    with using_executor(scheduler, jobs) as executor:    # connect before anything is written
-        out.mkdir(parents=True, exist_ok=True)
-        rows, batch = run_points(path, base, points, model=model, out=out, executor=executor, progress=progress)
-    rows = [{"sample": k, **r} for k, r in enumerate(rows)]
+    out = out_dir if out_dir is not None else Path("results") / f"{safe_name(path.stem)}-samples"
+    with using_executor(scheduler, jobs) as executor, ResultFolder(out, "samples") as rf:   # connect first
+        rows, batch = run_points(path, base, points, model=model, out=rf.out, executor=executor, progress=progress)
+        rows = [{"sample": k, **r} for k, r in enumerate(rows)]
+        st = _write_study(rf.stage, path, base, dists, rows, batch, notes, plots,
+                          dict(model=model, overrides=list(overrides), method=method, seed=seed, samples=n))
+        rf.commit()
+    st["paths"] = [rf.where(p) for p in st["paths"]]
+    return {"rows": rows, "batch": batch, "failures": failure_reasons(rows), "warnings": notes, **st}
+
+
+def _write_study(out: Path, path: Path, base: dict, dists, rows, batch, notes, plots: bool, settings: dict) -> dict:
+    """samples.csv, statistics.csv, correlations.csv, samples.json and samples.png of a finished study;
+    {"paths", "statistics", "correlations", "key_outputs"}."""
+    from .case import validate_case
+    from .results import _atomic_write, _json_default, versions
+    from .sweep import write_table
+
+    n, method, seed = settings["samples"], settings["method"], settings["seed"]
     what = f"{n} {method} samples (seed {seed}) of {path.name}: " + "; ".join(f"{d.key} = {d.spec}" for d in dists)
     names = write_table(out / "samples.csv", rows, ["sample"] + [d.key for d in dists],
                         f"flexmech {versions()['flexmech']} {what}")
@@ -216,8 +232,7 @@ def sample_study(case_path, samples: list[str], *, n: int, seed: int = 0, method
              _write_rows(out / "correlations.csv", corr, ["output", "input", "pearson", "spearman", "rank"],
                          f"input-output correlations over the successful samples; {what}")]
     keys = key_outputs(validate_case(copy.deepcopy(base), source=str(path)), outputs)
-    info = {"case": str(path), "model": model, "overrides": list(overrides), "method": method, "seed": seed,
-            "samples": n, "distributions": [d.__dict__ for d in dists], "key_outputs": keys, "columns": names,
+    info = {"case": str(path), **settings, "distributions": [d.__dict__ for d in dists], "key_outputs": keys, "columns": names,
             "jobs": batch.jobs, "executor": batch.executor, "computed": batch.computed, "cached": batch.cached,
             "retries": batch.retries, "failed": batch.failed, "wall_s": batch.wall_s, "warnings": notes,
             "versions": versions()}
@@ -229,6 +244,5 @@ def sample_study(case_path, samples: list[str], *, n: int, seed: int = 0, method
         png = plot_samples(out / "samples.png", inputs, {c: outputs[c] for c in keys[:4]}, corr,
                            title=f"{path.name}: {len(ok)} of {n} {method} samples, seed {seed}")
         paths += [png] if png else []
-    return {"rows": rows, "batch": batch, "paths": paths, "statistics": stats, "correlations": corr,
-            "failures": failure_reasons(rows), "warnings": notes, "key_outputs": keys}
+    return {"paths": paths, "statistics": stats, "correlations": corr, "key_outputs": keys}
 

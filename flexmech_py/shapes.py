@@ -211,7 +211,7 @@ def read_shape_csv(path) -> tuple[ShapeFrames, str, list[str]]:
         raise FlexmechError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     head = [ln[1:].strip() for ln in text if ln.startswith("#")]
     rows = list(csv.reader(ln for ln in text if ln and not ln.startswith("#")))
-    if not rows or rows[0][:3] != ["index", rows[0][1], "body"] or len(rows[0]) != 10:
+    if not rows or len(rows[0]) != 10 or rows[0][0] != "index" or rows[0][2] != "body":
         raise FlexmechError(f"{path}: not a shape file written by flexmech (header index,t,body,kind,point,x,y,dx,dy,rot)")
     key_name, body_rows = rows[0][1], rows[1:]
     try:

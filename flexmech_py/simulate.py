@@ -22,6 +22,7 @@ from .outputs import DeflectionReference, evaluate_outputs, joint_at_joint, link
 from .reactions import ModelReactions
 from .frames import continue_angles, select_frames
 from .results import Result
+from .sizes import check_elements, check_mesh, check_steps
 
 __all__ = ["simulate", "simulate_models", "Prepared", "motion_source", "rigid_motion", "time_grid", "RigidMotion"]
 
@@ -47,6 +48,7 @@ def time_grid(case: dict, dt: float | None = None, out_every: int | None = None)
         raise CaseError("solver.dt", f"must satisfy 0 < dt <= t_end = {sol['t_end']} s, got {dt}")
     nsteps = max(1, math.ceil(sol["t_end"] / dt - 1e-9))
     nsteps = out_every * math.ceil(nsteps / out_every)
+    check_steps(nsteps, sol["t_end"], dt)
     return nsteps, sol["t_end"] / nsteps, out_every
 
 
@@ -293,13 +295,14 @@ class Prepared:
         summary.json (memory does not grow with the run's length).  Returns a Result holding the last
         block's frames, the statistics of all (``stats``) and the frames to draw (``plot_view()``);
         failures raise as in :meth:`run`, after the files are written (marked partial); Ctrl-C raises
-        :class:`~flexmech_py.errors.Interrupted` after writing the frames so far.  A run whose CSV
-        would not fit on the disk is refused (CaseError) unless ``force``.  ``progress``: called as
-        progress(done, total) [steps] after every block."""
-        from .runner import FileSink, execute
+        :class:`~flexmech_py.errors.Interrupted` after writing the frames so far.  The files replace
+        an earlier run's in ``out_dir`` only when the run completes (:func:`flexmech_py.runner.stream_to_folder`).
+        A run whose CSV would not fit on the disk is refused (CaseError) unless ``force``.
+        ``progress``: called as progress(done, total) [steps] after every block."""
+        from .runner import stream_to_folder
 
-        sink = FileSink(out_dir, frames_total=self.frames, force=force)
-        res = execute(self, model, sink, geometric=geometric, estimate=estimate, diagnose=diagnose, progress=progress)
+        res = stream_to_folder(self, out_dir, model, force=force, geometric=geometric, estimate=estimate,
+                               diagnose=diagnose, progress=progress)
         notices.issue(res.extra)
         return res
 
@@ -445,6 +448,7 @@ class Prepared:
         model (one per element); the rigid-body solution on the grid is their reference."""
         case, sol, oe = self.case, self.case["solver"], self.out_every
         if model not in self.coupled:
+            check_mesh(case, model)      # the model's own arrays (sizes.DOF2_BYTES)
             self.coupled[model] = CoupledModel.from_case(case, split=(model == "nonlinear"))
         cm = self.coupled[model]
         integ = integrator_of(sol, model)
@@ -648,6 +652,8 @@ def simulate_models(case: dict, models=SUPERPOSITION_MODELS, **kw) -> dict:
 def _with_elements(case: dict, n: int) -> dict:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise CaseError("elements_per_link", f"must be a whole number >= 1, got {n!r}")
+    links = sum(1 for ln in case["links"] if not ln.get("rigid"))
+    check_elements(int(n) * links, links, field="--elements-per-link")   # before the mesh is made
     c = copy.deepcopy(case)
     c["mesh"]["elements_per_link"] = int(n)
     for ln in c["links"]:

@@ -24,6 +24,9 @@ import numpy as np
 
 from .case import _parse_value, apply_overrides, read_case_file, validate_case
 from .errors import CaseError, FlexmechError
+from .names import safe_name
+from .outdir import ResultFolder
+from .sizes import check_points, format_count
 
 __all__ = ["parse_param", "grid_points", "sweep", "sweep_point", "point_overrides", "load_base", "check_first_point",
            "run_points", "write_table", "failure_reasons", "TIMING_COLUMNS", "VARYING_COLUMNS"]
@@ -57,6 +60,8 @@ def parse_param(text: str) -> tuple[str, list, str]:
         except ValueError:
             raise CaseError(f"--param {key}", f"{spec!r} must be START:STOP:N with numbers START, STOP and "
                                               "a whole N >= 1") from None
+        check_points(n, f"--param {key}", lambda k: f"give at most {format_count(k)} values, e.g. "
+                                                   f"{key}={parts[0]}:{parts[1]}:{min(k, 1000)}")
         vals = np.linspace(a, b, n) if n > 1 else np.array([a], float)
         if isinstance(a, int) and isinstance(b, int) and np.allclose(vals, np.round(vals)):
             values = [int(round(v)) for v in vals]
@@ -74,6 +79,8 @@ def grid_points(params: list[tuple[str, list, str]]) -> list[dict]:
     keys = [k for k, _, _ in params]
     if len(set(keys)) != len(keys):
         raise CaseError("--param", f"a key is given twice: {', '.join(keys)}")
+    check_points(math.prod(len(v) for _, v, _ in params), "--param",
+                 lambda k: f"use at most {format_count(k)} grid points in all (fewer values per --param)")
     return [dict(zip(keys, combo)) for combo in product(*(v for _, v, _ in params))]
 
 
@@ -183,23 +190,24 @@ def sweep(case_path, params: list[str], *, model: str | None = None, overrides=(
     axes = [parse_param(p) for p in params]
     points = grid_points(axes)
     check_first_point(base, path.name, points)
-    out = Path(out_dir) if out_dir is not None else Path("results") / f"{path.stem}-sweep"
-    with using_executor(scheduler, jobs) as executor:    # connect before anything is written
-        out.mkdir(parents=True, exist_ok=True)
-        rows, batch = run_points(path, base, points, model=model, out=out, executor=executor, progress=progress)
-    keys = [k for k, _, _ in axes]
-    csv = out / "sweep.csv"
-    names = write_table(csv, rows, keys, f"flexmech {versions()['flexmech']} sweep of {path.name}: "
-                        + "; ".join(f"{k} = {s}" for k, _, s in axes))
-    info = {"case": str(path), "model": model, "overrides": list(overrides),
-            "params": [{"key": k, "spec": s, "values": v} for k, v, s in axes],
-            "points": len(points), "order": "cartesian, first parameter slowest (rows of sweep.csv)",
-            "columns": names, "jobs": batch.jobs, "executor": batch.executor, "computed": batch.computed,
-            "cached": batch.cached, "retries": batch.retries, "failed": batch.failed, "wall_s": batch.wall_s,
-            "versions": versions()}
-    js = out / "sweep.json"
-    _atomic_write(js, json.dumps(info, indent=2, default=_json_default) + "\n")
-    return {"rows": rows, "batch": batch, "paths": [csv, js], "grid": points, "failures": failure_reasons(rows)}
+    out = out_dir if out_dir is not None else Path("results") / f"{safe_name(path.stem)}-sweep"
+    with using_executor(scheduler, jobs) as executor, ResultFolder(out, "sweep") as rf:   # connect first
+        rows, batch = run_points(path, base, points, model=model, out=rf.out, executor=executor, progress=progress)
+        keys = [k for k, _, _ in axes]
+        csv = rf.stage / "sweep.csv"
+        names = write_table(csv, rows, keys, f"flexmech {versions()['flexmech']} sweep of {path.name}: "
+                            + "; ".join(f"{k} = {s}" for k, _, s in axes))
+        info = {"case": str(path), "model": model, "overrides": list(overrides),
+                "params": [{"key": k, "spec": s, "values": v} for k, v, s in axes],
+                "points": len(points), "order": "cartesian, first parameter slowest (rows of sweep.csv)",
+                "columns": names, "jobs": batch.jobs, "executor": batch.executor, "computed": batch.computed,
+                "cached": batch.cached, "retries": batch.retries, "failed": batch.failed, "wall_s": batch.wall_s,
+                "versions": versions()}
+        js = rf.stage / "sweep.json"
+        _atomic_write(js, json.dumps(info, indent=2, default=_json_default) + "\n")
+        rf.commit()
+    return {"rows": rows, "batch": batch, "paths": [rf.where(csv), rf.where(js)], "grid": points,
+            "failures": failure_reasons(rows)}
 
 
 def _cell(v) -> str:

@@ -194,7 +194,8 @@ def test_rerun_into_the_same_folder_replaces_the_old_files(cases_dir, tmp_path, 
     (out / "notes.txt").write_text("mine")
     code, _, _ = _run(["run", case, "--set", "solver.t_end=0.01", "--out", str(out), "--no-plots"], capsys)
     assert code == 0
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "summary.json", "timeseries.csv"]
+    assert sorted(p.name for p in out.iterdir()) == [".flexmech-results.json", "notes.txt", "summary.json",
+                                                     "timeseries.csv"]
     other = str(cases_dir / "manipulator_bricout.toml")
     before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
     code, _, err = _run(["run", other, "--set", "solver.t_end=0.01", "--out", str(out)], capsys)
@@ -215,7 +216,7 @@ def test_cli_ctrl_c_exits_130_with_the_partial_result(cases_dir, tmp_path):
                           "solver.t_end=200", "--out", str(out), "--no-plots"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    part = out / "timeseries.csv.part"
+    part = out / "flexmech-partial" / "timeseries.csv.part"      # the run's files while it goes
     t0 = time.monotonic()
     while not part.exists() and time.monotonic() - t0 < 60:
         time.sleep(0.05)

@@ -1,0 +1,211 @@
+"""The ``flexmech run`` and ``flexmech draw`` commands (their options: :mod:`flexmech_py.cli`).
+
+A run streams its frames into the staging folder of a :class:`~flexmech_py.outdir.ResultFolder`
+(:class:`~flexmech_py.runner.FileSink`), writes its drawing and plots there, and puts them all in
+place of the folder's earlier run only when it completed.  A run that stops (a solver failure, a
+singular position, Ctrl-C, SIGTERM, SIGHUP, a full disk) writes the frames so far, marked, and
+leaves the earlier run untouched (docs/cli.md, "What is left on disk").
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from .errors import FlexmechError, Interrupted, MechanismError, OutputError, SolverError
+from .names import safe_name
+from .outdir import ResultFolder, claim
+from .signals import exit_code
+
+__all__ = ["cmd_run", "cmd_draw", "integrator_overrides", "MAX_PANELS"]
+
+#: panels of the drawing.png of ``run --draw`` (more frames stay in shape.csv for ``flexmech draw --gif``)
+MAX_PANELS = 12
+#: bytes a kept shape frame takes per drawn point (x, y, dx, dy, rotation)
+SHAPE_POINT_BYTES = 40
+
+
+def integrator_overrides(args) -> list[str]:
+    """The ``--set`` overrides that ``--integrator``, ``--rho-inf`` and ``--hht-alpha`` stand for."""
+    out = []
+    integrator = args.integrator
+    if integrator is None and args.rho_inf is not None:
+        integrator = "generalized-alpha"
+    elif integrator is None and args.hht_alpha is not None:
+        integrator = "hht"
+    if integrator is not None:
+        out.append(f'solver.integrator="{integrator}"')
+    if args.rho_inf is not None:
+        out.append(f"solver.rho_inf={args.rho_inf!r}")
+    if args.hht_alpha is not None:
+        out.append(f"solver.hht_alpha={args.hht_alpha!r}")
+    return out
+
+
+def _shapes(args, prep, model):
+    """The ShapeCollector of ``--draw N`` (None without it); its frames' memory checked first."""
+    from .shapes import ShapeCollector
+    from .sizes import check_count, format_count
+
+    if args.draw is None:
+        return None
+    if args.draw < 2:
+        raise FlexmechError(f"--draw: needs 2 frames or more, got {args.draw}")
+    kept = min(args.draw, prep.frames)
+    points = sum(int(ln.get("elements", 0)) + 1 for ln in prep.case["links"]) + 4 * len(prep.case["links"]) + 8
+    check_count(kept, SHAPE_POINT_BYTES * points, "--draw", "drawn frames",
+                lambda n: f"draw at most {format_count(n)} frames (e.g. --draw {max(2, min(n, 1000))})")
+    return ShapeCollector(prep.case.mechanism, prep.frames, model, args.draw, prep.coupled)
+
+
+def cmd_run(args) -> int:
+    from .case import load_case
+    from .progress import RunProgress
+    from .runner import FileSink, execute
+    from .simulate import Prepared
+
+    case = load_case(args.case, overrides=args.set + integrator_overrides(args))
+    prep = Prepared(case, dt=args.dt, elements_per_link=args.elements_per_link)
+    model = args.model or prep.case["solver"]["model"]
+    out = args.out if args.out is not None else Path("results") / f"{safe_name(Path(args.case).stem)}-{model}"
+    shapes = _shapes(args, prep, model)
+    stopped, paths = None, []
+    with ResultFolder(out, "run", claim=lambda: claim(out, prep.case, args.overwrite), overwrite=args.overwrite) as rf:
+        sink = FileSink(rf.stage, frames_total=prep.frames, force=args.force)
+        progress = RunProgress(lambda: _run_cost(prep, model, sink), bar=True if args.progress else None,
+                               quiet=args.quiet)
+        try:
+            res = execute(prep, model, sink, progress=progress, observers=[shapes] if shapes else [])
+        except (Interrupted, SolverError, MechanismError, OutputError) as exc:   # frames so far written, marked
+            progress.close()
+            if getattr(exc, "partial", None) is None:
+                raise
+            rf.stopped(str(exc), marked=True)
+            stopped = exc
+        else:
+            progress.close(finished=True)
+            paths = _extras(res, shapes, sink, rf.stage, plots=not args.no_plots)
+            rf.commit()
+    if stopped is not None:
+        return _report_stopped(stopped, [rf.where(p) for p in sink.paths], rf)
+    print(res.table())
+    print("wrote " + ", ".join(str(rf.where(p)) for p in paths))
+    for w in res.extra.get("warnings", []):
+        print(f"flexmech: warning: {w}", file=sys.stderr)
+    return 0
+
+
+def _extras(res, shapes, sink, stage: Path, plots: bool) -> list[Path]:
+    """The drawing and the plots of a completed run, and its summary listing every file."""
+    paths = list(sink.paths)
+    if shapes is not None:
+        paths += _write_drawing(res, shapes.result(), stage, plots=plots)
+    if plots:
+        from .plots import plot_result
+
+        paths += plot_result(res.plot_view(), stage)
+    if len(paths) > len(sink.paths):
+        res.extra["files"] = [p.name for p in paths]
+        res.write_summary(stage)
+    return paths
+
+
+def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
+    """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
+    from .shapes import spread, write_shape_csv
+
+    head = [f"flexmech run --draw; case {res.case['case']['title']!r}; model {res.model}",
+            "per frame (index, t [s]) every drawn point: x, y its rigid position [m]; dx, dy its elastic "
+            "displacement [m]; rot the elastic rotation of its body there [rad]"]
+    paths = [write_shape_csv(out / "shape.csv", sf, head, key="t")]
+    if plots:
+        from .drawing import draw_frames
+
+        p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, spread(sf.key.size, MAX_PANELS),
+                           title=f"{res.case['case']['title']} - model {res.model}")
+        paths += [p] if p else []
+    return paths
+
+
+def _run_cost(prep, model: str, sink) -> str:
+    """The words of a run's cost line: steps, DOFs, the size of timeseries.csv."""
+    from .sizes import format_bytes
+
+    dofs = prep.coupled[model].ndof if model in prep.coupled else prep.fe.nfree
+    return (f"{prep.nsteps:,} steps of {dofs} DOFs, {prep.frames:,} frames, about "
+            f"{format_bytes(sink.projected_bytes)} of timeseries.csv")
+
+
+def _report_stopped(exc, paths, rf) -> int:
+    """Table, written files, warnings and the reason of a run that stopped; its exit code (3 failed,
+    130 Ctrl-C, 128 + N for signal N)."""
+    res = exc.partial
+    code = exit_code(exc) if isinstance(exc, KeyboardInterrupt) else 3
+    print(res.table())
+    where = "" if rf.kept == rf.out else f"; {rf.out} keeps its earlier results"
+    print(f"wrote partial results (up to t = {res.all_stats().t_last:.6g} s): "
+          + ", ".join(str(p) for p in paths) + where)
+    for w in res.extra.get("warnings", []):
+        print(f"flexmech: warning: {w}", file=sys.stderr)
+    print(f"flexmech: {'error' if code == 3 else 'stopped'}: {exc}", file=sys.stderr)
+    return code
+
+
+# ----------------------------------------------------------------------------- draw
+#: what `flexmech draw --out` may end in: the still image formats, and GIF for --gif
+STILL_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".webp", ".tif", ".tiff", ".eps")
+
+
+def _draw_target(args, folder: Path) -> Path:
+    """The file ``flexmech draw`` writes: --out (a folder: the default name inside it), else in RESULT."""
+    name = "drawing.gif" if args.gif else "drawing.png"
+    if args.out is None:
+        return folder / name
+    path = Path(args.out)
+    if not str(args.out).strip():
+        raise FlexmechError("--out: is empty; give a file name (e.g. --out drawing.png) or leave it out")
+    if path.is_dir():
+        return path / name
+    allowed = (".gif",) if args.gif else STILL_SUFFIXES
+    if path.suffix.lower() not in allowed:
+        kinds = "a .gif file (--gif animates)" if args.gif else f"one of {', '.join(STILL_SUFFIXES)} (or .gif with --gif)"
+        raise FlexmechError(f"--out: {str(path)!r} ends in {path.suffix or 'no suffix'!r}; give {kinds}")
+    return path
+
+
+def _draw_input(folder: Path):
+    """(shape frames, case, summary) of a folder written by ``flexmech run --draw``."""
+    import json
+
+    from .case import Case
+    from .shapes import read_shape_csv
+
+    if not (folder / "shape.csv").is_file():
+        raise FlexmechError(f"{folder}: no shape.csv there; write one with `flexmech run CASE --draw --out {folder}`")
+    sf, _, _ = read_shape_csv(folder / "shape.csv")
+    try:
+        summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+        case = Case(summary["input"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise FlexmechError(f"{folder}/summary.json: cannot be read as a flexmech run's summary ({exc})") from None
+    return sf, case, summary
+
+
+def cmd_draw(args) -> int:
+    from .drawing import animate_frames, draw_frames
+    from .shapes import spread
+
+    folder = Path(args.result)
+    sf, case, summary = _draw_input(folder)
+    frames = args.frames or (sf.key.size if args.gif else 6)
+    idx = spread(sf.key.size, frames)
+    path = _draw_target(args, folder)
+    title = f"{case['case']['title']} - model {summary.get('model', '')}"
+    with ResultFolder(path, "draw", single=True) as rf:
+        draw = animate_frames if args.gif else draw_frames
+        p, scale = draw(rf.stage / path.name, sf, case.mechanism, idx, scale=args.scale, title=title)
+        if p is None:
+            raise FlexmechError("draw: needs matplotlib and Pillow (pip install matplotlib)")
+        rf.commit()
+    print(f"wrote {path} ({idx.size} frames, deflection x {scale:g})")
+    return 0
