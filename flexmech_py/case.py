@@ -20,7 +20,7 @@ from .bundled import resolve_case_path
 from .errors import CaseError
 from .inputs import read_text
 from .mechanism import mechanism_from_spec
-from .mechanism.schema import mechanism_spec
+from .mechanism.schema import derived_keys, mechanism_spec
 from .mechanism.templates import expand_template
 from .sizes import check_mesh
 from .tomlfile import dumps_toml
@@ -125,6 +125,9 @@ def case_file_tables(case: dict) -> dict:
     """The tables of a resolved case as a case file holds them."""
     out = copy.deepcopy(dict(case))
     out["case"] = {k: val for k, val in out["case"].items() if k != "path" and val != ""}
+    for ln in out.get("links", []):   # what a section or material gives is written as the section or material
+        for key in derived_keys(ln):
+            ln.pop(key, None)
     return {k: val for k, val in out.items() if val not in ([], {})}
 
 

@@ -17,7 +17,7 @@ from .outputs import _axial_output, _load_output, point_components, wrap_angle
 
 __all__ = ["ModelFrames", "model_frames", "chord_motion", "body_angles", "node_state", "deviation", "curvature",
            "axial_forces", "joint_angles", "joint_coordinate", "joint_at_joint", "joint_output", "evaluate", "reaction",
-           "drive_force", "Diagnostics", "multiplier_alternation"]
+           "drive_force", "Diagnostics", "multiplier_alternation", "FrameReactions"]
 
 
 @dataclass
@@ -277,6 +277,25 @@ def reaction(cm: CoupledModel, fr: ModelFrames, name: str) -> np.ndarray:
         out[:, 0], out[:, 1] = _lam(fr, jm, "x"), _lam(fr, jm, "y")
     out[:, 2] = -_lam(fr, jm, "angle") - _lam(fr, jm, "hold")
     return out
+
+
+class FrameReactions:
+    """The model's joint reactions over one block's frames (``Result.reactions`` of a coupled block):
+    ``self(joint)`` (nf, 3) as :func:`reaction`.  A part of the block (:meth:`over` with ``sel``) keeps
+    them; a join of blocks has none (the multipliers of the frames are not kept)."""
+
+    def __init__(self, cm: CoupledModel, fr: ModelFrames | None, arrays: dict | None = None):
+        self.cm, self.fr, self.arrays = cm, fr, {} if arrays is None else arrays
+
+    def __call__(self, name: str) -> np.ndarray:
+        if name not in self.arrays:
+            self.arrays[name] = reaction(self.cm, self.fr, name)
+        return self.arrays[name]
+
+    def over(self, res, sel=None):
+        if sel is None:
+            return None
+        return FrameReactions(self.cm, None, {name: self(name)[sel] for name in self.cm.joints})
 
 
 def _shared_force(cm: CoupledModel, fr: ModelFrames, jm) -> np.ndarray:

@@ -515,7 +515,8 @@ class Prepared:
                      q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_dev, v=np.zeros_like(u_dev), a=np.zeros_like(u_dev),
                      rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=acc.timing(), extra=extra, axial=axial,
                      motion=ref, rigid=rmf, steps=i0 + oe * np.arange(qf.shape[1]), state=qf,
-                     curvature_of=functools.partial(_coupled_curvature, cm))
+                     curvature_of=functools.partial(_coupled_curvature, cm),
+                     reactions=cpl_out.FrameReactions(cm, fr))
         return _after(res, prev)
 
     def _report_mechanism(self, res: Result) -> None:

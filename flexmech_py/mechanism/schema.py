@@ -8,25 +8,78 @@ a CaseError naming the field and the fix.
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
 
 from .. import validate as v
 from ..errors import CaseError
+from ..materials import material_values
+from ..sections import section_properties
 from .drives import LAW_CODES, LAW_PARAMS, Drive
 from .joints import JOINT_KINDS
 from .system import Mechanism
 
-__all__ = ["mechanism_from_spec", "mechanism_spec", "link_section", "LINK_KEYS", "SECTION_KEYS"]
+__all__ = ["mechanism_from_spec", "mechanism_spec", "link_section", "derived_keys", "LINK_KEYS", "SECTION_KEYS"]
 
 SECTION_KEYS = ("area", "second_moment", "youngs_modulus", "density")
 LINK_KEYS = {"name", "start", "end", "length", "angle", "area", "second_moment", "youngs_modulus", "density",
-             "half_depth", "elements", "yield_strain", "rigid", "mass", "inertia", "centre", "points"}
+             "half_depth", "elements", "yield_strain", "rigid", "mass", "inertia", "centre", "points", "section",
+             "material"}
+#: the link keys a ``section`` table gives, and those a ``material`` gives
+FROM_SECTION = ("area", "second_moment", "half_depth")
+FROM_MATERIAL = ("youngs_modulus", "density")
+
+
+def _given_by(ln: dict, where: str) -> tuple[dict, dict]:
+    """(the link's values given by its section and material, the resolved section and material tables).
+    A resolved case holds both a section and the values it gives: they must agree (1e-9), else the
+    two are a contradiction named with the fix."""
+    derived, tables = {}, {}
+    if "section" in ln:
+        tables["section"], props = section_properties(ln["section"], f"{where}.section")
+        derived.update(area=props.area, second_moment=props.second_moment, half_depth=props.half_depth)
+    if "material" in ln:
+        mat = material_values(ln["material"], f"{where}.material")
+        tables["material"] = copy.deepcopy(ln["material"])   # as given: a name or a table (written back as is)
+        derived.update(youngs_modulus=mat["youngs_modulus"], density=mat["density"])
+        if "yield_strength" in mat:
+            derived["yield_strain"] = mat["yield_strength"] / mat["youngs_modulus"]
+    for key, val in derived.items():
+        if key in ln and key != "yield_strain":
+            given = v.num(ln, key, where, positive=True)
+            if abs(given - val) > 1e-9 * abs(val):
+                src = "section" if key in FROM_SECTION else "material"
+                raise CaseError(f"{where}.{key}", f"({given:g}) disagrees with the link's {src} (which gives "
+                                                  f"{val:g}); give one of the two: remove {key} or remove {src}")
+    if "yield_strain" in ln:
+        derived.pop("yield_strain", None)
+    return derived, tables
+
+
+def derived_keys(ln: dict) -> tuple:
+    """The keys of a resolved link table that its section and material give (left out of a written case)."""
+    out = (FROM_SECTION if "section" in ln else ()) + (FROM_MATERIAL if "material" in ln else ())
+    mat = material_values(ln["material"], "material") if "material" in ln else {}
+    if "yield_strength" in mat and "yield_strain" in ln and \
+            abs(ln["yield_strain"] - mat["yield_strength"] / mat["youngs_modulus"]) <= 1e-12 * ln["yield_strain"]:
+        out += ("yield_strain",)
+    return out
 
 
 def link_section(ln: dict, where: str) -> dict:
-    """The validated section and mass entries of a link table (shared by the templates)."""
+    """The validated section and mass entries of a link table (shared by the templates): a ``section``
+    table gives area, second moment and half depth, a ``material`` Young's modulus, density and the
+    yield strain (docs/cases.md, "Sections and materials")."""
+    derived, tables = _given_by(ln, where)
+    ln = {**ln, **derived}
+    d = _raw_section(ln, where)
+    d.update(tables)
+    return d
+
+
+def _raw_section(ln: dict, where: str) -> dict:
     rigid = ln.get("rigid", False)
     if not isinstance(rigid, bool):
         raise CaseError(f"{where}.rigid", f"must be true or false, got {rigid!r}")
@@ -334,7 +387,7 @@ def mechanism_spec(mech: Mechanism) -> dict:
         if ln.nominal_length is not None:
             d["length"] = ln.nominal_length
         for key in ("area", "second_moment", "youngs_modulus", "density", "half_depth", "elements", "yield_strain",
-                    "mass", "inertia"):
+                    "mass", "inertia", "section", "material"):
             if getattr(ln, key) is not None:
                 d[key] = getattr(ln, key)
         if ln.rigid:

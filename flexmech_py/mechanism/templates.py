@@ -47,7 +47,7 @@ def expand_template(raw: dict) -> dict:
     for i, ln in enumerate(links):
         w = f"links[{i}]"
         v.keys(ln, {"name", "length", "area", "second_moment", "youngs_modulus", "density", "half_depth", "elements",
-                    "yield_strain", "rigid", "mass", "inertia", "centre", "points"}, w)
+                    "yield_strain", "rigid", "mass", "inertia", "centre", "points", "section", "material"}, w)
         v.identifier(ln, "name", w, {x["name"] for x in links[:i] if isinstance(x, dict)})
         link_section(ln, w)
         v.num(ln, "length", w, positive=True, required=True)
