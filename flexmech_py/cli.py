@@ -14,6 +14,8 @@
     flexmech sweep CASE.toml --sample KEY.PATH=normal:MEAN:SD [--sample ...] --samples N [--seed S] [--method lhs]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
     flexmech bench [--quick] [--out DIR] [--cases DIR]
+    flexmech optimize CASE.toml --vary KEY.PATH=LO:HI [...] --objective Q [--constraint "Q <= V" ...] [--method M]
+(run and steady take --stress and --fatigue CORRECTION, run also --window T0:T1: docs/cli.md "Design")
 
 The multi-run commands (sweep, stability, accuracy, compare --models) run on the local process
 pool (--jobs N) or, with --scheduler tcp://HOST:PORT | local:N (or FLEXMECH_SCHEDULER), on Dask.
@@ -34,6 +36,7 @@ from pathlib import Path
 
 from . import notices
 from .case import MODELS as MODELS_ALL
+from .cli_design import add_design_options, add_optimize_parser, design_analysis, print_design, write_design
 from .errors import FlexmechError
 
 __all__ = ["main"]
@@ -103,6 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run even when timeseries.csv would not fit on the disk of --out")
     r.add_argument("--overwrite", action="store_true",
                    help="replace the results of another run found in --out (files flexmech writes only)")
+    add_design_options(r)
 
     rp = sub.add_parser("reproduce", help="regenerate the seed paper's Figs. 3-12 and a Markdown report")
     rp.add_argument("--out", default="reproduce", help="output folder (default: ./reproduce)")
@@ -155,6 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     sd.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
     sd.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>-steady)")
     sd.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
+    add_design_options(sd, window=False)
 
     dr = sub.add_parser("draw", help="draw the mechanism at frames of a run written with `flexmech run --draw`")
     dr.add_argument("result", help="a folder written by `flexmech run --draw` (its shape.csv and summary.json)")
@@ -203,6 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", default=None, help="output folder (default: results/<case name>-sweep, or -samples); "
                                                 "finished runs are cached in OUT/cache")
     sw.add_argument("--no-plots", action="store_true", help="do not write samples.png (--sample)")
+    add_optimize_parser(sub, _add_scheduler, _positive_int)
     b = sub.add_parser("bench", help="measure kernel, start-up, memory and solver costs (docs/performance.md)")
     b.add_argument("--quick", action="store_true", help="a reduced ladder (1..8 elements per link, fewer steps)")
     b.add_argument("--out", default="bench", help="output folder for the CSV files and bench.png (default: ./bench)")
@@ -330,16 +336,21 @@ def _cmd_steady(args) -> int:
 
     case = load_case(args.case, overrides=args.set)
     pc = PeriodicCase(case, args.model, geometric=args.geometric)
+    da = design_analysis(args, pc.case, pc.fe, steady=True)
     with ResultFolder(_out(args, f"{pc.model}-steady"), "steady") as rf:
         fr = floquet(pc)
         res = steady_state(pc, fr)
-        paths = res.write(rf.stage)
+        if da is not None:
+            da.add(res)
+        design_paths = write_design(da, res, rf.stage, plots=not args.no_plots) if da is not None else []
+        paths = res.write(rf.stage) + design_paths
         if not args.no_plots:
             from .plots import plot_result
 
             paths += plot_result(res, rf.stage)
         rf.commit()
     print(res.table())
+    print_design(da)
     f = res.extra["floquet"]
     print(f"period {pc.period:.6g} s in {pc.nsteps} steps; largest Floquet multiplier |mu| = {f['max_abs_multiplier']:.8g} "
           f"({'stable' if f['stable'] else 'UNSTABLE'}); cond(I - Phi) = {f['cond_I_minus_Phi']:.3g}; "
@@ -549,11 +560,12 @@ def _cmd_reproduce(args) -> int:
 
 
 def _commands() -> dict:
+    from .cli_optimize import cmd_optimize
     from .cli_run import cmd_draw, cmd_run
 
     return {"run": cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
             "steady": _cmd_steady, "modes": _cmd_modes, "draw": cmd_draw, "sweep": _cmd_sweep, "bench": _cmd_bench,
-            "accuracy": _cmd_accuracy}
+            "accuracy": _cmd_accuracy, "optimize": lambda args: cmd_optimize(args, _scheduler(args))}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from .cli_design import design_analysis, print_design, write_design
 from .errors import FlexmechError, Interrupted, MechanismError, OutputError, SolverError
 from .names import safe_name
 from .outdir import ResultFolder, claim
@@ -69,13 +70,14 @@ def cmd_run(args) -> int:
     model = args.model or prep.case["solver"]["model"]
     out = args.out if args.out is not None else Path("results") / f"{safe_name(Path(args.case).stem)}-{model}"
     shapes = _shapes(args, prep, model)
+    design = design_analysis(args, prep.case, prep.coupled[model].mesh if model in prep.coupled else prep.fe)
     stopped, paths = None, []
     with ResultFolder(out, "run", claim=lambda: claim(out, prep.case, args.overwrite), overwrite=args.overwrite) as rf:
         sink = FileSink(rf.stage, frames_total=prep.frames, force=args.force)
         progress = RunProgress(lambda: _run_cost(prep, model, sink), bar=True if args.progress else None,
                                quiet=args.quiet)
         try:
-            res = execute(prep, model, sink, progress=progress, observers=[shapes] if shapes else [])
+            res = execute(prep, model, sink, progress=progress, observers=[o for o in (shapes, design) if o])
         except (Interrupted, SolverError, MechanismError, OutputError) as exc:   # frames so far written, marked
             progress.close()
             if getattr(exc, "partial", None) is None:
@@ -84,27 +86,30 @@ def cmd_run(args) -> int:
             stopped = exc
         else:
             progress.close(finished=True)
-            paths = _extras(res, shapes, sink, rf.stage, plots=not args.no_plots)
+            paths = _extras(res, shapes, sink, rf.stage, plots=not args.no_plots, design=design)
             rf.commit()
     if stopped is not None:
         return _report_stopped(stopped, [rf.where(p) for p in sink.paths], rf)
     print(res.table())
+    print_design(design)
     print("wrote " + ", ".join(str(rf.where(p)) for p in paths))
     for w in res.extra.get("warnings", []):
         print(f"flexmech: warning: {w}", file=sys.stderr)
     return 0
 
 
-def _extras(res, shapes, sink, stage: Path, plots: bool) -> list[Path]:
-    """The drawing and the plots of a completed run, and its summary listing every file."""
+def _extras(res, shapes, sink, stage: Path, plots: bool, design=None) -> list[Path]:
+    """The drawing, the design files and the plots of a completed run, and its summary listing every file."""
     paths = list(sink.paths)
+    if design is not None:
+        paths += write_design(design, res, stage, plots=plots)
     if shapes is not None:
         paths += _write_drawing(res, shapes.result(), stage, plots=plots)
     if plots:
         from .plots import plot_result
 
         paths += plot_result(res.plot_view(), stage)
-    if len(paths) > len(sink.paths):
+    if len(paths) > len(sink.paths) or design is not None:
         res.extra["files"] = [p.name for p in paths]
         res.write_summary(stage)
     return paths
