@@ -61,13 +61,17 @@ def cmd_optimize(args, scheduler) -> int:
 def _print_result(r: dict, paths) -> None:
     word = "optimum" if r["feasible"] else "no feasible design; the least infeasible"
     print(f"{word}: " + ", ".join(f"{k} = {v:.6g}" for k, v in r["optimum"].items())
-          + f"; {r['objective']} = {r['objective_value']:.6g}")
+          + f"; {r['objective']} = {_num(r['objective_value'])}")
     for c in r["constraints"]:
         state = "active" if c["active"] else ("met" if c["met"] else "VIOLATED")
-        print(f"  {c['constraint']}: {c['value']:.6g} ({state}, margin {c['margin']:+.3g})")
+        print(f"  {c['constraint']}: {_num(c['value'])} ({state}, margin {c['margin']:+.3g})")
     print(f"{r['evaluations']} designs ({r['computed']} computed, {r['cached']} cached) in {r['wall_s']:.1f} s; "
           f"{r['method']}")
     print("wrote " + ", ".join(str(p) for p in paths))
     if not r["feasible"]:
         print(f"flexmech: error: no design within the bounds meets the constraints (exit {EXIT_INFEASIBLE}); widen "
               "the bounds or relax a constraint", file=sys.stderr)
+
+
+def _num(x) -> str:
+    return "n/a (the design's run failed)" if x is None else f"{x:.6g}"

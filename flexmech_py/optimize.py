@@ -98,8 +98,8 @@ class Evaluator:
     def scaled_objective(self, u) -> float:
         row = self.get(u)[0]
         f = row["objective"]
-        if not math.isfinite(f):        # a failed design: well behind the start
-            return 1e3
+        if not math.isfinite(f):        # a failed design: well behind the start (its margins are -1)
+            return 10.0
         return f / (self.f_scale or 1.0)
 
     def margins(self, u) -> np.ndarray:

@@ -32,6 +32,9 @@ __all__ = ["Variable", "Constraint", "Problem", "parse_vary", "parse_constraint"
 
 #: quantities that need the fatigue count (the others do not pay for it)
 FATIGUE_QUANTITIES = ("life", "life_hours")
+#: a life constraint's margin is its decades over this: about 1 / |Basquin exponent|, the decades of life a
+#: relative stress change of one decade makes, so that its margin weighs like a stress margin
+LIFE_DECADES = 10.0
 _LINK_QUANTITIES = ("mass", "peak_stress", "safety_factor", "life")
 _CONSTRAINT = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_.]*)\s*(<=|>=)\s*(\S+)\s*$")
 
@@ -50,12 +53,12 @@ class Constraint:
     limit: float
 
     def margin(self, value) -> float:
-        """Signed margin, >= 0 when met, finite: relative to the limit (lives: in decades, log10); a
-        design without the value (a failed run) -1."""
+        """Signed margin, >= 0 when met, finite: relative to the limit (lives: decades over LIFE_DECADES,
+        a life below one cycle counted as one); a design without the value (a failed run) -1."""
         if value is None or math.isnan(value):
             return -1.0
-        if self.quantity.split(".")[-1] in FATIGUE_QUANTITIES:
-            d = math.log10(min(max(value, 1e-300), 1e300)) - math.log10(self.limit)
+        if self.quantity.split(".")[-1] in FATIGUE_QUANTITIES:   # decades of life over LIFE_DECADES: a stress
+            d = (math.log10(min(max(value, 1.0), 1e300)) - math.log10(self.limit)) / LIFE_DECADES   # margin's size
         else:
             d = (min(value, 1e300) - self.limit) / abs(self.limit)
         d = max(min(d, 1e6), -1e6)
