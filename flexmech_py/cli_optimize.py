@@ -16,6 +16,7 @@ from .errors import CaseError
 from .optimize import EXIT_INFEASIBLE, optimize, optimum_case_text, write_outputs
 from .optimize_problem import Problem, parse_constraint, parse_vary
 from .outdir import ResultFolder
+from .parallel import using_executor
 from .sweep import load_base
 
 __all__ = ["cmd_optimize"]
@@ -41,9 +42,9 @@ def cmd_optimize(args, scheduler) -> int:
     case = validate_case(copy.deepcopy(base), source=str(path))
     problem = _problem(args, case)
     out = Path(args.out) if args.out is not None else Path("results") / f"{path.stem}-optimize"
-    with ResultFolder(out, "optimize") as rf:
-        result = optimize(problem, base, path.name, model=args.model, method=args.method, executor=scheduler,
-                          out=rf.stage, maxiter=args.maxiter, popsize=args.popsize, seed=args.seed,
+    with using_executor(scheduler, args.jobs) as executor, ResultFolder(out, "optimize") as rf:   # connect first
+        result = optimize(problem, base, path.name, model=args.model, method=args.method, executor=executor,
+                          cache=rf.out / "cache", maxiter=args.maxiter, popsize=args.popsize, seed=args.seed,
                           progress=sys.stderr.isatty())
         head = (f"# flexmech optimize: {'optimum' if result['feasible'] else 'NO FEASIBLE DESIGN: the least infeasible'}"
                 f" of {path.name} ({problem.objective}; {', '.join(map(str, problem.constraints)) or 'no constraints'})\n")

@@ -187,13 +187,15 @@ def run_evolution(ev: Evaluator, maxiter: int, popsize: int, seed: int, iterates
                                      polish=False, updating="deferred", workers=generation, callback=note, tol=1e-3)
 
 
-def optimize(problem, raw: dict, source: str, *, model=None, method: str = "slsqp", executor=None, out=None,
+def optimize(problem, raw: dict, source: str, *, model=None, method: str = "slsqp", executor=None, cache=None,
              maxiter: int = 30, popsize: int = 6, seed: int = 1, progress: bool = False) -> dict:
-    """Solve ``problem`` for the case ``raw``; returns the result dict (optimize.json)."""
+    """Solve ``problem`` for the case ``raw`` (its designs on ``executor``: an open executor, a scheduler
+    address, or None for the local pool; cached in the folder ``cache``); returns the result dict
+    (optimize.json)."""
     if method not in METHODS:
         raise CaseError("--method", f"must be one of {', '.join(METHODS)}, got {method!r}")
     t0 = time.perf_counter()
-    ev = Evaluator(problem, raw, source, model, executor, None if out is None else out / "cache", progress)
+    ev = Evaluator(problem, raw, source, model, executor, cache, progress)
     iterates: list = []
     u0 = np.array([(_start(raw, v) - v.low) / (v.high - v.low) for v in problem.variables])
     u0 = np.clip(u0, 0.0, 1.0)

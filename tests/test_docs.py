@@ -174,6 +174,9 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
     if argv[0] == "modes":
         assert list(tmp_path.rglob("modes.csv")) and list(tmp_path.rglob("mode_shapes.csv"))
         return
+    if argv[0] == "optimize":
+        assert list(tmp_path.rglob("optimize.json")) and list(tmp_path.rglob("optimum.toml"))
+        return
     if argv[0] in ("stability", "sweep", "accuracy"):   # their tables: stability.csv, sweep.csv, accuracy.csv
         assert list(tmp_path.rglob("samples.csv" if "--sample" in argv else f"{argv[0]}.csv"))
         return
