@@ -103,8 +103,9 @@ def plot_convergence(path, rows: list[dict], objective: str, title: str) -> Path
     ax0.set_ylabel(objective)
     ax0.legend(fontsize=8)
     ax0.grid(alpha=0.3)
-    ax1.semilogy(k, np.maximum(viol, 1e-16), ".", ms=3, color="C3")
-    ax1.set_ylabel("largest constraint\nviolation (relative)")
+    if np.any(~ok):
+        ax1.semilogy(k[~ok], np.maximum(viol[~ok], 1e-12), "x", ms=4, color="C3")
+    ax1.set_ylabel("largest violation of\nan infeasible design")
     ax1.set_xlabel("evaluation")
     ax1.grid(alpha=0.3)
     fig.suptitle(title, fontsize=10)
