@@ -192,7 +192,9 @@ def design_lines(rep: dict) -> list[str]:
             cyc = f"{f['life_cycles']:.3g} crank cycles, " if f["life_cycles"] is not None else ""
             span = f.get("life_hours_interval")
             span_txt = f" [{span[0]:.3g}..{span[1]:.3g} h]" if span else ""
-            out.append(f"fatigue {name} ({fat_rep['correction']}): life {cyc}{f['life_hours']:.3g} h{span_txt} at "
+            life = (f"{cyc}{f['life_hours']:.3g} h{span_txt}" if f["damage_per_history"] != float("inf") else
+                    "none: a cycle's mean stress reaches the ultimate strength")
+            out.append(f"fatigue {name} ({fat_rep['correction']}): life {life} at "
                        f"{c['fraction']:.3g} L ({c['fibre']} fibre); damage {f['damage_per_history']:.3g} per "
                        f"{fat_rep['history_s']:.4g} s")
     cost = rep["cost"]

@@ -47,6 +47,16 @@ def _mechanism_panel(ax, case, env, config, vmax, plt):
     return lc
 
 
+def _finish(fig, path, title: str, plt) -> Path:
+    """Title, layout, the file written (naming it when the write fails), the figure closed."""
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    save_figure(fig, path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def plot_stress_envelope(path, case, env, title: str) -> Path | None:
     """stress_envelope.png: the mechanism at the window's first frame with each flexible link coloured by
     the largest |outer-fibre stress| at its stations, and the envelope (largest tension, largest
@@ -74,12 +84,7 @@ def plot_stress_envelope(path, case, env, title: str) -> Path | None:
     ax1.set_title("envelope over the frames (dotted: +-yield strength)", fontsize=9)
     ax1.legend(fontsize=7, ncol=2)
     ax1.grid(alpha=0.3)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    save_figure(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return _finish(fig, path, title, plt)
 
 
 def plot_convergence(path, rows: list[dict], objective: str, title: str) -> Path | None:
@@ -108,9 +113,4 @@ def plot_convergence(path, rows: list[dict], objective: str, title: str) -> Path
     ax1.set_ylabel("largest violation of\nan infeasible design")
     ax1.set_xlabel("evaluation")
     ax1.grid(alpha=0.3)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    save_figure(fig, path, dpi=110)
-    plt.close(fig)
-    return path
+    return _finish(fig, path, title, plt)

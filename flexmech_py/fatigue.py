@@ -122,15 +122,16 @@ def link_fatigue(name: str, length: float, fractions: np.ndarray, sig: np.ndarra
     at times t); the critical station and the cycles that dominate its damage."""
     _check_material(name, mat)
     dmg = np.zeros(sig.shape[:2])
-    best = (-1.0, 0, 0, None, None)
+    best = (-1.0, -1.0, 0, 0, None, None)
     for f in range(sig.shape[0]):
         for k in range(sig.shape[1]):
             cyc = rainflow_cycles(sig[f, k, :-1])     # the last frame repeats the first
             d = cycle_damage(cyc, mat, correction)
             dmg[f, k] = float(d.sum())
-            if dmg[f, k] > best[0]:
-                best = (dmg[f, k], f, k, cyc, d)
-    total, f, k, cyc, d = best
+            key = (dmg[f, k], float(np.max(np.abs(sig[f, k]))))   # infinite damage: the most stressed station
+            if key > best[:2]:
+                best = (*key, f, k, cyc, d)
+    total, _, f, k, cyc, d = best
     top = np.argsort(-d)[:TOP_CYCLES] if d is not None and d.size else []
     cycles = [{"range_Pa": float(cyc[i, 0]), "mean_Pa": float(cyc[i, 1]), "count": float(cyc[i, 2]),
                "t_start_s": float(t[int(cyc[i, 3])]), "damage_share": _share(d[i], total)}
