@@ -24,7 +24,7 @@ from flexmech_py.simulate import Prepared
 from flexmech_py.stress import link_stations, station_values
 
 DATA = Path(__file__).parent / "data"
-BEAM = Path(__file__).parents[1] / "cases" / "rotating_beam.toml"
+BEAM = Path(__file__).parent / "data" / "rotating_beam.toml"
 FLEXMECH = [sys.executable, "-m", "flexmech_py"]
 
 PINNED = """

@@ -17,7 +17,7 @@ from flexmech_py.materials import MATERIALS
 from flexmech_py.optimize import EXIT_INFEASIBLE, optimize
 from flexmech_py.optimize_problem import Problem, parse_constraint, parse_vary
 
-BEAM = Path(__file__).parents[1] / "cases" / "rotating_beam.toml"
+BEAM = Path(__file__).parent / "data" / "rotating_beam.toml"
 FLEXMECH = [sys.executable, "-m", "flexmech_py"]
 LIMIT = 16e6      # Pa
 FAST = ["solver.output_every=10"]
