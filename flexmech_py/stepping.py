@@ -87,13 +87,15 @@ class RigidBuffer:
         self.source = MotionSource(self.setup, rtol=sol["rigid_rtol"], atol=sol["rigid_atol"], hmax=sol["t_end"])
         self.positions = force_constant_positions(packed)
         self.current = None
+        self.ahead = RIGID_AHEAD        # steps sampled ahead: from one after a change of effort, doubling
 
     def chunk(self, i: int, k: int) -> tuple[RigidChunk, int]:
         """(chunk, position of step i in it) of a chunk holding steps i..i+k."""
         c = self.current
         if c is None or i < c.i0 or i + k > c.i0 + c.rm.t.size - 1:
-            end = min(self.prep.nsteps, max(i + k, i + RIGID_AHEAD))
+            end = min(self.prep.nsteps, max(i + k, i + self.ahead))
             c = self.current = RigidChunk(i, self.source(self.prep.times(i, end)))
+            self.ahead = min(2 * self.ahead, RIGID_AHEAD)
         return c, i - c.i0
 
     def set_constants(self, values: dict, i: int) -> None:
@@ -102,7 +104,7 @@ class RigidBuffer:
         for joint, value in values.items():
             self.setup.packed.rspec[self.positions[joint]] = float(value)
         self.source.restart_at(float(c.rm.t[a]), c.rm.z[a], c.rm.zd[a])
-        self.current = None
+        self.current, self.ahead = None, 1
 
     def copy(self) -> "RigidBuffer":
         other = copy.copy(self)

@@ -197,7 +197,8 @@ class MotionSource:
         z, zd = np.asarray(z, float), np.asarray(zd, float)
         self._state, status = kernels.mbs.mbs_dynamic_start(nst, p.ispec, p.rspec, float(t), z, zd, self.rtol,
                                                             self.atol, self.hmax, self.tol)
-        kernels.check_status(status, "rigid-body dynamics (restart)", time=float(t), detail=self._detail(z, float(t)))
+        if status:
+            kernels.check_status(status, "rigid-body dynamics (restart)", time=float(t), detail=self._detail(z, float(t)))
         self._t_from = float(t)
 
     def fork(self) -> "MotionSource":
