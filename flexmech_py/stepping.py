@@ -279,7 +279,25 @@ def _grouped(frames, idx: int):
     return RigidMotion.concat(parts), [f[idx:] for f in frames]
 
 
-class SuperpositionStepper:
+class RecordedFrames:
+    """What both families' steppers share: the recorded frames (``frames``) and the current one
+    (``current()``) evaluated into Results by the family's ``_block``."""
+
+    frames: list
+
+    def recorded(self) -> int:
+        return len(self.frames)
+
+    def current_block(self, step: int) -> Result:
+        return self._block([self.current()], step, step)
+
+    def result(self, step: int) -> Result:
+        if not self.frames:
+            raise ValueError("no frame recorded yet: advance the simulation first")
+        return self._block(self.frames, step, 0)
+
+
+class SuperpositionStepper(RecordedFrames):
     """The superposition models' elastic loop (flexmech_ked) continued call by call."""
 
     def __init__(self, prep: Prepared, model: str, rigid: RigidBuffer):
@@ -324,9 +342,6 @@ class SuperpositionStepper:
                 self.frames.append((c, a + j * every, tuple(x[:, j] for x in out[:4])))
         self.last = (c, a + k, tuple(x[:, -1] for x in out[:4]))
 
-    def recorded(self) -> int:
-        return len(self.frames)
-
     def save(self) -> dict:
         return {"state": dict(self.state), "last": self.last}
 
@@ -355,16 +370,9 @@ class SuperpositionStepper:
         acc.deflection = DeflectionReference(self.prep.case, self.prep.setup)
         return self.prep.superposition_block(self.model, self.sol, rm, i0, cols, None, acc, step, every=1)
 
-    def current_block(self, step: int) -> Result:
-        return self._block([self.current()], step, step)
-
-    def result(self, step: int) -> Result:
-        if not self.frames:
-            raise ValueError("no frame recorded yet: advance the simulation first")
-        return self._block(self.frames, step, 0)
 
 
-class CoupledStepper:
+class CoupledStepper(RecordedFrames):
     """The coupled and nonlinear models' loop (flexmech_coupled_run) continued call by call.  A frame's
     Newton iterations and multiplier alternation are the largest since the run's previous frame,
     over the calls between them, as in a batch run."""
@@ -413,9 +421,6 @@ class CoupledStepper:
                     self.since = (0.0, 0.0)
         self.last = (c, a + k, cval[:, :, -1], tuple(x[:, -1] for x in out[:5]), la[:, -1])
 
-    def recorded(self) -> int:
-        return len(self.frames)
-
     def save(self) -> dict:
         return {"state": self.state, "iters": self.iters, "last": self.last, "first": self.first, "since": self.since}
 
@@ -452,10 +457,3 @@ class CoupledStepper:
         return self.prep.coupled_block(self.cm, self.model, rm, np.asfortranarray(cval), i0, cols, self.iters, None,
                                        diag, acc, step, every=1, alternating=la)
 
-    def current_block(self, step: int) -> Result:
-        return self._block([self.current()], step, step)
-
-    def result(self, step: int) -> Result:
-        if not self.frames:
-            raise ValueError("no frame recorded yet: advance the simulation first")
-        return self._block(self.frames, step, 0)
