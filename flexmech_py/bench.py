@@ -40,6 +40,7 @@ from .errors import FlexmechError
 from .inputs import checked_file, checked_folder
 from .outdir import ResultFolder
 from .plots import save_figure
+from .bench_stepping import bench_stepping
 
 __all__ = ["run_bench", "flops_superposition", "flops_newton", "fit_exponent"]
 
@@ -595,15 +596,20 @@ def _measure(out: Path, cases: Path, quick: bool, progress) -> dict:
     progress("side by side with Exudyn (seed four-bar, seed manipulator)")
     exudyn = bench_side_by_side(seed, quick, progress)
     exudyn_manipulator = bench_side_by_side_manipulator(cases, quick, progress)
+    progress("stepping from Python, one step per call (seed four-bar)")
+    stepping = bench_stepping(seed, quick, progress)
 
     summary = (_startup_rows(startup, peak) + _seed_rows(seeds, ref) + _scaling_rows(ladder, solves)
-               + _memory_rows(memory) + _exudyn_rows(exudyn, exudyn_manipulator))
+               + _memory_rows(memory) + _exudyn_rows(exudyn, exudyn_manipulator)
+               + [{"metric": f"stepping_ratio_{r['model']}", "value": r["ratio"], "unit": "1",
+                   "note": f"{r['overhead_us_per_call']:.3g} us per call"} for r in stepping])
     summary.append({"metric": "bench_wall", "value": time.perf_counter() - t_all, "unit": "s", "note": "quick" if quick else "full"})
 
     paths = [out / "bench_ladder.csv", out / "bench_solves.csv", out / "bench_summary.csv", out / "bench_seed.csv"]
     for path, rows in zip(paths, (ladder, solves, summary, seeds)):
         _write_csv(path, rows)
-    for name, rows in (("bench_exudyn.csv", exudyn), ("bench_exudyn_manipulator.csv", exudyn_manipulator)):
+    for name, rows in (("bench_stepping.csv", stepping), ("bench_exudyn.csv", exudyn),
+                       ("bench_exudyn_manipulator.csv", exudyn_manipulator)):
         if rows:
             paths.append(out / name)
             _write_csv(paths[-1], rows)
@@ -611,7 +617,8 @@ def _measure(out: Path, cases: Path, quick: bool, progress) -> dict:
     if png is not None:
         paths.append(png)
     return {"startup": startup, "seeds": seeds, "peak": peak, "ladder": ladder, "reference": ref, "solves": solves,
-            "memory": memory, "exudyn": exudyn, "exudyn_manipulator": exudyn_manipulator, "summary": summary,
+            "memory": memory, "stepping": stepping, "exudyn": exudyn, "exudyn_manipulator": exudyn_manipulator,
+            "summary": summary,
             "paths": paths}
 
 
@@ -638,6 +645,9 @@ def report(res: dict) -> str:
            table(res["solves"], ["elements_per_link", "dofs", "bandwidth", "banded_us", "dense_us"]),
            "", "long runs (output every 1000th step)",
            table(res["memory"], ["steps", "frames", "tracemalloc_peak_MB", "maxrss_MB", "wall_s"]),
+           "", "stepping from Python, one step per call, against the batch run (seed four-bar; CPU)",
+           table(res["stepping"], ["model", "steps", "batch_us_per_step", "ratio", "overhead_us_per_call",
+                                   "max_rel_difference"]),
            "", "side by side with Exudyn (seed four-bar, dt = 1.25e-5 s, generalized-alpha 0.8; CPU of the time integration)",
            table(res["exudyn"], ["model", "elements_per_link", "steps", "flexmech_cpu_s", "exudyn_cpu_s", "speedup",
                                  "newton_per_step", "strain_coupler_diff", "strain_follower_diff", "first_revolution_s",

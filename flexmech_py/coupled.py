@@ -13,7 +13,7 @@ import numpy as np
 
 from . import kernels
 from .coupled_layout import CON_ANGLE, CON_POINT, CON_PROJECTION, Layout, LinkMesh, Row, SharedAngles, \
-    flat_description, marker_key, node_segment, start_value
+    flat_description, force_constant_positions, marker_key, node_segment, start_value
 
 __all__ = ["CoupledModel", "LinkMesh", "validity", "CON_POINT", "CON_ANGLE", "CON_PROJECTION"]
 
@@ -126,6 +126,16 @@ class CoupledModel:
             elif r.value[0] == "start":
                 out[0, i] = start_value(self.case.mechanism, start, r.value[1], r.value[2])
         return np.asfortranarray(out)
+
+    def set_force_constants(self, values: dict) -> None:
+        """Set the ``constant`` [N m or N] of the force drives of the joints in ``values`` in the flat
+        descriptions the kernels read: the runs and evaluations after the call apply it."""
+        self._spec((0.0, 0.0), (0.0, 0.0))
+        self._spec((0.0, 0.0), (0.0, 0.0), kernel=True)
+        for ispec, rspec in {id(f): f for f in (self._flat, self._kflat) if f is not None}.values():
+            pos = force_constant_positions(self.layout, rspec.size, ispec)
+            for joint, value in values.items():
+                rspec[pos[joint]] = float(value)
 
     # ------------------------------------------------------------------ kernel calls
     def _spec(self, gravity, rayleigh, kernel=False):

@@ -27,7 +27,7 @@ from .model import link_mesh, rcm_free_numbering, uniform_mesh
 
 __all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "JOINT_ROWS", "HOLDING", "CON_POINT", "CON_ANGLE",
            "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",
-           "start_value", "flat_description"]
+           "start_value", "flat_description", "force_constant_positions"]
 
 # constraint kinds (flexmech_markers) and marker kinds (flexmech_coupled_system)
 CON_POINT, CON_ANGLE, CON_PROJECTION = 1, 2, 3
@@ -459,6 +459,16 @@ class SharedAngles:
 
 
 # ----------------------------------------------------------------------------- the flat description
+def force_constant_positions(lay: Layout, rspec_size: int, ispec: np.ndarray) -> dict:
+    """{joint: index in rspec} of the ``constant`` of every force drive in a flat description (ispec,
+    rspec of :func:`flat_description`, with or without shared angles): its law's first parameter,
+    counted from the end of rspec (the laws' parameters, harmonics and tables, then gravity and
+    Rayleigh damping close it)."""
+    nforce, nh, nth, ntab = (int(x) for x in ispec[8:12])
+    first = rspec_size - 4 - 5 * ntab - 3 * nth * nforce - 2 * nh * nforce - 4 * nforce
+    return {d.joint: first + 4 * k for k, (_, d) in enumerate(lay.forces)}
+
+
 def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0),
                      shared: SharedAngles | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(ispec, rspec) of flexmech_coupled_system: coupled_build (layout documented there); with ``shared``

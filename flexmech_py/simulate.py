@@ -375,7 +375,7 @@ class Prepared:
             sol["geometric_stiffness"] = geometric
         integ = integrator_of(sol, model)
         am, af_, beta, gamma = integrator_coefficients(integ["integrator"], integ)
-        acc = _Accumulated()
+        acc = Accumulated()
         state, prev = {"u0": u0, "v0": v0}, None
         acc.deflection = DeflectionReference(self.case, self.setup)
         for i0, i1, rm in self._chunks(3 * fe.nfree + 4 * fe.ndof + fe.nel, acc.clock):
@@ -397,26 +397,30 @@ class Prepared:
                     raise
                 k, d = guards.frames_before(exc.step, oe), exc.data
                 acc.geo_iters += int(d["geo_iters"])
-                exc.partial = self._superposition_block(model, sol, rm, i0, [d[n][:, :k] for n in ("uf", "vf", "af", "nf")],
+                exc.partial = self.superposition_block(model, sol, rm, i0, [d[n][:, :k] for n in ("uf", "vf", "af", "nf")],
                                                         prev, acc, i0 + exc.step)
                 exc.step += i0                  # the chunk's step -> the run's step (exc.time is already global)
                 exc.data = dict(d, cm=None, geometric=sol["geometric_stiffness"])
                 raise
             acc.add_time("kernel", t0, c0)
             acc.geo_iters += int(out[4])
-            block = self._superposition_block(model, sol, rm, i0, out[:4], prev, acc, i1)
+            block = self.superposition_block(model, sol, rm, i0, out[:4], prev, acc, i1)
             lr = fe.last_run                    # the state at step i1: the next chunk continues from it
             state = {"u0": lr["u"], "v0": lr["v"], "a0": lr["a"], "p0": lr["p"]}
             prev = _last_values(block, prev)
             self.last_cpu = acc.cpu()
             yield block
 
-    def _superposition_block(self, model: str, sol: dict, rm: RigidMotion, i0: int, frames, prev, acc, steps_done):
+    def superposition_block(self, model: str, sol: dict, rm: RigidMotion, i0: int, frames, prev, acc, steps_done,
+                            every: int | None = None):
         """The block of a chunk's frames (uf, vf, af, nf over the free DOFs; frame 0 at step i0, the
-        previous block's last frame when i0 > 0, evaluated again for the continuity of angles and dropped)."""
+        previous block's last frame when i0 > 0, evaluated again for the continuity of angles and dropped);
+        ``rm`` the rigid motion at every ``every``-th of its samples per frame (default: at every step,
+        ``every = out_every``; 1 when rm holds the frames only)."""
         fe, case, oe = self.fe, self.case, self.out_every
         uf, vf, af, nf = frames
-        sel = slice(0, oe * (uf.shape[1] - 1) + 1, oe)
+        every = oe if every is None else every
+        sel = slice(0, every * (uf.shape[1] - 1) + 1, every)
         rmf = rm.select(sel)
         motion_f = rmf.motion
         rig_f = fe.rig_samples(rm, self.gravity, sel)
@@ -453,7 +457,7 @@ class Prepared:
         cm = self.coupled[model]
         integ = integrator_of(sol, model)
         am, af_, beta, gamma = integrator_coefficients(integ["integrator"], integ)
-        acc, diag = _Accumulated(), cpl_out.Diagnostics(cm)
+        acc, diag = Accumulated(), cpl_out.Diagnostics(cm)
         state, prev, first = None, None, None
         acc.deflection = DeflectionReference(case, self.setup)
         for i0, i1, rm in self._chunks(6 * cm.ndof + 3 * len(cm.markers), acc.clock):
@@ -473,24 +477,27 @@ class Prepared:
                     raise
                 k, d = guards.frames_before(exc.step, oe), exc.data
                 frames = [d[n][:, :k] for n in ("qf", "vf", "af", "lf", "ef")]
-                exc.partial = self._coupled_block(cm, model, rm, cval, i0, frames, d["iters"], prev, diag, acc,
+                exc.partial = self.coupled_block(cm, model, rm, cval, i0, frames, d["iters"], prev, diag, acc,
                                                   i0 + exc.step)
                 exc.data = dict(d, cm=cm, geometric="coupled", q_last=frames[0][:, -1])
                 exc.step += i0
                 raise
             acc.add_time("kernel", t0, c0)
-            block = self._coupled_block(cm, model, rm, cval, i0, (qf, vf, af, lf, ef), iters, prev, diag, acc, i1)
+            block = self.coupled_block(cm, model, rm, cval, i0, (qf, vf, af, lf, ef), iters, prev, diag, acc, i1)
             state, prev = cm.last_run, _last_values(block, prev)
             self.last_cpu = acc.cpu()
             yield block
 
-    def _coupled_block(self, cm, model: str, rm: RigidMotion, cval, i0: int, frames, iters: int, prev, diag, acc,
-                       steps_done: int):
-        """The block of a chunk's frames of the coupled or nonlinear model (frame 0 as in
-        :meth:`_superposition_block`)."""
+    def coupled_block(self, cm, model: str, rm: RigidMotion, cval, i0: int, frames, iters: int, prev, diag, acc,
+                      steps_done: int, every: int | None = None, alternating=None):
+        """The block of a chunk's frames of the coupled or nonlinear model (frame 0, ``rm`` and ``every`` as
+        in :meth:`superposition_block`, ``cval`` on rm's samples; ``alternating`` the multipliers'
+        alternating part per frame, default the last run's)."""
         case, sol, oe = self.case, self.case["solver"], self.out_every
         qf, vf, af, lf, ef = frames
-        idx = slice(0, oe * (qf.shape[1] - 1) + 1, oe)
+        every = oe if every is None else every
+        idx = slice(0, every * (qf.shape[1] - 1) + 1, every)
+        alternating = cm.last_run["la"][:, :qf.shape[1]] if alternating is None else alternating
         rmf = rm.select(idx)
         ref = rmf.motion
         fr = cpl_out.model_frames(cm, qf, vf, af, lf, rmf.t, self.gravity, sol["rayleigh"])
@@ -506,7 +513,7 @@ class Prepared:
         columns.update(_drive_columns(cm, fr, units))
         diag.add(fr, ef, rmf, iters, cval[:, :, idx])
         extra = {"integrator": integrator_summary(sol, model), "coupled": diag.summary(steps_done),
-                 "step_alternation": cpl_out.multiplier_alternation(cm, cm.last_run["la"][:, :qf.shape[1]], lf,
+                 "step_alternation": cpl_out.multiplier_alternation(cm, alternating, lf,
                                                                     rmf.t, _drive_column_joints(cm))}
         rig_chord = np.asfortranarray(np.stack([fr.chord.phi, fr.chord.omega, fr.chord.alpha,
                                                 fr.chord.ax - self.gravity[0],
@@ -535,7 +542,7 @@ class Prepared:
         res.extra["warning_kinds"] = {**notices.kinds_of(st.warnings, "mechanism"), **res.extra.get("warning_kinds", {})}
 
 
-class _Accumulated:
+class Accumulated:
     """What a run's blocks carry accumulated: wall and CPU time of the rigid motion, the kernel's
     samples and the kernel, geometric-stiffness iterations, the largest reaction residual."""
 

@@ -63,9 +63,30 @@ class RigidMotion:
     def __init__(self, setup: MotionSetup, t, z, zd, zdd, lam, jq, dv):
         self.setup = setup
         self.t, self.z, self.zd, self.zdd, self.lam, self.jq, self.dv = t, z, zd, zdd, lam, jq, dv
-        idx = [[j.name for j in setup.mech.joints].index(p) for p in setup.primary]
-        self.q, self.qd, self.qdd = (jq[:, idx, k] for k in range(3))
-        self.motion = _link_motion(setup.mech, z, zd, zdd)
+        self._motion = None
+
+    def _primary(self, k: int) -> np.ndarray:
+        names = [j.name for j in self.setup.mech.joints]
+        return self.jq[:, [names.index(p) for p in self.setup.primary], k]
+
+    @property
+    def q(self) -> np.ndarray:
+        return self._primary(0)
+
+    @property
+    def qd(self) -> np.ndarray:
+        return self._primary(1)
+
+    @property
+    def qdd(self) -> np.ndarray:
+        return self._primary(2)
+
+    @property
+    def motion(self) -> "LinkMotion":
+        """The links' LinkMotion (computed on first use)."""
+        if self._motion is None:
+            self._motion = _link_motion(self.setup.mech, self.z, self.zd, self.zdd)
+        return self._motion
 
     def select(self, idx) -> "RigidMotion":
         return RigidMotion(self.setup, self.t[idx], self.z[idx], self.zd[idx], self.zdd[idx], self.lam[idx],
@@ -163,6 +184,22 @@ class MotionSource:
                                                             self.atol, self.hmax, self.tol)
         kernels.check_status(status, "rigid-body dynamics (start)", time=0.0, detail=self._detail(st.z0, 0.0))
         self._t_from = 0.0
+
+    def restart_at(self, t: float, z, zd) -> None:
+        """Continue the motion from the state (z, zd) at time t [s] with the description as it is now
+        (a force drive's law changed at t, flexmech_py.stepping): the dynamic mode starts its
+        integration afresh there; the kinematic mode, whose samples do not depend on the force laws,
+        goes on as it was."""
+        if self.setup.mode == "kinematic":
+            return
+        p = self.setup.packed
+        nst = kernels.mbs.mbs_state_size(p.n)
+        z, zd = np.asarray(z, float), np.asarray(zd, float)
+        self._state, status = kernels.mbs.mbs_dynamic_start(nst, p.ispec, p.rspec, float(t), z, zd, self.rtol,
+                                                            self.atol, self.hmax, self.tol)
+        if status:
+            kernels.check_status(status, "rigid-body dynamics (restart)", time=float(t), detail=self._detail(z, float(t)))
+        self._t_from = float(t)
 
     def fork(self) -> "MotionSource":
         """An independent source at the same point of the motion (two grids followed in turn, e.g. a

@@ -16,7 +16,7 @@ from .drives import Drive
 from .system import Mechanism
 
 __all__ = ["Packed", "pack", "drawn_coordinates", "joint_coordinates", "marker_position", "row_scales",
-           "coordinate_drive"]
+           "coordinate_drive", "force_constant_positions"]
 
 
 @dataclass
@@ -145,6 +145,15 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
     return Packed(ispec=np.array(ispec, np.int32), rspec=np.array(rspec, float), n=3 * nb, nrow=row,
                   nj=len(mech.joints), lref=lref, joint_rows=joint_rows, drive_rows=drive_rows, drives=drives,
                   markers=markers)
+
+
+def force_constant_positions(packed: Packed) -> dict:
+    """{joint: index in packed.rspec} of the ``constant`` of every force drive (the first of its law's
+    four parameters, which flexmech_drivelaw adds to the effort at every evaluation): a caller that
+    changes it there changes the effort from the next evaluation on (flexmech_py.stepping)."""
+    nb, nmk, nj = (int(x) for x in packed.ispec[:3])
+    first = 2 * nb + 3 + 2 * nmk + 3 * nj          # masses, inertias, gravity, lref, markers, axes, refs
+    return {d.joint: first + 4 * k for k, d in enumerate(packed.drives) if not d.kinematic}
 
 
 def row_scales(mech: Mechanism, packed: Packed) -> np.ndarray:
