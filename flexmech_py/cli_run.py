@@ -48,13 +48,13 @@ def _shapes(args, prep, model):
     checked first.  ``--view`` keeps as many frames as the page holds (flexmech_py.view.decimate)."""
     from .shapes import ShapeCollector, body_points
     from .sizes import check_count, format_count
-    from .view.decimate import frames_for
+    from .view.decimate import frames_for, kept_points
 
     if args.draw is not None and args.draw < 2:
         raise FlexmechError(f"--draw: needs 2 frames or more, got {args.draw}")
     count = args.draw or 0
     if args.view:
-        count = max(count, frames_for(body_points(prep.case.mechanism, prep.fe.node_frac)[-1].sl.stop, prep.frames))
+        count = max(count, frames_for(kept_points(body_points(prep.case.mechanism, prep.fe.node_frac)), prep.frames))
     if not count:
         return None
     kept = min(count, prep.frames)
@@ -132,7 +132,7 @@ def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
     """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
     from .shapes import spread, write_shape_csv
 
-    head = [f"flexmech run --draw; case {res.case['case']['title']!r}; model {res.model}",
+    head = [f"flexmech run --draw/--view; case {res.case['case']['title']!r}; model {res.model}",
             "per frame (index, t [s]) every drawn point: x, y its rigid position [m]; dx, dy its elastic "
             "displacement [m]; rot the elastic rotation of its body there [rad]; kappa a flexible link's "
             "curvature at its nodes [1/m]"]

@@ -59,7 +59,11 @@ class Browser:
 
     def open(self, path: Path, timeout: float = 20.0) -> float:
         """Load a file and wait until its script says it is ready; the seconds from the navigation's
-        start to that moment (the browser's own clock)."""
+        start to that moment (the browser's own clock).  The logs of what came before (the browser's
+        own start page) are dropped first, so console() and requests() tell of this page only."""
+        self.driver.get("about:blank")
+        self.console()
+        self.requests()
         self.driver.get(Path(path).resolve().as_uri())
         end = time.time() + timeout
         while time.time() < end:

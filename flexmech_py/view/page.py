@@ -5,15 +5,18 @@ from __future__ import annotations
 
 import html
 import json
+import re
 from importlib import resources
 from pathlib import Path
 
 from ..errors import FlexmechError
 
-__all__ = ["render", "target", "PARTS"]
+__all__ = ["render", "target", "PARTS", "SCRIPTS"]
 
+#: the script of the page, in the order its parts run (one function scope; each file < 600 lines)
+SCRIPTS = ("view_core.js", "view_mechanism.js", "view_pages.js")
 #: the files of the page, installed with the package (flexmech_py/meson.build)
-PARTS = ("template.html", "view.css", "view.js")
+PARTS = ("template.html", "view.css") + SCRIPTS
 SUFFIXES = (".html", ".htm")
 
 
@@ -25,12 +28,11 @@ def render(data: dict, generator: str) -> str:
     """The HTML page of ``data`` (a payload of flexmech_py.view.*_data): the JSON inside a script
     element of type application/json, every ``<`` escaped so that no text of a result ends it."""
     blob = json.dumps(data, separators=(",", ":"), allow_nan=False).replace("<", "\\u003c")
-    page = _part("template.html")
-    for mark, text in (("__TITLE__", html.escape(f"{data.get('title') or 'flexmech'} - flexmech view")),
-                       ("__GENERATOR__", html.escape(generator)), ("__CSS__", _part("view.css")),
-                       ("__DATA__", blob), ("__JS__", _part("view.js"))):
-        page = page.replace(mark, text, 1)
-    return page
+    parts = {"TITLE": html.escape(f"{data.get('title') or 'flexmech'} - flexmech view"),
+             "GENERATOR": html.escape(generator), "CSS": _part("view.css"), "DATA": blob,
+             "JS": "\n".join(_part(s) for s in SCRIPTS)}
+    # one pass: a result's text that happens to read __JS__ is not a place to fill
+    return re.sub(r"__(TITLE|GENERATOR|CSS|DATA|JS)__", lambda m: parts[m.group(1)], _part("template.html"))
 
 
 def target(out, folder: Path) -> Path:

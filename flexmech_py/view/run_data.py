@@ -35,7 +35,7 @@ def run_payload(folder: Path) -> dict:
     sf, key, _ = read_shape_csv(need(folder / "shape.csv", fix))
     if key != "t":
         raise FlexmechError(f"{folder / 'shape.csv'}: holds shapes by {key}, not frames of a run over time; {fix}")
-    stored = sf.key.size
+    stored, miss = sf.key.size, thin.station_error(sf)
     sf, dropped = thin.thin_stations(sf)
     sf = thin.thin_frames(sf)
     cols, units = _read_curves(need(folder / "timeseries.csv", "the run's curves are missing: run the case again"))
@@ -46,7 +46,10 @@ def run_payload(folder: Path) -> dict:
            "marks": time_marks(summary), "warnings": _warnings(summary)}
     out["decimation"] = {"frames_run": int(summary.get("frames", cols["t"].size)), "frames_stored": int(stored),
                          "frames_kept": int(sf.key.size), "points_kept": int(sf.x.shape[1]),
-                         "points_dropped": dropped, "rule": thin.rule_text()}
+                         "points_dropped": dropped, "rule": thin.rule_text(), "deflection_error": miss["deflection"],
+                         "curvature_error": miss["curvature"],
+                         "curve_error": max((s["drawn_error"] for p in out["curves"] for s in p["series"]), default=0.0),
+                         "curve_bucket_s": thin.bucket_span(cols["t"])}
     return out
 
 
@@ -86,10 +89,10 @@ def shape_payload(sf: ShapeFrames) -> dict:
 
 def _default_scale(sf: ShapeFrames) -> float:
     """The PNG drawings' magnification (drawing.magnification) over the frames with the largest nodal
-    displacement."""
+    displacement, never below 1: a deflection already that large is shown as it is, not shrunk."""
     nodal = np.max(np.hypot(sf.d[..., 0], sf.d[..., 1]), axis=1)
     top = np.argsort(nodal)[-SCALE_FRAMES:]
-    return magnification(mechanism_size(sf), max(largest_drawn(sf, int(i)) for i in top))
+    return max(1.0, magnification(mechanism_size(sf), max(largest_drawn(sf, int(i)) for i in top)))
 
 
 def _field(case: Case, sf: ShapeFrames) -> dict | None:
@@ -128,7 +131,7 @@ def _curves(case: Case, cols: dict, units: dict, summary: dict) -> list[dict]:
         for n in group:
             x, y = decimate(t, cols[n], thin.CURVE_POINTS)
             series.append({"name": n, "t": f32(x), "y": f32(scale * y), "points": int(x.size),
-                           "error": column_error(summary, n)})
+                           "drawn_error": thin.curve_error(t, cols[n], x, y), "error": column_error(summary, n)})
         panels.append({"unit": display_unit(unit), "series": series})
     return panels
 
