@@ -321,7 +321,7 @@ function stabilityPage() {
   });
   const series = d.bands.map((b, k) => ({ name: b.name, kind: "band", colour: PALETTE[k], x: sp, lo: b.lo, hi: b.hi }));
   const topF = 1.15 * Math.max(...d.bands[d.bands.length - 1].hi);
-  d.harmonics.forEach((k) => series.push({ name: k % 2 ? k + "Ω/2" : (k === 2 ? "Ω" : k / 2 + "Ω"), tag: k % 2 ? k + "Ω/2" : (k === 2 ? "Ω" : k / 2 + "Ω"), colour: "#999", x: [xmin, xmax], y: [k * xmin / 2, k * xmax / 2], width: 0.8, dash: k % 2 ? [2, 3] : [], noRange: true, noCursor: true }));
+  d.harmonics.forEach((k) => series.push({ name: k === 1 ? "Ω/2" : k % 2 ? k + "Ω/2" : (k === 2 ? "Ω" : k / 2 + "Ω"), tag: k === 1 ? "Ω/2" : k % 2 ? k + "Ω/2" : (k === 2 ? "Ω" : k / 2 + "Ω"), colour: "#999", x: [xmin, xmax], y: [k * xmin / 2, k * xmax / 2], width: 0.8, dash: k % 2 ? [2, 3] : [], noRange: true, noCursor: true }));
   const g2 = new Chart(bottom, {
     xmin, xmax, ymin: 0, ymax: topF, xlabel: "crank speed Ω [rad/s]", ylabel: "frequency [rad/s]", series, spans: spans.map((s) => Object.assign({}, s, { label: "" })),
     readout: (x) => {
