@@ -38,6 +38,7 @@ from pathlib import Path
 from . import notices
 from .case import MODELS as MODELS_ALL
 from .cli_design import add_design_options, add_optimize_parser, design_analysis, print_design, write_design
+from .cli_run import add_view_parser, cmd_draw, cmd_run, cmd_view
 from .errors import FlexmechError
 
 __all__ = ["main"]
@@ -175,12 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="an animated GIF of the frames instead of a PNG of panels (default RESULT/drawing.gif)")
     dr.add_argument("--out", default=None, help="file to write (default: RESULT/drawing.png, with --gif RESULT/drawing.gif)")
 
-    vw = sub.add_parser("view", help="one self-contained HTML page of a result: the mechanism deforming over time, "
-                                     "curves, warnings; mode shapes; stability charts")
-    vw.add_argument("result", help="a folder written by flexmech run --view (or --draw), flexmech modes or "
-                                   "flexmech stability")
-    vw.add_argument("--out", default=None, metavar="FILE.html",
-                    help="the page to write (default RESULT/view.html; a folder: view.html inside it)")
+    add_view_parser(sub)
 
     md = sub.add_parser("modes", help="natural frequencies and mode shapes of the mechanism frozen at one "
                                       "configuration, or along one cycle")
@@ -572,7 +568,6 @@ def _cmd_reproduce(args) -> int:
 
 def _commands() -> dict:
     from .cli_optimize import cmd_optimize
-    from .cli_run import cmd_draw, cmd_run, cmd_view
 
     return {"run": cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
             "steady": _cmd_steady, "modes": _cmd_modes, "draw": cmd_draw, "view": cmd_view, "sweep": _cmd_sweep,

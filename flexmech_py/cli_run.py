@@ -18,7 +18,7 @@ from .names import safe_name
 from .outdir import ResultFolder, claim
 from .signals import exit_code
 
-__all__ = ["cmd_run", "cmd_draw", "cmd_view", "integrator_overrides", "MAX_PANELS"]
+__all__ = ["cmd_run", "cmd_draw", "cmd_view", "add_view_parser", "integrator_overrides", "MAX_PANELS"]
 
 #: panels of the drawing.png of ``run --draw`` (more frames stay in shape.csv for ``flexmech draw --gif``)
 MAX_PANELS = 12
@@ -231,6 +231,16 @@ def cmd_draw(args) -> int:
 
 
 # ----------------------------------------------------------------------------- view
+def add_view_parser(sub) -> None:
+    """The ``flexmech view`` command's options."""
+    vw = sub.add_parser("view", help="one self-contained HTML page of a result: the mechanism deforming over time, "
+                                     "curves, warnings; mode shapes; stability charts")
+    vw.add_argument("result", help="a folder written by flexmech run --view (or --draw), flexmech modes or "
+                                   "flexmech stability")
+    vw.add_argument("--out", default=None, metavar="FILE.html",
+                    help="the page to write (default RESULT/view.html; a folder: view.html inside it)")
+
+
 def cmd_view(args) -> int:
     from .sizes import format_bytes
     from .view import write_view
