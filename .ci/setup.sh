@@ -68,9 +68,30 @@ fi
 version=$(.venv/bin/flexmech --version) || die "the installed package does not import (see the lines above; build log: $LOG)"
 say "ready: $version"
 
+# the test command also opens `flexmech view` pages in a real browser (tests/test_view_browser.py):
+# Debian's chromium and chromium-driver, and selenium; without them those tests are skipped, saying why
+browser_for_tests() {
+  local pkgs=()
+  command -v chromium >/dev/null 2>&1 || pkgs+=(chromium)
+  command -v chromedriver >/dev/null 2>&1 || pkgs+=(chromium-driver)
+  if [ ${#pkgs[@]} -gt 0 ]; then
+    local sudo=""
+    [ "$(id -u)" = 0 ] || sudo=$(command -v sudo || true)
+    if command -v apt-get >/dev/null 2>&1 && { [ "$(id -u)" = 0 ] || [ -n "$sudo" ]; }; then
+      say "installing ${pkgs[*]} (the browser tests of flexmech view)"
+      $sudo apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${pkgs[@]}" >/dev/null \
+        || say "could not install ${pkgs[*]}: the browser tests will be skipped"
+    else
+      say "no ${pkgs[*]} and no way to install them: the browser tests will be skipped"
+    fi
+  fi
+  $PY -c 'import selenium' >/dev/null 2>&1 || $PY -m pip install -q "selenium>=4" \
+    || say "could not install selenium: the browser tests will be skipped"
+}
+
 case "${1:-}" in
   reproduce) shift; exec .venv/bin/flexmech reproduce --out reproduce "$@" ;;
-  test) shift; exec .venv/bin/pytest -q "$@" ;;
+  test) shift; browser_for_tests; exec .venv/bin/pytest -q "$@" ;;
   "") ;;
   *) die "unknown action '$1' (use: reproduce, test)" ;;
 esac

@@ -2,13 +2,14 @@
 
     flexmech run CASE.toml [--model M] [--dt S] [--elements-per-link N] [--integrator I] [--rho-inf X]
                  [--hht-alpha A] [--set KEY.PATH=VALUE ...] [--out DIR] [--overwrite] [--force]
-                 [--quiet | --progress] [--no-plots] [--draw [N]]
+                 [--quiet | --progress] [--no-plots] [--draw [N]] [--view]
     flexmech reproduce [--out DIR]
     flexmech compare RESULT_DIR --reference FILE.csv [--x t|crank_angle] [--columns C ...] [--out DIR]
     flexmech compare --models CASE.toml [--reference-model nonlinear] [--model-list M,M] [--set ...] [--out DIR]
     flexmech stability CASE.toml --speed START:STOP:N [--model M] [--geometric G] [--jobs N] [--out DIR]
     flexmech steady CASE.toml [--model M] [--geometric G] [--out DIR]
     flexmech draw RESULT_DIR [--frames N] [--scale S] [--gif] [--out FILE]
+    flexmech view RESULT_DIR [--out FILE.html]
     flexmech modes CASE.toml [--at T | --crank-angle A] [--count N] [--along-cycle K] [--model M] [--out DIR]
     flexmech sweep CASE.toml --param KEY.PATH=START:STOP:N [--param ...] [--model M] [--jobs N] [--out DIR]
     flexmech sweep CASE.toml --sample KEY.PATH=normal:MEAN:SD [--sample ...] --samples N [--seed S] [--method lhs]
@@ -37,6 +38,7 @@ from pathlib import Path
 from . import notices
 from .case import MODELS as MODELS_ALL
 from .cli_design import add_design_options, add_optimize_parser, design_analysis, print_design, write_design
+from .cli_run import add_view_parser, cmd_draw, cmd_run, cmd_view
 from .errors import FlexmechError
 
 __all__ = ["main"]
@@ -99,6 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep the mechanism's points at N frames spread over the run (default 6) in shape.csv "
                         "and draw them, deflection magnified, in drawing.png (at most 12 panels; all frames: "
                         "flexmech draw OUT --gif)")
+    r.add_argument("--view", action="store_true",
+                   help="also write OUT/view.html: the run in one self-contained page (the mechanism deforming "
+                        "over time, its strain, the curves; see flexmech view); keeps the shapes it needs in shape.csv")
     r.add_argument("--quiet", action="store_true", help="no cost estimate and no progress bar on stderr")
     r.add_argument("--progress", action="store_true",
                    help="draw the progress bar even when stderr is not a terminal (default: only on a terminal)")
@@ -170,6 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
     dr.add_argument("--gif", action="store_true",
                     help="an animated GIF of the frames instead of a PNG of panels (default RESULT/drawing.gif)")
     dr.add_argument("--out", default=None, help="file to write (default: RESULT/drawing.png, with --gif RESULT/drawing.gif)")
+
+    add_view_parser(sub)
 
     md = sub.add_parser("modes", help="natural frequencies and mode shapes of the mechanism frozen at one "
                                       "configuration, or along one cycle")
@@ -561,11 +568,11 @@ def _cmd_reproduce(args) -> int:
 
 def _commands() -> dict:
     from .cli_optimize import cmd_optimize
-    from .cli_run import cmd_draw, cmd_run
 
     return {"run": cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
-            "steady": _cmd_steady, "modes": _cmd_modes, "draw": cmd_draw, "sweep": _cmd_sweep, "bench": _cmd_bench,
-            "accuracy": _cmd_accuracy, "optimize": lambda args: cmd_optimize(args, _scheduler(args))}
+            "steady": _cmd_steady, "modes": _cmd_modes, "draw": cmd_draw, "view": cmd_view, "sweep": _cmd_sweep,
+            "bench": _cmd_bench, "accuracy": _cmd_accuracy,
+            "optimize": lambda args: cmd_optimize(args, _scheduler(args))}
 
 
 def main(argv: list[str] | None = None) -> int:

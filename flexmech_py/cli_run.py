@@ -18,7 +18,7 @@ from .names import safe_name
 from .outdir import ResultFolder, claim
 from .signals import exit_code
 
-__all__ = ["cmd_run", "cmd_draw", "integrator_overrides", "MAX_PANELS"]
+__all__ = ["cmd_run", "cmd_draw", "cmd_view", "add_view_parser", "integrator_overrides", "MAX_PANELS"]
 
 #: panels of the drawing.png of ``run --draw`` (more frames stay in shape.csv for ``flexmech draw --gif``)
 MAX_PANELS = 12
@@ -44,19 +44,24 @@ def integrator_overrides(args) -> list[str]:
 
 
 def _shapes(args, prep, model):
-    """The ShapeCollector of ``--draw N`` (None without it); its frames' memory checked first."""
-    from .shapes import ShapeCollector
+    """The ShapeCollector of ``--draw N`` and ``--view`` (None without either); its frames' memory
+    checked first.  ``--view`` keeps as many frames as the page holds (flexmech_py.view.decimate)."""
+    from .shapes import ShapeCollector, body_points
     from .sizes import check_count, format_count
+    from .view.decimate import frames_for, kept_points
 
-    if args.draw is None:
-        return None
-    if args.draw < 2:
+    if args.draw is not None and args.draw < 2:
         raise FlexmechError(f"--draw: needs 2 frames or more, got {args.draw}")
-    kept = min(args.draw, prep.frames)
+    count = args.draw or 0
+    if args.view:
+        count = max(count, frames_for(kept_points(body_points(prep.case.mechanism, prep.fe.node_frac)), prep.frames))
+    if not count:
+        return None
+    kept = min(count, prep.frames)
     points = sum(int(ln.get("elements", 0)) + 1 for ln in prep.case["links"]) + 4 * len(prep.case["links"]) + 8
     check_count(kept, SHAPE_POINT_BYTES * points, "--draw", "drawn frames",
                 lambda n: f"draw at most {format_count(n)} frames (e.g. --draw {max(2, min(n, 1000))})")
-    return ShapeCollector(prep.case.mechanism, prep.frames, model, args.draw, prep.coupled)
+    return ShapeCollector(prep.case.mechanism, prep.frames, model, count, prep.coupled)
 
 
 def cmd_run(args) -> int:
@@ -86,7 +91,8 @@ def cmd_run(args) -> int:
             stopped = exc
         else:
             progress.close(finished=True)
-            paths = _extras(res, shapes, sink, rf.stage, plots=not args.no_plots, design=design)
+            paths = _extras(res, shapes, sink, rf.stage, plots=not args.no_plots, design=design,
+                            draw=args.draw is not None, view=args.view)
             rf.commit()
     if stopped is not None:
         return _report_stopped(stopped, [rf.where(p) for p in sink.paths], rf)
@@ -98,30 +104,38 @@ def cmd_run(args) -> int:
     return 0
 
 
-def _extras(res, shapes, sink, stage: Path, plots: bool, design=None) -> list[Path]:
-    """The drawing, the design files and the plots of a completed run, and its summary listing every file."""
+def _extras(res, shapes, sink, stage: Path, plots: bool, design=None, draw: bool = False,
+            view: bool = False) -> list[Path]:
+    """The drawing (``--draw``), the design files, the plots and the page (``--view``) of a completed
+    run, and its summary listing every file."""
     paths = list(sink.paths)
     if design is not None:
         paths += write_design(design, res, stage, plots=plots)
     if shapes is not None:
-        paths += _write_drawing(res, shapes.result(), stage, plots=plots)
+        paths += _write_drawing(res, shapes.result(), stage, plots=plots and draw)
     if plots:
         from .plots import plot_result
 
         paths += plot_result(res.plot_view(), stage)
-    if len(paths) > len(sink.paths) or design is not None:
-        res.extra["files"] = [p.name for p in paths]
+    page = [stage / "view.html"] if view else []
+    if len(paths) > len(sink.paths) or design is not None or page:
+        res.extra["files"] = [p.name for p in paths + page]
         res.write_summary(stage)
-    return paths
+    if view:
+        from .view import page_of
+
+        page[0].write_text(page_of(stage)[0], encoding="utf-8")
+    return paths + page
 
 
 def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
     """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
     from .shapes import spread, write_shape_csv
 
-    head = [f"flexmech run --draw; case {res.case['case']['title']!r}; model {res.model}",
+    head = [f"flexmech run --draw/--view; case {res.case['case']['title']!r}; model {res.model}",
             "per frame (index, t [s]) every drawn point: x, y its rigid position [m]; dx, dy its elastic "
-            "displacement [m]; rot the elastic rotation of its body there [rad]"]
+            "displacement [m]; rot the elastic rotation of its body there [rad]; kappa a flexible link's "
+            "curvature at its nodes [1/m]"]
     paths = [write_shape_csv(out / "shape.csv", sf, head, key="t")]
     if plots:
         from .drawing import draw_frames
@@ -213,4 +227,25 @@ def cmd_draw(args) -> int:
             raise FlexmechError("draw: needs matplotlib and Pillow (pip install matplotlib)")
         rf.commit()
     print(f"wrote {path} ({idx.size} frames, deflection x {scale:g})")
+    return 0
+
+
+# ----------------------------------------------------------------------------- view
+def add_view_parser(sub) -> None:
+    """The ``flexmech view`` command's options."""
+    vw = sub.add_parser("view", help="one self-contained HTML page of a result: the mechanism deforming over time, "
+                                     "curves, warnings; mode shapes; stability charts")
+    vw.add_argument("result", help="a folder written by flexmech run --view (or --draw), flexmech modes or "
+                                   "flexmech stability")
+    vw.add_argument("--out", default=None, metavar="FILE.html",
+                    help="the page to write (default RESULT/view.html; a folder: view.html inside it)")
+
+
+def cmd_view(args) -> int:
+    from .sizes import format_bytes
+    from .view import write_view
+
+    info = write_view(args.result, args.out)
+    what = f"; {info.frames} frames of {info.points} points" if info.kind == "run" else ""
+    print(f"wrote {info.path} ({format_bytes(info.bytes)}, a {info.kind} result{what}; open it in a browser)")
     return 0

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .glyphs import (BODY_COLOURS, BODY_STYLES, GROUND_GUIDE, GROUND_PIVOT, RIGID_GHOST, glyph_of, joint_marks,
+                     legend_words)
 from .plots import _PNG, have_matplotlib, save_figure
 
 __all__ = ["magnification", "deformed_lines", "draw_frames", "animate_frames", "draw_modes", "plot_along",
@@ -23,8 +25,9 @@ __all__ = ["magnification", "deformed_lines", "draw_frames", "animate_frames", "
 #: the largest magnified displacement as a fraction of the mechanism's size
 TARGET_FRACTION = 0.1
 SUBDIVISIONS = 8          # points per element of a flexible link's drawn curve (cubic Hermite)
-RIGID_STYLE = {"color": "0.55", "lw": 1.0, "ls": (0, (4, 3))}
-BODY_COLOURS = ("C0", "C2", "C3", "C4", "C5", "C1", "C6", "C8", "C9")
+RIGID_STYLE = {"color": RIGID_GHOST["colour"], "lw": RIGID_GHOST["width"], "ls": (0, RIGID_GHOST["dash"])}
+#: matplotlib's marker of each glyph shape (flexmech_py.glyphs)
+MARKERS = {"circle": "o", "square": "s", "triangle": "^"}
 
 
 def magnification(size: float, dmax: float, fraction: float = TARGET_FRACTION) -> float:
@@ -94,25 +97,6 @@ def _outline(body, pts: np.ndarray) -> np.ndarray:
     return np.concatenate([pts[order], pts[order[:1]]])
 
 
-def _joint_marks(mech, sf) -> list:
-    """[(name, point index or None, ground, joint kind, driven)] of every joint: the point of its
-    non-ground side b (a if b is the ground) in sf's layout; ground: None, the ground point's
-    position, or (a point, the direction) of a prismatic joint's guide on the ground."""
-    driven = {d.joint for d in mech.drives}
-    out = []
-    for j in mech.joints:
-        a, b = mech.joint_points(j)
-        side = b if b.body is not None else a
-        ground = None if a.body is not None and b.body is not None else np.asarray((a if a.body is None else b).position, float)
-        label = side.point
-        if side.body.kind == "link" and not side.body.rigid:
-            label = f"{side.body.fraction(side.point):.12g}"
-        if ground is not None and j.kind == "prismatic":
-            ground = (ground, np.asarray(j.unit_axis(), float))
-        out.append((j.name, sf.point(side.body.name, label), ground, j.kind, j.name in driven))
-    return out
-
-
 def _draw_instant(ax, sf, i: int, scale: float, marks, colours) -> None:
     """One instant: rigid configuration dashed, deformed bodies solid, joints and ground."""
     for b, col in zip(sf.bodies, colours):
@@ -123,35 +107,30 @@ def _draw_instant(ax, sf, i: int, scale: float, marks, colours) -> None:
         if b.kind == "rigid_link":
             line = line[:2]
         line = _outline(b, line)
-        if b.kind == "body" and line.shape[0] > 3:
-            ax.fill(line[:, 0], line[:, 1], color=col, alpha=0.25, zorder=2)
-        ax.plot(line[:, 0], line[:, 1], "-", color=col, lw=2.4 if b.kind == "flexible" else 3.2,
+        if BODY_STYLES[b.kind]["fill"] and line.shape[0] > 3:
+            ax.fill(line[:, 0], line[:, 1], color=col, alpha=BODY_STYLES[b.kind]["fill"], zorder=2)
+        ax.plot(line[:, 0], line[:, 1], "-", color=col, lw=BODY_STYLES[b.kind]["width"],
                 solid_capstyle="round", zorder=3)
-    for name, p, ground, kind, driven in marks:
-        if p is None:
-            continue
-        pos = sf.x[i, p] + scale * sf.d[i, p]
-        if ground is not None and kind == "prismatic":   # a guide on the ground: its line, not a pivot
-            ax.axline(ground[0], xy2=ground[0] + ground[1], color="0.35", lw=1.0, zorder=0)
-        elif ground is not None:
-            ax.plot(*ground, marker="^", ms=11, mfc="0.85", mec="k", zorder=0)
-        if kind == "prismatic":
-            ax.plot(*pos, marker="s", ms=7, mfc="white", mec="k", zorder=4)
-        else:
-            ax.plot(*pos, marker="o", ms=5.5, mfc="white" if not driven else "k", mec="k", zorder=4)
+    for m in marks:
+        if m.point is not None:
+            _draw_joint(ax, m, sf.x[i, m.point] + scale * sf.d[i, m.point])
+
+
+def _draw_joint(ax, m, pos) -> None:
+    """A joint's glyph at ``pos`` and, on the ground, its pivot or its guide (flexmech_py.glyphs)."""
+    if m.axis is not None:          # a guide on the ground: its line, not a pivot
+        ax.axline(m.ground, xy2=m.ground + m.axis, color=GROUND_GUIDE["colour"], lw=GROUND_GUIDE["width"], zorder=0)
+    elif m.ground is not None:
+        g = GROUND_PIVOT
+        ax.plot(*m.ground, marker=MARKERS[g["marker"]], ms=g["size"], mfc=g["fill"], mec=g["edge"], zorder=0)
+    g = glyph_of(m.kind)
+    ax.plot(*pos, marker=MARKERS[g["marker"]], ms=g["size"], mfc=g["driven_fill"] if m.driven else g["fill"],
+            mec=g["edge"], zorder=4)
 
 
 def _symbols(marks) -> str:
     """The legend of the joint marks drawn (only those present)."""
-    kinds = {(kind, ground is not None, driven) for _, _, ground, kind, driven in marks}
-    words = ["o joint"]
-    if any(d for _, _, d in kinds):
-        words.append("● driven joint")
-    if any(g and k != "prismatic" for k, g, _ in kinds):
-        words.append("▲ ground pivot")
-    if any(k == "prismatic" for k, _, _ in kinds):
-        words.append("■ slider" + (" (grey line: its guide on the ground)" if any(g and k == "prismatic" for k, g, _ in kinds) else ""))
-    return ", ".join(words)
+    return ", ".join(legend_words(marks))
 
 
 def _instants(sf, idx, scale: float | None):
@@ -219,7 +198,7 @@ def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str =
     rows, cols, width, height = _panel_grid(idx.size, hi - lo)
     fig = _figure(width, height)
     axes = fig.subplots(rows, cols, squeeze=False)
-    marks, colours = _joint_marks(mech, sf), _colours(sf)
+    marks, colours = joint_marks(mech, sf), _colours(sf)
     for n, ax in enumerate(axes.ravel()):
         if n >= idx.size:
             ax.set_visible(False)
@@ -265,7 +244,7 @@ def animate_frames(path, sf, mech, idx, *, scale: float | None = None, title: st
 
 def _animate(writer, fig, ax, path, idx, sf, scale, mech, lo, hi, title) -> None:
     """The frames of :func:`animate_frames`, written by ``writer``."""
-    marks, colours = _joint_marks(mech, sf), _colours(sf)
+    marks, colours = joint_marks(mech, sf), _colours(sf)
     with writer.saving(fig, str(path), dpi=80):
         for i in idx:
             ax.clear()

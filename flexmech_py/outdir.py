@@ -67,7 +67,7 @@ _OURS = {LOCK_NAME, MANIFEST, PARTIAL_DIR, *PERSISTENT}
 
 #: the names a run writes (the plots are listed by the run itself)
 RUN_FILES = ("timeseries.csv", "timeseries.csv.part", "summary.json", "timeseries.png",
-             "strain_vs_crank_angle.png", "shape.csv", "drawing.png")
+             "strain_vs_crank_angle.png", "shape.csv", "drawing.png", "view.html")
 
 
 def command_line() -> str:

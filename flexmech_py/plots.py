@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["plot_result", "line_figure", "have_matplotlib", "plot_stability", "work_precision_figure", "plot_samples",
-           "decimate", "display_unit", "coincidences", "legend_corner", "mechanism_sketch", "spread", "MAX_POINTS"]
+           "decimate", "panel_groups", "region_label", "part_spans", "display_unit", "coincidences", "legend_corner",
+           "mechanism_sketch", "spread", "MAX_POINTS"]
 
 #: points drawn per line at most: about the width of a screen in pixels, min and max of every bucket kept
 MAX_POINTS = 2000
@@ -272,40 +273,45 @@ def _panel_key(name: str, spec: dict | None) -> tuple:
     return (spec["kind"], str(place))
 
 
-def _result_panels(res, x, names=None, max_series: int = 4) -> list[dict]:
-    """Panels of a result's columns: one unit and kind each, outputs at one place together, at most
-    ``max_series`` curves and no curve 20 times smaller than another; lengths in mm when they stay
-    below 0.1 m, dimensionless columns as [-]."""
-    specs = res.case["outputs"]
-    names = list(names or res.columns)
+def panel_groups(names, units: dict, specs: dict, peaks: dict, max_series: int = 4) -> list[list[str]]:
+    """The columns ``names`` in panels: one unit and kind each, outputs at one place together, at
+    most ``max_series`` curves and no curve 20 times smaller than another (``peaks``: each column's
+    largest |value|; ``specs``: the case's outputs; a column without one is grouped by its unit)."""
     groups: list[list[str]] = []
     for name in names:
-        key = (res.units.get(name, ""),) + _panel_key(name, specs.get(name))
-        if groups and (res.units.get(groups[-1][0], ""),) + _panel_key(groups[-1][0], specs.get(groups[-1][0])) == key:
+        key = (units.get(name, ""),) + _panel_key(name, specs.get(name))
+        if groups and (units.get(groups[-1][0], ""),) + _panel_key(groups[-1][0], specs.get(groups[-1][0])) == key:
             groups[-1].append(name)
         else:
             groups.append([name])
     merged: list[list[str]] = []
     for g in groups:   # neighbours of one unit and kind share a panel while it stays small
         last = merged[-1] if merged else None
-        if (last and res.units.get(last[0]) == res.units.get(g[0]) and len(last) + len(g) <= max_series
+        if (last and units.get(last[0]) == units.get(g[0]) and len(last) + len(g) <= max_series
                 and _panel_key(last[0], specs.get(last[0]))[0] == _panel_key(g[0], specs.get(g[0]))[0]):
             last.extend(g)
         else:
             merged.append(list(g))
-    panels = []
+    out = []
     for g in merged:
-        peak = {nm: float(np.nanmax(np.abs(res.columns[nm]))) if res.columns[nm].size else 0.0 for nm in g}
         part, top = [], None
         for nm in g:
-            if part and (len(part) >= max_series or peak[nm] < top / 20.0 or peak[nm] > 20.0 * top):
-                panels.append(_panel(res, x, part))
+            if part and (len(part) >= max_series or peaks[nm] < top / 20.0 or peaks[nm] > 20.0 * top):
+                out.append(part)
                 part = []
             if not part:
-                top = max(peak[nm], 1e-300)
+                top = max(peaks[nm], 1e-300)
             part.append(nm)
-        panels.append(_panel(res, x, part))
-    return panels
+        out.append(part)
+    return out
+
+
+def _result_panels(res, x, names=None, max_series: int = 4) -> list[dict]:
+    """Panels of a result's columns (:func:`panel_groups`); lengths in mm when they stay below 0.1 m,
+    dimensionless columns as [-]."""
+    names = list(names or res.columns)
+    peaks = {nm: float(np.nanmax(np.abs(res.columns[nm]))) if res.columns[nm].size else 0.0 for nm in names}
+    return [_panel(res, x, g) for g in panel_groups(names, res.units, res.case["outputs"], peaks, max_series)]
 
 
 def _panel(res, x, names) -> dict:
@@ -363,14 +369,15 @@ def spread(values, gap: float) -> list[float]:
 _MU_STYLE = {"real+": ("^", "tab:red", "+1"), "real-": ("v", "tab:purple", "−1"), "complex": ("o", "tab:orange", "")}
 
 
-def _region_label(part: dict) -> str:
+def region_label(part: dict) -> str:
+    """The label of an unstable region's part: +1, −1, or the angle of a complex pair (±a° or ±a–b°)."""
     if part["type"] != "complex":
         return _MU_STYLE[part["type"]][2]
     a, b = part["angle_deg"]
     return f"±{a:.0f}°" if round(a) == round(b) else f"±{a:.0f}–{b:.0f}°"
 
 
-def _part_spans(regions):
+def part_spans(regions):
     """(lo, hi, part) of every part of every region: boundaries halfway between the samples on either side."""
     for reg in regions:
         parts = reg["parts"]
@@ -405,11 +412,11 @@ def _stability_top(ax, ok, regions, stable_rate):
                    label=f"threshold {stable_rate:g} 1/s (|μ| = exp({stable_rate:g}·2π/Ω)): stable below")
     width = sp.max() - sp.min()
     n = 0
-    for lo, hi, part in _part_spans(regions or []):
+    for lo, hi, part in part_spans(regions or []):
         color = _MU_STYLE[part["type"]][1]
         ax.axvspan(lo, hi, color=color, alpha=0.12, lw=0)
         if hi - lo > 0.015 * width:   # narrow parts: the markers say their type
-            ax.text(0.5 * (lo + hi), ymax * 10 ** (1.0 - 0.45 * (n % 3)), _region_label(part), color=color,
+            ax.text(0.5 * (lo + hi), ymax * 10 ** (1.0 - 0.45 * (n % 3)), region_label(part), color=color,
                     fontsize=7, ha="center")
             n += 1
     ax.set_ylabel("growth rate ln max|μ| / T [1/s]")

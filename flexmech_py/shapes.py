@@ -6,12 +6,15 @@ Points, body by body (:func:`body_points`): every flexible link's mesh nodes in 
 points, a rigid body's centre of mass, named points and joint points.  Per point: its position in the
 rigid-body solution ``x`` [m], its elastic displacement ``d`` [m] from there (global components) and
 the elastic rotation ``rot`` [rad] of its body there (a flexible link: the slope of the deflection
-relative to the rigid link axis).  Nothing here draws (flexmech_py/drawing.py does).
+relative to the rigid link axis) and, for a run's frames, the curvature ``kappa`` [1/m] of a flexible
+link at its nodes as the model computes it (what its ``strain`` outputs are made of; empty at the
+points of rigid parts).  Nothing here draws (flexmech_py/drawing.py does).
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +23,8 @@ import numpy as np
 from .errors import FlexmechError
 
 __all__ = ["Body", "ShapeFrames", "body_points", "rigid_positions", "superposition_displacements",
-           "coupled_displacements", "write_shape_csv", "read_shape_csv", "ShapeCollector", "spread"]
+           "coupled_displacements", "node_curvatures", "write_shape_csv", "read_shape_csv", "ShapeCollector",
+           "spread"]
 
 KINDS = ("flexible", "rigid_link", "body")
 
@@ -52,16 +56,19 @@ class Body:
 class ShapeFrames:
     """Drawn points at several instants (a run's frames) or of several mode shapes: ``key`` (n,) the
     time [s] or the frequency [Hz] of each, ``x`` (n, npts, 2) rigid positions [m], ``d`` (n, npts, 2)
-    elastic displacements, ``rot`` (n, npts) elastic rotations [rad]; ``bodies`` the point layout."""
+    elastic displacements, ``rot`` (n, npts) elastic rotations [rad]; ``bodies`` the point layout;
+    ``kappa`` (n, npts) the curvature [1/m] at a flexible link's nodes (NaN elsewhere), or None."""
 
     bodies: list
     key: np.ndarray
     x: np.ndarray
     d: np.ndarray
     rot: np.ndarray
+    kappa: np.ndarray | None = None
 
     def select(self, idx) -> "ShapeFrames":
-        return ShapeFrames(self.bodies, self.key[idx], self.x[idx], self.d[idx], self.rot[idx])
+        return ShapeFrames(self.bodies, self.key[idx], self.x[idx], self.d[idx], self.rot[idx],
+                           None if self.kappa is None else self.kappa[idx])
 
     def point(self, body: str, label: str) -> int | None:
         b = next((b for b in self.bodies if b.name == body), None)
@@ -185,18 +192,42 @@ def coupled_displacements(cm, bodies: list, u_dev: np.ndarray, qf: np.ndarray, r
     return d, rot
 
 
+def node_curvatures(block, idx: np.ndarray, bodies: list) -> np.ndarray:
+    """(n, npts) the curvature [1/m] of every flexible link at its nodes at the frames ``idx`` of a
+    run's block (a Result), as the model computes its strain outputs; NaN at the points of rigid parts."""
+    sub = dataclasses.replace(block, t=block.t[idx], u=block.u[:, idx],
+                              state=None if block.state is None else block.state[:, idx],
+                              motion=None if block.motion is None else block.motion.select(idx))
+    names = [ln["name"] for ln in block.case["links"]]
+    out = np.full((idx.size, bodies[-1].sl.stop), np.nan)
+    for b in bodies:
+        if b.kind == "flexible":
+            out[:, b.sl] = sub.node_curvatures(names.index(b.name)).T
+    return out
+
+
+#: the columns of a shape file; KAPPA_COLUMN follows them when the file holds curvatures
+SHAPE_COLUMNS = "body,kind,point,x,y,dx,dy,rot"
+KAPPA_COLUMN = "kappa"
+
+
 def write_shape_csv(path, sf: ShapeFrames, head: list[str], key: str = "t") -> Path:
     """Write ShapeFrames as CSV: ``#`` comment lines ``head``, a header
-    ``index,<key>,body,kind,point,x,y,dx,dy,rot`` and one row per instant and point (atomically)."""
+    ``index,<key>,body,kind,point,x,y,dx,dy,rot[,kappa]`` and one row per instant and point
+    (atomically); ``kappa`` when sf has curvatures, empty at the points of rigid parts."""
     from .results import _atomic_write
 
-    lines = [f"# {h}" for h in head] + [f"index,{key},body,kind,point,x,y,dx,dy,rot"]
+    with_k = sf.kappa is not None
+    lines = [f"# {h}" for h in head] + [f"index,{key},{SHAPE_COLUMNS}" + (f",{KAPPA_COLUMN}" if with_k else "")]
     for i in range(sf.key.size):
         for b in sf.bodies:
             for k, lab in enumerate(b.labels):
                 p = b.sl.start + k
-                lines.append(f"{i},{sf.key[i]:.10g},{b.name},{b.kind},{lab},{sf.x[i, p, 0]:.10g},{sf.x[i, p, 1]:.10g},"
-                             f"{sf.d[i, p, 0]:.6e},{sf.d[i, p, 1]:.6e},{sf.rot[i, p]:.6e}")
+                row = (f"{i},{sf.key[i]:.10g},{b.name},{b.kind},{lab},{sf.x[i, p, 0]:.10g},{sf.x[i, p, 1]:.10g},"
+                       f"{sf.d[i, p, 0]:.6e},{sf.d[i, p, 1]:.6e},{sf.rot[i, p]:.6e}")
+                if with_k:
+                    row += "," if np.isnan(sf.kappa[i, p]) else f",{sf.kappa[i, p]:.6e}"
+                lines.append(row)
     _atomic_write(Path(path), "\n".join(lines) + "\n")
     return Path(path)
 
@@ -211,14 +242,15 @@ def read_shape_csv(path) -> tuple[ShapeFrames, str, list[str]]:
         raise FlexmechError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     head = [ln[1:].strip() for ln in text if ln.startswith("#")]
     rows = list(csv.reader(ln for ln in text if ln and not ln.startswith("#")))
-    if not rows or len(rows[0]) != 10 or rows[0][0] != "index" or rows[0][2] != "body":
-        raise FlexmechError(f"{path}: not a shape file written by flexmech (header index,t,body,kind,point,x,y,dx,dy,rot)")
-    key_name, body_rows = rows[0][1], rows[1:]
+    if not rows or len(rows[0]) < 2 or ",".join(rows[0][2:]) not in (SHAPE_COLUMNS, f"{SHAPE_COLUMNS},{KAPPA_COLUMN}"):
+        raise FlexmechError(f"{path}: not a shape file written by flexmech (header index,t,{SHAPE_COLUMNS}[,kappa])")
+    key_name, body_rows, width = rows[0][1], rows[1:], len(rows[0])
     try:
         idx = np.array([int(r[0]) for r in body_rows])
-        vals = np.array([[float(x) for x in (r[1], *r[5:10])] for r in body_rows]).reshape(-1, 6)
+        vals = np.array([[float(x) if x else np.nan for x in (r[1], *r[5:width])] for r in body_rows])
+        vals = vals.reshape(-1, width - 4)
     except (ValueError, IndexError):
-        raise FlexmechError(f"{path}: a row is not index,{key_name},body,kind,point,x,y,dx,dy,rot numbers") from None
+        raise FlexmechError(f"{path}: a row is not index,{key_name},{','.join(rows[0][2:])} numbers") from None
     n = int(idx.max()) + 1 if idx.size else 0
     first = body_rows[:int(np.sum(idx == 0))]
     bodies, start = [], 0
@@ -235,8 +267,9 @@ def read_shape_csv(path) -> tuple[ShapeFrames, str, list[str]]:
         start += len(labels)
     if n == 0 or idx.size != n * start:
         raise FlexmechError(f"{path}: every instant must list the same {start} points")
-    vals = vals.reshape(n, start, 6)
-    return ShapeFrames(out, vals[:, 0, 0], vals[:, :, 1:3], vals[:, :, 3:5], vals[:, :, 5]), key_name, head
+    vals = vals.reshape(n, start, width - 4)
+    kappa = vals[:, :, 6] if width == 11 else None
+    return ShapeFrames(out, vals[:, 0, 0], vals[:, :, 1:3], vals[:, :, 3:5], vals[:, :, 5], kappa), key_name, head
 
 
 def spread(n: int, count: int) -> np.ndarray:
@@ -273,7 +306,8 @@ class ShapeCollector:
         else:
             bodies = body_points(self.mech, block.fe.node_frac)
             d, rot = superposition_displacements(block.fe, bodies, block.u[:, idx], rm)
-        return ShapeFrames(bodies, block.t[idx], rigid_positions(self.mech, bodies, rm), d, rot)
+        return ShapeFrames(bodies, block.t[idx], rigid_positions(self.mech, bodies, rm), d, rot,
+                           node_curvatures(block, idx, bodies))
 
     def result(self) -> ShapeFrames | None:
         """The frames gathered (None before the first)."""
@@ -281,4 +315,5 @@ class ShapeCollector:
             return None
         p = self.parts
         return ShapeFrames(p[0].bodies, np.concatenate([s.key for s in p]), np.concatenate([s.x for s in p]),
-                           np.concatenate([s.d for s in p]), np.concatenate([s.rot for s in p]))
+                           np.concatenate([s.d for s in p]), np.concatenate([s.rot for s in p]),
+                           np.concatenate([s.kappa for s in p]))
