@@ -15,7 +15,11 @@ from . import kernels
 from .coupled_layout import CON_ANGLE, CON_POINT, CON_PROJECTION, Layout, LinkMesh, Row, SharedAngles, \
     flat_description, marker_key, node_segment, start_value
 
-__all__ = ["CoupledModel", "LinkMesh", "validity", "CON_POINT", "CON_ANGLE", "CON_PROJECTION"]
+__all__ = ["CoupledModel", "LinkMesh", "validity", "CON_POINT", "CON_ANGLE", "CON_PROJECTION", "SOLVER_PATHS"]
+
+#: the linear algebra of a Newton step (fortran/flexmech_coupled_solve.f90: PATH_*)
+SOLVER_PATHS = ("band, multipliers by their Schur complement", "saddle band",
+                "condensed segments, multipliers by their Schur complement", "bordered saddle band")
 
 
 class CoupledModel:
@@ -26,7 +30,8 @@ class CoupledModel:
     ``n_el``, ``ld`` (maxld, nseg) 1-based all-DOF numbers of each segment's local vector, ``ndof``,
     ``free_of`` (1-based, 0 = fixed), ``q_fixed``, ``bodies``, ``markers``, ``rows``, ``joints``
     {name: JointModel}, ``forces``, ``mesh`` (the flexible links' mesh view for results);
-    ``last_run`` the last run's frames and final state."""
+    ``last_run`` the last run's frames and final state; ``solver`` the structure of its linear algebra
+    (:meth:`structure`, taken at a run's start)."""
 
     def __init__(self, layout: Layout):
         self.layout = layout
@@ -36,6 +41,7 @@ class CoupledModel:
         self.bodies, self.markers, self.rows = layout.bodies, layout.markers, layout.rows
         self.joints, self.forces, self.node_ends = layout.joints, layout.forces, layout.node_ends
         self.last_run = None
+        self.solver = None
         self._flat = None
         self._kflat = None
         #: the nonlinear model with solver.node_angles = "shared": the kernel integrates one absolute
@@ -179,6 +185,8 @@ class CoupledModel:
             div_limit = DIVERGENCE_FACTOR * max(self.case["links"][li]["length"] for li, _, _ in self.segments)
         seg_link = np.array([li + 1 for li, _, _ in self.segments], np.int32)
         ispec, rspec = self._spec(gravity, rayleigh, kernel=True)
+        if state is None:       # (a continued run keeps the structure its start took)
+            self.solver = self._structure(ispec, rspec, q, v)
         qf, vf, af, lk, lka, ef, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
             nframes, ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
             out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry)
@@ -200,6 +208,27 @@ class CoupledModel:
                              step=int(fail), data={"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "iters": iters,
                                                    "q": q, "v": v, "a": a, "p": p, "newton": newton})
         return qf, vf, af, lf, ef, iters
+
+    def structure(self, q, v) -> dict:
+        """The linear algebra a run takes at the state (q, v) (all DOFs, the layout's angles), with the
+        solver modes set now (kernels.cpl.cpl_set_solver, cpl_set_multipliers): ``path`` (one of
+        :data:`SOLVER_PATHS`), ``band_unknowns`` and ``band_half_width`` of its band, ``dense_unknowns``
+        (the border, or the rows of a Schur complement), and the floating-point operations of one
+        factorization and of one solve (machine-independent: their growth with the mesh shows a
+        quadratic cost; docs/theory.md section 12.6)."""
+        ispec, rspec = self._spec((0.0, 0.0), (0.0, 0.0), kernel=True)
+        q, v = np.asarray(q, float), np.asarray(v, float)
+        if self.shared is not None:
+            q, v, _ = self.shared.to_kernel(q, v, np.zeros_like(q))
+        return self._structure(ispec, rspec, q, v)
+
+    @staticmethod
+    def _structure(ispec, rspec, q, v) -> dict:
+        info, status = kernels.cpl.cpl_structure(ispec, rspec, q, v)
+        kernels.check_status(status, "cpl_structure")
+        return {"path": SOLVER_PATHS[int(info[0])], "band_unknowns": int(info[1]), "band_half_width": int(info[2]),
+                "dense_unknowns": int(info[3]), "flops_per_factorization": float(info[4]),
+                "flops_per_solve": float(info[5])}
 
     def dense(self, q, v, a, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), t=0.0):
         """Residual (all DOFs, no constraint forces), M, C_v, K_t (dense, free DOFs), [kinetic,

@@ -469,6 +469,7 @@ class Diagnostics:
                 "newton": {"iterations": self.iterations, "mean_per_step": self.iterations / max(nsteps, 1),
                            "max_per_step": self.max_iterations, "factorizations": self.factorizations,
                            "factorizations_per_step": self.factorizations / max(nsteps, 1)},
+                "solver": self.cm.solver,
                 "link_length_drift": {"max_relative": self.stretch, "bound": 1e-3, "within_bound": self.stretch < 1e-3},
                 "joint_closure_error_m": max(viol["point_m"], viol["guide_normal_m"]),
                 "constraint_violation": viol,

@@ -7,45 +7,24 @@
 !> (NEWTON_AUTO, docs/theory.md 12.2).  M and C_v are exact; K_t holds the elastic, chord and elastic
 !> inertial terms, and for the nonlinear model's absolute node angles the whole derivative of the
 !> residual (docs/theory.md 12.1); the coupled model's chord dependence of the inertia, the constraint
-!> curvature and the force laws' dependence on the configuration are in the residual only.
+!> curvature and the force laws' dependence on the configuration are in the residual only.  The
+!> linear algebra of a correction (the structure of S with the constraint rows): flexmech_coupled_solve.
 module flexmech_coupled_run
-  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
-                             STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
+  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
   use flexmech_markers, only: marker_state, CON_POINT, CON_ANGLE, MAXCOL
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap
   use flexmech_coupled_rows, only: eval_row, drive_load
-  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_band_setup, lm_band_finish, lm_factor, lm_solve
+  use flexmech_coupled_storage, only: link_mats
   use flexmech_coupled_assembly, only: assemble, assemble_residual
-  use flexmech_saddle_band, only: saddle_system, saddle_setup, saddle_factor, saddle_solve, saddle_flops
+  use flexmech_coupled_solve, only: newton_solver, ns_setup, ns_factor, ns_rows, ns_correction, ns_gdot
   use flexmech_alternation, only: alternation_monitor, alt_setup, alt_step, alt_take
   implicit none
   private
   public :: coupled_run, coupled_elastic_measure
   public :: coupled_set_newton, NEWTON_MODIFIED, NEWTON_FULL, NEWTON_AUTO
   public :: coupled_set_start, START_ACCELERATION, START_VELOCITY
-  public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED
-  public :: coupled_set_multipliers, MULT_AUTO, MULT_SCHUR, MULT_SADDLE
 
-  !> Linear solver of the iteration matrix in coupled_run (docs/theory.md section 11, "The solve"):
-  !> SOLVER_CONDENSED eliminates every segment's elastic DOFs (a band of half width <= 5) onto the
-  !> shared end-position DOFs and solves the condensed band system; SOLVER_BAND factorizes the whole
-  !> free-DOF band matrix (half bandwidth 3 x elements per segment + 2); SOLVER_AUTO (default) takes
-  !> the condensed solve when the whole band is wider than the interior band + 4, i.e. when the
-  !> segments' arrowheads widen it (2 or more elements per segment); with one element per segment
-  !> (the nonlinear model) the whole band is narrow and its one LAPACK call beats one per segment.
-  integer, parameter :: SOLVER_AUTO = -1, SOLVER_BAND = 0, SOLVER_CONDENSED = 1
-  integer :: solver_mode = SOLVER_AUTO
-  !> How a Newton step reaches the constraint rows' multipliers when S is factorized as one band
-  !> (docs/theory.md section 11.3): MULT_SCHUR by the dense Schur complement G' S^-1 G (m solves and
-  !> a dense LU per factorization: cheap for the few rows of a mechanism's joints), MULT_SADDLE by the
-  !> band LU of the whole saddle-point system with the multipliers interleaved (flexmech_saddle_band:
-  !> linear in the number of rows, for the nonlinear model's weld per interior node), MULT_AUTO
-  !> (default) the one of fewer flops by saddle_flops.  The condensed solve always uses the Schur
-  !> complement.
-  integer, parameter :: MULT_AUTO = -1, MULT_SCHUR = 0, MULT_SADDLE = 1
-  integer :: multiplier_mode = MULT_AUTO
   !> When coupled_run rebuilds and factorizes the iteration matrix within a step (docs/theory.md
   !> section 12.2): NEWTON_MODIFIED once per step (at the predictor), NEWTON_FULL at every iteration,
   !> NEWTON_AUTO (default) once per step and again whenever an iteration contracts the correction by
@@ -65,22 +44,6 @@ module flexmech_coupled_run
   real(dp), parameter :: RESTART_MOVE = 0.05_dp
 
 contains
-
-  !> Select the linear solver of coupled_run (SOLVER_AUTO, SOLVER_BAND or SOLVER_CONDENSED;
-  !> module-wide, for tests and benchmarks).  status = STATUS_BAD_INPUT for another value.
-  subroutine coupled_set_solver(mode, status)
-    integer, intent(in) :: mode
-    integer, intent(out) :: status
-    call set_mode(mode, SOLVER_AUTO, SOLVER_CONDENSED, solver_mode, status)
-  end subroutine coupled_set_solver
-
-  !> Select how coupled_run reaches the multipliers (MULT_AUTO, MULT_SCHUR or MULT_SADDLE;
-  !> status STATUS_BAD_INPUT otherwise).
-  subroutine coupled_set_multipliers(mode, status)
-    integer, intent(in) :: mode
-    integer, intent(out) :: status
-    call set_mode(mode, MULT_AUTO, MULT_SADDLE, multiplier_mode, status)
-  end subroutine coupled_set_multipliers
 
   !> Matrix refresh policy of every later coupled_run (NEWTON_*); status STATUS_BAD_INPUT otherwise.
   subroutine coupled_set_newton(mode, status)
@@ -178,23 +141,22 @@ contains
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), la(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
-    real(dp), allocatable :: res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
-    real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
+    real(dp), allocatable :: res(:), qs(:), vs(:), w(:)
+    real(dp), allocatable :: qn(:), lamn(:), lam(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
     real(dp), allocatable :: th1(:), tau1(:), g1(:)      ! step_work's drive states and row values
-    integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
-    integer :: nsteps, n, it, frame, info, itmax_frame, nf, nc, kat
+    integer, allocatable :: freeidx(:)
+    integer :: nsteps, n, it, frame, itmax_frame, nf, nc, kat
     !> restarts at q_n that kept the predictor's matrix: (1) converged with it, (2) rebuilt it after all
     integer :: restart_kept(2)
     real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
-    logical :: converged, refactor, use_cond, refresh, second, use_saddle, kept
+    logical :: converged, refresh, second, kept
     type(link_mats) :: lm
-    type(saddle_system) :: sd
+    type(newton_solver) :: ns
     type(alternation_monitor) :: alt     ! the multipliers' step-to-step alternation
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
     nsteps = size(cval, 3) - 1
     nf = sys%nfree
     nc = sys%nc
-    refactor = .false.
     restart_kept = 0
     if (out_every < 1 .or. dt <= 0.0_dp .or. nsteps < 0 .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
         size(cval, 2) < nc .or. size(lf, 1) < nc .or. size(la, 1) < nc .or. size(la, 2) /= size(qf, 2) .or. &
@@ -276,32 +238,14 @@ contains
 
   contains
 
-    !> The band or condensed storage of S, the work arrays, the free-DOF index and the constraint
-    !> gradients' nonzero pattern.
+    !> The solver (the storage of S, the constraint gradients' pattern, the path) and the work arrays.
     subroutine setup_work()
-      integer :: i
-      real(dp) :: fl(2)
-      call lm_setup(sys, nc, lm)
-      use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
-                                (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
-      if (.not. use_cond) call lm_band_setup(sys, lm)     ! S as one band, in lm%ab
-      allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf), qn(sys%ndof))
+      call ns_setup(sys, q, v, lm, ns)
+      allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), w(sys%ndof), qn(sys%ndof), freeidx(nf))
+      freeidx = ns%freeidx
       w = 0.0_dp
-      allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
-                dlam(max(1, nc)), lamn(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
-                lam0(max(1, nc)), gsh(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
-                tau0(max(1, sys%nd)), th1(max(1, sys%nd)), tau1(max(1, sys%nd)), g1(max(1, nc)))
-      gt = 0.0_dp
-      do i = 1, sys%ndof
-        if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
-      end do
-      call gradient_pattern()
-      use_saddle = .false.
-      if (nc > 0 .and. .not. use_cond .and. multiplier_mode /= MULT_SCHUR) then
-        call saddle_setup(nf, nc, sys%kl, ngnz, gnz, sd)
-        fl = saddle_flops(nf, nc, sys%kl, sd%ka)
-        use_saddle = multiplier_mode == MULT_SADDLE .or. fl(2) < fl(1)
-      end if
+      allocate (lam(max(1, nc)), lamn(max(1, nc)), g0(max(1, nc)), lam0(max(1, nc)), gsh(max(1, nc)), &
+                th0(max(1, sys%nd)), tau0(max(1, sys%nd)), th1(max(1, sys%nd)), tau1(max(1, sys%nd)), g1(max(1, nc)))
     end subroutine setup_work
 
     !> The Newton iterations of step n (predictor qs, vs set): converged, it and the state at the
@@ -329,10 +273,11 @@ contains
           call factor()
           if (status /= STATUS_OK) exit
         end if
-        call constraints(n + 1)      ! gradients (matrix part only after a factorization), values, G^T lam in res
+        ! gradients (the factorization's part with them after a factorization), values, G^T lam in res
+        call ns_rows(sys, lm, ns, q, v, cval(1, :, n + 1), lam, res, status)
         if (status /= STATUS_OK) exit
-        gsh(1:nc) = gval(1:nc)/(betap*dt*dt)
-        call correction(gsh(1:nc))
+        gsh(1:nc) = ns%gval(1:nc)/(betap*dt*dt)
+        call ns_correction(sys, lm, ns, res, gsh, a, lam, da_norm, a_norm, newton, status)
         if (status /= STATUS_OK) exit
         iters = iters + 1
         kat = kat + 1                ! iterations of this attempt
@@ -365,62 +310,6 @@ contains
         refresh = refresh .or. second
       end do
     end subroutine newton_iterations
-
-    !> One Newton correction at the assembled residual: solve S da + G dlam = -R, G' da = -shift
-    !> (shift (nc): the rows' residual in the units of G' a) by the saddle band or the multipliers'
-    !> Schur complement, update a and lam; newton(1:3) = [|R|, |da|, |a|].
-    subroutine correction(shift)
-      real(dp), intent(in) :: shift(:)
-      integer :: i
-      do i = 1, nf
-        rf(i) = -res(freeidx(i))
-      end do
-      newton(1) = norm2(rf)
-      if (use_saddle) then
-        call saddle_correction(shift)
-      else
-        call schur_correction(shift)
-      end if
-      if (status /= STATUS_OK) return
-      a_norm = 0.0_dp
-      do i = 1, nf         ! a loop: a(freeidx) = a(freeidx) + rf would copy through the heap
-        a(freeidx(i)) = a(freeidx(i)) + rf(i)
-        a_norm = a_norm + a(freeidx(i))**2
-      end do
-      da_norm = sqrt(sum(rf**2)); a_norm = sqrt(a_norm)
-      newton(2:3) = [da_norm, a_norm]
-    end subroutine correction
-
-    !> rf = -R on entry, da on return, lam updated: [S G; G' 0] [da; dlam] = [-R; -shift] as one band.
-    subroutine saddle_correction(shift)
-      real(dp), intent(in) :: shift(:)
-      dlam(1:nc) = -shift
-      call saddle_solve(sd, rf, dlam(1:nc), status)
-      if (status /= STATUS_OK) return
-      if (.not. ieee_is_finite(sum(abs(rf)) + sum(abs(dlam(1:nc))))) then
-        status = STATUS_NONFINITE
-        return
-      end if
-      lam(1:nc) = lam(1:nc) + dlam(1:nc)
-    end subroutine saddle_correction
-
-    !> The same by S^-1 and the multipliers' Schur complement: da = S^-1 (-R) - X dlam with
-    !> (G' X) dlam = G' S^-1 (-R) + shift.
-    subroutine schur_correction(shift)
-      real(dp), intent(in) :: shift(:)
-      integer :: i
-      call band_solve_rhs(rf)
-      if (status /= STATUS_OK .or. nc == 0) return
-      do i = 1, nc
-        dlam(i) = gdot(i, rf) + shift(i)
-      end do
-      call small_solve(dlam)
-      if (status /= STATUS_OK) return
-      do i = 1, nc
-        rf = rf - x(:, i)*dlam(i)
-      end do
-      lam(1:nc) = lam(1:nc) + dlam(1:nc)
-    end subroutine schur_correction
 
     !> Accept the iterate: the correction within tol of the accelerations (or the position correction
     !> below 1e-2 tol of the mechanism size), or stagnated at the round-off level of the residual (no
@@ -463,26 +352,6 @@ contains
       carry(size(carry)) = work
     end subroutine save_carry
 
-    !> Free DOFs on which row ic's gradient can be nonzero (the columns of its two markers), without
-    !> repetitions: gnz(1:ngnz(ic), ic).
-    subroutine gradient_pattern()
-      integer :: ic, k, f, ncl, cols(2*MAXCOL)
-      real(dp) :: gv, gd, ac, grad(2*MAXCOL)
-      type(marker_state) :: ma, mb
-      ngnz = 0
-      do ic = 1, nc
-        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
-                      q, v, gv, gd, ac, ncl, cols, grad, ma, mb)
-        do k = 1, ncl
-          f = sys%free_of(cols(k))
-          if (f == 0) cycle
-          if (any(gnz(1:ngnz(ic), ic) == f)) cycle
-          ngnz(ic) = ngnz(ic) + 1
-          gnz(ngnz(ic), ic) = f
-        end do
-      end do
-    end subroutine gradient_pattern
-
     !> Consistent initial acceleration and multipliers at t0: [M G; G^T 0] [a; lam] = [-R(q, v, 0);
     !> cval'' - acc0], by iterative refinement with S = M (a rigid body's J_S stands for a zero inertia
     !> in S; the refinement removes its effect).
@@ -498,12 +367,12 @@ contains
           call factor()
           if (status /= STATUS_OK) return
         end if
-        call constraints(1)
+        call ns_rows(sys, lm, ns, q, v, cval(1, :, 1), lam, res, status)
         if (status /= STATUS_OK) return
         do j = 1, nc        ! the rows' acceleration residual G a - (cval'' - acc0)
-          shift(j) = gdot(j, a(freeidx)) - (cval(3, j, 1) - acc0(j))
+          shift(j) = ns_gdot(ns, j, a(freeidx)) - (cval(3, j, 1) - ns%acc0(j))
         end do
-        call correction(shift(1:nc))
+        call ns_correction(sys, lm, ns, res, shift, a, lam, da_norm, a_norm, newton, status)
         if (status /= STATUS_OK) return
         dn = da_norm; an = a_norm
         if (dn <= 1.0e-3_dp*tol*(an + 1.0e-30) .or. dn > 0.5_dp*dn_prev) exit   ! converged, or round-off
@@ -511,17 +380,6 @@ contains
       end do
       call assemble(sys, q, v, a, t0, .false., 0.0_dp, 0.0_dp, res, lm, energy)
     end subroutine initial_acceleration
-
-    !> G(:, ic)^T y over the gradient's nonzero pattern.
-    pure real(dp) function gdot(ic, y)
-      integer, intent(in) :: ic
-      real(dp), intent(in) :: y(:)
-      integer :: k
-      gdot = 0.0_dp
-      do k = 1, ngnz(ic)
-        gdot = gdot + gt(gnz(k, ic), ic)*y(gnz(k, ic))
-      end do
-    end function gdot
 
     !> Values of the rows (the constraint functions, not their errors).
     subroutine row_values(gv)
@@ -572,79 +430,11 @@ contains
       lam0 = lam
     end subroutine step_work
 
-    !> Constraint gradients (X = S^-1 G and the Schur matrix when S was just factorized), errors
-    !> gval = g - cval (angles: principal value), velocity parts acc0 of g'', and G^T lam in res.
-    subroutine constraints(k)
-      integer, intent(in) :: k
-      integer :: ic, j, f, ncl, cols(2*MAXCOL)
-      real(dp) :: gv, gd, grad(2*MAXCOL)
-      type(marker_state) :: ma, mb
-      do ic = 1, nc
-        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
-                      q, v, gv, gd, acc0(ic), ncl, cols, grad, ma, mb)
-        gval(ic) = gv - cval(1, ic, k)
-        if (sys%con(1, ic) == CON_ANGLE) gval(ic) = wrap(gval(ic))
-        do j = 1, ngnz(ic)
-          gt(gnz(j, ic), ic) = 0.0_dp
-        end do
-        do j = 1, ncl
-          res(cols(j)) = res(cols(j)) + lam(ic)*grad(j)
-          f = sys%free_of(cols(j))
-          if (f > 0) gt(f, ic) = gt(f, ic) + grad(j)
-        end do
-      end do
-      if (nc > 0 .and. refactor .and. use_saddle) then
-        call saddle_factor(sd, lm%ab, gt, ngnz, gnz, status)
-        refactor = .false.
-      else if (nc > 0 .and. refactor) then
-        x(:, 1:nc) = gt(:, 1:nc)
-        if (use_cond) then
-          call lm_solve(sys, lm, nc, x, nf, status)
-          if (status /= STATUS_OK) return
-        else
-          call dgbtrs('N', nf, sys%kl, sys%ku, nc, lm%ab, size(lm%ab, 1), ipiv, x, nf, info)
-        end if
-        do j = 1, nc
-          do ic = 1, nc
-            amat(ic, j) = gdot(ic, x(:, j))
-          end do
-        end do
-        call dgetrf(nc, nc, amat, size(amat, 1), ipc, info)
-        status = lapack_status(info)
-        refactor = .false.
-      end if
-    end subroutine constraints
-
-    !> Factorize S (assembled in lm): condensed, or the whole band (reference).
+    !> Factorize the assembled S (flexmech_coupled_solve: its path) and count it.
     subroutine factor()
       newton(4) = newton(4) + 1.0_dp
-      if (use_cond) then
-        call lm_factor(sys, lm, status)
-      else
-        call lm_band_finish(sys, lm)
-        if (.not. use_saddle) then   ! (the saddle band takes S in once the gradients are known)
-          call dgbtrf(nf, nf, sys%kl, sys%ku, lm%ab, size(lm%ab, 1), ipiv, info)
-          status = lapack_status(info)
-        end if
-      end if
-      refactor = .true.
+      call ns_factor(sys, lm, ns, status)
     end subroutine factor
-
-    subroutine band_solve_rhs(xx)
-      real(dp), intent(inout) :: xx(:)
-      if (use_cond) then
-        call lm_solve(sys, lm, 1, xx, nf, status)
-      else
-        call dgbtrs('N', nf, sys%kl, sys%ku, 1, lm%ab, size(lm%ab, 1), ipiv, xx, nf, info)
-      end if
-      if (.not. ieee_is_finite(sum(abs(xx)))) status = STATUS_NONFINITE
-    end subroutine band_solve_rhs
-
-    subroutine small_solve(xx)
-      real(dp), intent(inout) :: xx(:)
-      call dgetrs('N', nc, 1, amat, size(amat, 1), ipc, xx, size(xx), info)
-      if (.not. ieee_is_finite(sum(abs(xx(1:nc))))) status = STATUS_NONFINITE
-    end subroutine small_solve
 
   end subroutine coupled_run
 

@@ -86,8 +86,8 @@ KED_SDOF = (np.array([0, 0, 0, 1, 0, 0], np.int32), np.array([1], np.int32),
 KED_OMEGA = 1.0                                                                # sqrt(k / m)
 
 # coupled loop: one segment, one element, fixed chord (ends and th_1 fixed): only th_0 free,
-# m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L (flat description: flexmech_coupled_system, coupled_build); absang = arch = 0
-CPL_SDOF = (np.array([1, 0, 6, 1] + [0] * 8 + [1] + list(range(1, 7)) + [0, 0, 0, 0, 1, 0] + [0, 0], np.int32),
+# m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L (flat description: flexmech_coupled_system, coupled_build); absang = arch = 0, nbd = -1 (no bordered band)
+CPL_SDOF = (np.array([1, 0, 6, 1] + [0] * 8 + [1] + list(range(1, 7)) + [0, 0, 0, 0, 1, 0] + [0, 0] + [-1], np.int32),
             np.array([1.0, 105.0, 1e3, 0.25, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]))   # L, rho A, EA, EI; node fractions
 CPL_OMEGA = 1.0
 CPL_Q0 = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
