@@ -48,8 +48,7 @@ def _supported(mech) -> None:
     """ValueError unless the mechanism is what this builder models."""
     if any(ln.rigid for ln in mech.links) or any(j.kind != "revolute" for j in mech.joints):
         raise ValueError("the Exudyn side by side models flexible links, rigid bodies and revolute joints only")
-    drives = [d for d in mech.drives]
-    if len(drives) != 1 or drives[0].law != "constant_speed":
+    if len(mech.drives) != 1 or mech.drives[0].law != "constant_speed":
         raise ValueError("the Exudyn side by side models one constant-speed drive")
 
 

@@ -100,7 +100,10 @@ contains
     bordered = solver_mode == SOLVER_BORDERED .or. solver_mode == SOLVER_AUTO .and. sys%nbd > 0
     if (sys%nbd == 0 .and. solver_mode == SOLVER_AUTO) bordered = any(sys%row_border(1:sys%nc) /= 0)
     bordered = bordered .and. sys%nbd >= 0
-    call lm_setup(sys, merge(1, ns%nc, bordered), lm)      ! (the condensed solve's columns: not here)
+    ! the condensed solve's columns for the rows (nc of them) only where it may be taken: the coupled
+    ! model, or forced
+    call lm_setup(sys, merge(ns%nc, 1, .not. bordered .and. (sys%nbd < 0 .or. solver_mode == SOLVER_CONDENSED)), &
+                  lm)
     if (bordered) then
       call lm_bordered_setup(sys, lm, ns%ngnz, ns%gnz)
       ns%path = PATH_BORDERED
