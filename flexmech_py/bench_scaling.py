@@ -14,13 +14,16 @@ one 2 and 4 elements per link with one short run each (the tests run it).
 
 from __future__ import annotations
 
+import argparse
 import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .bench_runs import bench_case, fit_exponent
+from .bench_runs import bench_case, fit_exponent, table
+from .bundled import cases_dir
 from .case import load_case
 from .errors import CaseError, SolverError
 from .simulate import Prepared
@@ -181,3 +184,24 @@ def scaling_rows(rows: list[dict]) -> list[dict]:
             out.append({"metric": f"{key}.relative_to_seed_fourbar", "value": f["relative_to_seed_fourbar"], "unit": "1",
                         "note": "kernel time per element and step at the finest mesh / the seed four-bar's"})
     return out
+
+
+def main(argv=None) -> int:
+    """``python -m flexmech_py.bench_scaling [--quick] [CASES]``: this section of ``flexmech bench``
+    alone, its two tables on stdout (docs/performance.md regenerates from it)."""
+    ap = argparse.ArgumentParser(prog="python -m flexmech_py.bench_scaling", description=main.__doc__)
+    ap.add_argument("--quick", action="store_true", help="the quick ladder (2 and 4 elements per link)")
+    ap.add_argument("cases", nargs="?", default=None, help="folder of case files (default: the bundled cases)")
+    args = ap.parse_args(argv)
+    rows = bench_scaling(Path(args.cases) if args.cases else cases_dir(), args.quick,
+                         lambda msg: print(msg, file=sys.stderr, flush=True))
+    pivot = scaling_pivot(rows)
+    print("kernel CPU per step [us] against elements per link\n" + table(pivot, list(pivot[0])))
+    print("\nfits\n" + table(scaling_summary(rows), ["case", "model", "ladder", "exponent_time", "exponent_flops",
+                                                   "us_per_element_step_finest", "relative_to_seed_fourbar",
+                                                   "newton_per_step_finest"]))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -9,10 +9,13 @@ without it the sections are skipped with one line.
 
 from __future__ import annotations
 
+import argparse
+import sys
 from pathlib import Path
 
 from . import bench_exudyn, bench_exudyn_mechanism
 from .bench_runs import table
+from .bundled import cases_dir
 
 __all__ = ["exudyn_sections", "exudyn_rows", "exudyn_report", "SIDE_BY_SIDE", "SIDE_BY_SIDE_MECHANISM"]
 
@@ -117,13 +120,13 @@ def exudyn_rows(res: dict) -> list[dict]:
     rows = [{"metric": f"exudyn.{r['model']}.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
              "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed four-bar, {r['steps']} steps of 1.25e-5 s"}
             for r in exudyn]
-    return rows + [{"metric": f"exudyn.manipulator.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
-                    "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed manipulator, {r['steps']} steps of 1.25e-5 s"}
-                   for r in exudyn_manipulator]
-    + [{"metric": f"exudyn.{r['case']}.{r['node_angles']}.{r['elements_per_link']}_per_link.speedup",
-        "value": r["speedup"], "unit": "1",
-        "note": f"Exudyn CPU / flexmech CPU, {r['case']} (nonlinear), {r['steps']} steps of 1.25e-5 s"}
-       for r in res["exudyn_mechanism"]]
+    rows += [{"metric": f"exudyn.manipulator.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
+              "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed manipulator, {r['steps']} steps of 1.25e-5 s"}
+             for r in exudyn_manipulator]
+    return rows + [{"metric": f"exudyn.{r['case']}.{r['node_angles']}.{r['elements_per_link']}_per_link.speedup",
+                    "value": r["speedup"], "unit": "1",
+                    "note": f"Exudyn CPU / flexmech CPU, {r['case']} (nonlinear), {r['steps']} steps of 1.25e-5 s"}
+                   for r in res["exudyn_mechanism"]]
 
 
 def exudyn_report(res: dict) -> list[str]:
@@ -141,3 +144,21 @@ def exudyn_report(res: dict) -> list[str]:
                    "strain differences relative to flexmech's peak)",
                table(res["exudyn_mechanism"], list(res["exudyn_mechanism"][0]))]
               if res.get("exudyn_mechanism") else [])]
+
+
+def main(argv=None) -> int:
+    """``python -m flexmech_py.bench_side_by_side [--quick] [CASES]``: these sections of ``flexmech
+    bench`` alone, their tables on stdout (docs/performance.md regenerates from it)."""
+    ap = argparse.ArgumentParser(prog="python -m flexmech_py.bench_side_by_side", description=main.__doc__)
+    ap.add_argument("--quick", action="store_true", help="the quick sizes (4 elements per link, a few ms)")
+    ap.add_argument("cases", nargs="?", default=None, help="folder of case files (default: the bundled cases)")
+    args = ap.parse_args(argv)
+    cases = Path(args.cases) if args.cases else cases_dir()
+    res = exudyn_sections(cases / "fourbar_hac.toml", cases, args.quick,
+                          lambda msg: print(msg, file=sys.stderr, flush=True))
+    print("\n".join(exudyn_report(res)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

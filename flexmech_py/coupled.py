@@ -44,6 +44,7 @@ class CoupledModel:
         self.solver = None
         self._flat = None
         self._kflat = None
+        self._by_link = None      # {link: (segment numbers, their end nodes k1)}, built on first use
         #: the nonlinear model with solver.node_angles = "shared": the kernel integrates one absolute
         #: angle per node (coupled_layout.SharedAngles); None: chord-relative angles and weld rows
         shared = layout.split and layout.case["solver"].get("node_angles", "relative") == "shared"
@@ -69,8 +70,29 @@ class CoupledModel:
         return self.seg_slice(segs[0])[0:2], self.seg_slice(segs[-1])[2:4]
 
     def node_segment(self, li: int, k: int) -> tuple[int, int]:
-        """(segment, node within it) of mesh node k of link li: the first segment holding it."""
-        return node_segment(self.segments, li, k)
+        """(segment, node within it) of mesh node k of link li: the first segment holding it (a
+        bisection: the nonlinear model has a segment per element, and outputs ask for every node)."""
+        segs, ends = self._link_segments(li)
+        si = segs[min(int(np.searchsorted(ends, k, side="left")), len(segs) - 1)]
+        if not self.segments[si][1] <= k <= self.segments[si][2]:
+            return node_segment(self.segments, li, k)       # (raises: k is not on the link)
+        return si, k - self.segments[si][1]
+
+    def element_segment(self, li: int, e: int) -> tuple[int, int]:
+        """(segment, element within it) of element e (0-based, along the link) of link li."""
+        segs, ends = self._link_segments(li)
+        si = segs[min(int(np.searchsorted(ends, e, side="right")), len(segs) - 1)]
+        return si, e - self.segments[si][1]
+
+    def _link_segments(self, li: int) -> tuple[list[int], np.ndarray]:
+        if self._by_link is None:
+            by = {}
+            for si, (l2, _, k1) in enumerate(self.segments):   # (a link's segments in order along it)
+                by.setdefault(l2, ([], []))
+                by[l2][0].append(si)
+                by[l2][1].append(k1)
+            self._by_link = {l2: (sg, np.asarray(ends)) for l2, (sg, ends) in by.items()}
+        return self._by_link[li]
 
     def body_of(self, bi: int):
         """The rigid-body entry (index, DOFs, m, J_C, J_S) of mechanism body bi (None for a flexible link)."""

@@ -153,8 +153,7 @@ def _element_parts(cm: CoupledModel, li: int, frac: float) -> list:
         parts = [(e, (frac - f[e]) / (f[e + 1] - f[e]))]
     out = []
     for e, xi in parts:
-        si = next(i for i, (l2, k0, k1) in enumerate(cm.segments) if l2 == li and k0 <= e < k1)
-        out.append((si, e - cm.segments[si][1], xi))
+        out.append((*cm.element_segment(li, e), xi))
     return out
 
 

@@ -17,7 +17,8 @@
 module flexmech_coupled_solve
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE
+  use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
+                             STATUS_BAD_INPUT
   use flexmech_markers, only: marker_state, CON_ANGLE, MAXCOL
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap
   use flexmech_coupled_rows, only: eval_row, row_patterns
@@ -51,15 +52,20 @@ module flexmech_coupled_solve
   integer :: multiplier_mode = MULT_AUTO
   integer, parameter :: PATH_BAND_SCHUR = 0, PATH_BAND_SADDLE = 1, PATH_CONDENSED = 2, PATH_BORDERED = 3
 
-  !> One run's solver: its path, the constraint gradients gt (free DOFs x rows, nonzero on the
-  !> patterns gnz(1:ngnz(i), i) only), the Schur path's X = S^-1 G, its dense matrix and pivots, the
-  !> rows' errors gval and velocity parts acc0, and the work vectors of a correction.
+  !> One run's solver: its path, the constraint gradients on their patterns (gc(k, i): the entry of
+  !> free DOF gnz(k, i) in row i, k = 1..ngnz(i); memory linear in the rows), the Schur paths' X =
+  !> S^-1 G (free DOFs x rows), its dense matrix and pivots (allocated on those paths only: the
+  !> band saddle and bordered paths keep the memory linear in the mesh), the rows' errors gval and
+  !> velocity parts acc0, and the work vectors of a correction.
   type :: newton_solver
     integer :: nf = 0, nc = 0, path = PATH_BAND_SCHUR
     !> S was factorized since the gradients were last taken in (ns_rows completes the factorization)
     logical :: refactor = .false.
     integer, allocatable :: freeidx(:), ipiv(:), ipc(:), gnz(:, :), ngnz(:)
-    real(dp), allocatable :: gt(:, :), x(:, :), amat(:, :), rf(:), dlam(:), gval(:), acc0(:)
+    !> slot(j, i): the pattern slot the j-th column of row i's evaluation took last (checked, then
+    !> searched on a miss: the columns come in the same order at every evaluation)
+    integer, allocatable :: slot(:, :)
+    real(dp), allocatable :: gc(:, :), x(:, :), amat(:, :), rf(:), dlam(:), gval(:), acc0(:)
   end type newton_solver
 
 contains
@@ -88,9 +94,10 @@ contains
     real(dp) :: fl(2)
     logical :: bordered
     ns%nf = sys%nfree; ns%nc = sys%nc; nc1 = max(1, sys%nc)
-    allocate (ns%gt(ns%nf, nc1), ns%amat(nc1, nc1), ns%ipc(nc1), ns%gnz(2*MAXCOL, nc1), ns%ngnz(nc1), &
+    allocate (ns%gc(2*MAXCOL, nc1), ns%gnz(2*MAXCOL, nc1), ns%ngnz(nc1), ns%slot(2*MAXCOL, nc1), &
               ns%rf(ns%nf), ns%dlam(nc1), ns%gval(nc1), ns%acc0(nc1), ns%freeidx(ns%nf), ns%ipiv(ns%nf))
-    ns%gt = 0.0_dp
+    ns%gc = 0.0_dp
+    ns%slot = 1
     do i = 1, sys%ndof
       if (sys%free_of(i) > 0) ns%freeidx(sys%free_of(i)) = i
     end do
@@ -109,15 +116,18 @@ contains
       ns%path = PATH_BORDERED
       return
     end if
-    allocate (ns%x(ns%nf, nc1))
     if (lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
                        (solver_mode == SOLVER_AUTO .and. sys%nbd < 0 .and. sys%kl > lm%kbi + 4))) then
       ns%path = PATH_CONDENSED
+      call schur_storage(ns)
       return
     end if
     call lm_band_setup(sys, lm)     ! S as one band, in lm%ab
     ns%path = PATH_BAND_SCHUR
-    if (ns%nc == 0 .or. multiplier_mode == MULT_SCHUR) return
+    if (ns%nc == 0 .or. multiplier_mode == MULT_SCHUR) then
+      call schur_storage(ns)
+      return
+    end if
     zero = 0           ! S's pattern: the segments' blocks (one-element segments), else its whole band
     if (sys%maxn == 1) then
       call saddle_setup(ns%nf, ns%nc, 0, zero, ns%ngnz, ns%gnz, lm%sd, cliques=lm%fl(1:6, :))
@@ -125,8 +135,18 @@ contains
       call saddle_setup(ns%nf, ns%nc, 0, zero, ns%ngnz, ns%gnz, lm%sd, kl=sys%kl)
     end if
     fl = saddle_flops(ns%nf, ns%nc, sys%kl, lm%sd%ka)
-    if (multiplier_mode == MULT_SADDLE .or. fl(2) < fl(1)) ns%path = PATH_BAND_SADDLE
+    if (multiplier_mode == MULT_SADDLE .or. fl(2) < fl(1)) then
+      ns%path = PATH_BAND_SADDLE
+    else
+      call schur_storage(ns)
+    end if
   end subroutine ns_setup
+
+  !> The Schur paths' X = S^-1 G (free DOFs x rows), their dense matrix and its pivots.
+  subroutine schur_storage(ns)
+    type(newton_solver), intent(inout) :: ns
+    allocate (ns%x(ns%nf, max(1, ns%nc)), ns%amat(max(1, ns%nc), max(1, ns%nc)), ns%ipc(max(1, ns%nc)))
+  end subroutine schur_storage
 
   !> Factorize the assembled S (the condensed segments, or the whole band; the saddle and bordered
   !> bands once the gradients are known, in ns_rows).
@@ -149,7 +169,7 @@ contains
     ns%refactor = .true.
   end subroutine ns_factor
 
-  !> The rows at (q, v): gradients gt, errors gval = g - cv (cv: the rows' values at this time; angles
+  !> The rows at (q, v): gradients gc, errors gval = g - cv (cv: the rows' values at this time; angles
   !> to their principal value), velocity parts acc0 of g'', and G^T lam added to res; after a
   !> factorization the rest of it (the saddle or bordered band's LU with G, or X = S^-1 G and the
   !> Schur matrix).
@@ -160,7 +180,7 @@ contains
     real(dp), intent(in) :: q(:), v(:), cv(:), lam(:)
     real(dp), intent(inout) :: res(:)
     integer, intent(out) :: status
-    integer :: ic, j, f, ncl, cols(2*MAXCOL)
+    integer :: ic, j, k, f, ncl, cols(2*MAXCOL)
     real(dp) :: gv, gd, grad(2*MAXCOL)
     type(marker_state) :: ma, mb
     status = STATUS_OK
@@ -169,23 +189,31 @@ contains
                     q, v, gv, gd, ns%acc0(ic), ncl, cols, grad, ma, mb)
       ns%gval(ic) = gv - cv(ic)
       if (sys%con(1, ic) == CON_ANGLE) ns%gval(ic) = wrap(ns%gval(ic))
-      do j = 1, ns%ngnz(ic)
-        ns%gt(ns%gnz(j, ic), ic) = 0.0_dp
-      end do
+      ns%gc(1:ns%ngnz(ic), ic) = 0.0_dp
       do j = 1, ncl
         res(cols(j)) = res(cols(j)) + lam(ic)*grad(j)
         f = sys%free_of(cols(j))
-        if (f > 0) ns%gt(f, ic) = ns%gt(f, ic) + grad(j)
+        if (f == 0) cycle
+        k = ns%slot(j, ic)
+        if (ns%gnz(k, ic) /= f) then
+          k = pattern_slot(ns, ic, f)
+          if (k == 0) then            ! a gradient off the pattern the run set up with (not expected)
+            status = STATUS_BAD_INPUT
+            return
+          end if
+          ns%slot(j, ic) = k
+        end if
+        ns%gc(k, ic) = ns%gc(k, ic) + grad(j)
       end do
     end do
     if (.not. ns%refactor) return
     ns%refactor = .false.
     select case (ns%path)
     case (PATH_BORDERED)
-      call saddle_factor(lm%sd, ns%gt, ns%ngnz, ns%gnz, status)
+      call saddle_factor(lm%sd, ns%gc, ns%ngnz, ns%gnz, status)
     case (PATH_BAND_SADDLE)
       call saddle_take_band(lm%sd, lm%ab, sys%kl)
-      call saddle_factor(lm%sd, ns%gt, ns%ngnz, ns%gnz, status)
+      call saddle_factor(lm%sd, ns%gc, ns%ngnz, ns%gnz, status)
     case default
       if (ns%nc > 0) call schur_matrix(sys, lm, ns, status)
     end select
@@ -198,7 +226,10 @@ contains
     type(newton_solver), intent(inout) :: ns
     integer, intent(out) :: status
     integer :: ic, j, info
-    ns%x(:, 1:ns%nc) = ns%gt(:, 1:ns%nc)
+    ns%x(:, 1:ns%nc) = 0.0_dp
+    do j = 1, ns%nc
+      ns%x(ns%gnz(1:ns%ngnz(j), j), j) = ns%gc(1:ns%ngnz(j), j)
+    end do
     if (ns%path == PATH_CONDENSED) then
       call lm_solve(sys, lm, ns%nc, ns%x, ns%nf, status)
       if (status /= STATUS_OK) return
@@ -287,9 +318,19 @@ contains
     integer :: k
     ns_gdot = 0.0_dp
     do k = 1, ns%ngnz(ic)
-      ns_gdot = ns_gdot + ns%gt(ns%gnz(k, ic), ic)*y(ns%gnz(k, ic))
+      ns_gdot = ns_gdot + ns%gc(k, ic)*y(ns%gnz(k, ic))
     end do
   end function ns_gdot
+
+  !> The slot k of free DOF f in row ic's gradient pattern (gnz(k, ic) = f; 0: not on it).
+  pure integer function pattern_slot(ns, ic, f) result(k)
+    type(newton_solver), intent(in) :: ns
+    integer, intent(in) :: ic, f
+    do k = 1, ns%ngnz(ic)
+      if (ns%gnz(k, ic) == f) return
+    end do
+    k = 0
+  end function pattern_slot
 
   !> The path and its size: [path (PATH_*), unknowns in the band, the band's half width, unknowns
   !> eliminated densely (border, or the rows of a Schur complement), floating-point operations of one

@@ -20,8 +20,8 @@
 !> Schur complement G' S^-1 G grows with the cube.
 !> S enters either entry by entry over its pattern (saddle_add6, saddle_add_diag: the nonlinear
 !> model's one-element segments and rigid bodies, straight from the assembly) or from a free-DOF band
-!> in LAPACK factor layout (saddle_take_band: entry (i, j) at row 2 kl + 1 + i - j).  G: (n, m)
-!> constraint gradients by free DOF, nonzero on the patterns gnz(1:ngnz(i), i) only.
+!> in LAPACK factor layout (saddle_take_band: entry (i, j) at row 2 kl + 1 + i - j).  G: the m
+!> constraint gradients on their patterns: g(k, i) the entry of free DOF gnz(k, i), k <= ngnz(i).
 module flexmech_saddle_band
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, dtbsv, lapack_status, STATUS_OK
@@ -40,6 +40,9 @@ module flexmech_saddle_band
   !> Ordering, factors and work vector of one bordered saddle-point system.
   type :: saddle_system
     integer :: n = 0, m = 0, ni = 0, nb = 0, ka = 0, kd = 0
+    !> kl of a free-DOF band whose every pair within kl lies in the interior band (saddle_take_band
+    !> copies it straight; -1: not known, -2: does not fit)
+    integer :: kl_fits = -1
     integer, allocatable :: pos(:)           !< (n + m) position of free DOF f (1..n) and of multiplier n + i
     !> the interior rows of W(:, j) and V(:, j): ranges rlo(r)..rhi(r), r = rptr(j)..rptr(j + 1) - 1
     integer, allocatable :: rptr(:), rlo(:), rhi(:)
@@ -270,7 +273,12 @@ contains
     do j = 1, 6
       if (p(j) == 0) cycle
       do i = 1, 6
-        if (p(i) > 0) call put(sd, p(i), p(j), s6(i, j))
+        if (p(i) == 0) cycle
+        if (p(i) <= sd%ni .and. p(j) <= sd%ni) then     ! (the interior, inline: most entries)
+          sd%ab(sd%kd + p(i) - p(j), p(j)) = sd%ab(sd%kd + p(i) - p(j), p(j)) + s6(i, j)
+        else
+          call put(sd, p(i), p(j), s6(i, j))
+        end if
       end do
     end do
   end subroutine saddle_add6
@@ -289,15 +297,50 @@ contains
     type(saddle_system), intent(inout) :: sd
     real(dp), intent(in) :: s_band(:, :)
     integer, intent(in) :: kl
-    integer :: i, j, ds
+    integer :: i, j, ds, p, q
+    real(dp) :: val
     ds = 2*kl + 1
     call saddle_zero(sd)
+    if (sd%kl_fits == -1) sd%kl_fits = merge(kl, -2, band_fits(sd, kl))
+    if (sd%kl_fits == kl) then      ! (a single chain: straight into the band, as fast as a copy)
+      do j = 1, sd%n
+        q = sd%pos(j)
+        do i = max(1, j - kl), min(sd%n, j + kl)
+          sd%ab(sd%kd + sd%pos(i) - q, q) = s_band(ds + i - j, j)
+        end do
+      end do
+      return
+    end if
     do j = 1, sd%n
+      q = sd%pos(j)
       do i = max(1, j - kl), min(sd%n, j + kl)
-        if (s_band(ds + i - j, j) /= 0.0_dp) call put(sd, sd%pos(i), sd%pos(j), s_band(ds + i - j, j))
+        val = s_band(ds + i - j, j)
+        if (val == 0.0_dp) cycle
+        p = sd%pos(i)
+        if (p <= sd%ni .and. q <= sd%ni) then     ! (the interior, inline: most entries)
+          sd%ab(sd%kd + p - q, q) = sd%ab(sd%kd + p - q, q) + val
+        else
+          call put(sd, p, q, val)
+        end if
       end do
     end do
   end subroutine saddle_take_band
+
+  !> Every free-DOF pair within kl of each other lies in the interior band.
+  pure logical function band_fits(sd, kl)
+    type(saddle_system), intent(in) :: sd
+    integer, intent(in) :: kl
+    integer :: i, j
+    band_fits = .true.
+    do j = 1, sd%n
+      do i = max(1, j - kl), min(sd%n, j + kl)
+        if (sd%pos(i) > sd%ni .or. sd%pos(j) > sd%ni .or. abs(sd%pos(i) - sd%pos(j)) > sd%ka) then
+          band_fits = .false.
+          return
+        end if
+      end do
+    end do
+  end function band_fits
 
   !> S's entry (f, g) as stored (before saddle_factor): the dense matrices of the tests.
   pure real(dp) function saddle_s_entry(sd, f, g) result(val)
@@ -328,7 +371,7 @@ contains
     end do
   end function in_ranges
 
-  !> Add G (g over the patterns) to the stored S and factorize: the band LU, then the border's W, V
+  !> Add G (g(k, i): the entry of free DOF gnz(k, i) in row i) to the stored S and factorize: the band LU, then the border's W, V
   !> and Schur complement, its dense LU.  status STATUS_OK or the LAPACK status (singular: the rows
   !> are dependent at this configuration).
   subroutine saddle_factor(sd, g, ngnz, gnz, status)
@@ -341,8 +384,13 @@ contains
       c = sd%pos(sd%n + i)
       do k = 1, ngnz(i)
         r = sd%pos(gnz(k, i))
-        call put(sd, r, c, g(gnz(k, i), i))      ! G: row of the DOF, column of the multiplier
-        call put(sd, c, r, g(gnz(k, i), i))      ! G'
+        if (r <= sd%ni .and. c <= sd%ni) then     ! (the interior, inline: most entries)
+          sd%ab(sd%kd + r - c, c) = sd%ab(sd%kd + r - c, c) + g(k, i)
+          sd%ab(sd%kd + c - r, r) = sd%ab(sd%kd + c - r, r) + g(k, i)
+        else
+          call put(sd, r, c, g(k, i))      ! G: row of the DOF, column of the multiplier
+          call put(sd, c, r, g(k, i))      ! G'
+        end if
       end do
     end do
     info = 0
