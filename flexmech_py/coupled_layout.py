@@ -24,14 +24,14 @@ import numpy as np
 
 from .coupled_ordering import bordered_numbering
 from .errors import CaseError
+from .mechanism.rows import CON_ANGLE, CON_POINT, CON_PROJECTION
 from .model import link_mesh, rcm_free_numbering, uniform_mesh
 
 __all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "JOINT_ROWS", "HOLDING", "CON_POINT", "CON_ANGLE",
            "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",
            "start_value", "flat_description"]
 
-# constraint kinds (flexmech_markers) and marker kinds (flexmech_coupled_system)
-CON_POINT, CON_ANGLE, CON_PROJECTION = 1, 2, 3
+# marker kinds (flexmech_coupled_system); the constraint kinds: mechanism.rows
 MK_GROUND, MK_NODE, MK_BODY = 0, 1, 2
 J_FLOOR = 1e-6     # a rigid body without rotary inertia: J_S = J_FLOOR m lref^2 in the iteration matrix
 

@@ -30,7 +30,7 @@ module flexmech_coupled_system
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
   use flexmech_beam, only: beam_mass, beam_stiffness
-  use flexmech_markers, only: CON_POINT, CON_ANGLE, CON_PROJECTION
+  use flexmech_markers, only: CON_POINT, con_valid
   use flexmech_assembly, only: half_bandwidth
   implicit none
   private
@@ -250,12 +250,11 @@ contains
       end select
     end do
     do i = 1, sys%nc
-      if (sys%con(1, i) < CON_POINT .or. sys%con(1, i) > CON_PROJECTION) return
+      if (.not. con_valid(sys%con(1, i), sys%con(4, i))) return
       if (any(sys%con(2:3, i) < 1) .or. any(sys%con(2:3, i) > sys%nmk)) return
-      if (sys%con(1, i) == CON_POINT .and. (sys%con(4, i) < 1 .or. sys%con(4, i) > 2)) return
     end do
     do i = 1, sys%nd
-      if (sys%dv(1, i) /= CON_ANGLE .and. sys%dv(1, i) /= CON_PROJECTION) return
+      if (sys%dv(1, i) == CON_POINT .or. .not. con_valid(sys%dv(1, i), 0)) return   ! a coordinate row
       if (any(sys%dv(2:3, i) < 1) .or. any(sys%dv(2:3, i) > sys%nmk)) return
       if (sys%dv(5, i) > 0) then
         if (sys%dv(4, i) < 1 .or. sys%dv(4, i) + sys%dv(5, i) - 1 > ntab .or. sys%dv(5, i) < 2) return

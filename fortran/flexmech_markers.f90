@@ -12,26 +12,34 @@
 !>   rigid-body point s (body frame, from the centre of mass):  r = r_C + R(phi) s,  psi = phi
 !>     DOFs [x_C, y_C, phi]
 !>   ground point: r fixed, psi = 0, no DOF.
-!> A constraint row (or a joint coordinate) is a scalar function of two markers a, b (one routine per
-!> kind), returned as its value g, rate g', the velocity part acc0 of g'' and its gradient over the
-!> columns of a (first ma%n entries) then of b (next mb%n entries; a column may repeat when the two
-!> markers share a DOF: gradients add):
-!>   CON_POINT       (r_a - r_b)_i, i = aux (1: x, 2: y)             revolute, weld (point rows)
-!>   CON_ANGLE       psi_b - psi_a                                    weld, prismatic, kinematic drive
-!>                                                                    and torque on a revolute
-!>   CON_PROJECTION  e . (r_b - r_a), e = R(psi_a) d, d fixed in a   prismatic normal row (d the guide
-!>                                                                    normal), slide coordinate (d the
-!>                                                                    guide direction)
-!> A new constraint kind is one routine here and one case in constraint_row.
+!> A constraint row (or a joint coordinate) is a scalar function of two markers a, b, returned as its
+!> value g, rate g', the velocity part acc0 of g'' and its gradient over the columns of a (first ma%n
+!> entries) then of b (next mb%n entries; a column may repeat when the two markers share a DOF:
+!> gradients add).  Every model (the rigid-body solver flexmech_mbs, the coupled and nonlinear models
+!> through flexmech_coupled_rows) evaluates its rows here, by the index of the row kind: this table is
+!> the one constraint vocabulary (its Python mirror: flexmech_py/mechanism/rows.py).
+!>   index  name            routine          value unit  g; parameters (aux integer, d(2) real)
+!>   1      CON_POINT       row_point        m           (r_a - r_b)_i, i = aux (1: x, 2: y)
+!>   2      CON_ANGLE       row_angle        rad         psi_b - psi_a
+!>   3      CON_PROJECTION  row_projection   m           e . (r_b - r_a), e = R(psi_a) d, d fixed in a's frame
+!> A joint kind is a list of rows of these kinds on its two markers (revolute: two CON_POINT rows;
+!> weld: two CON_POINT and a CON_ANGLE; prismatic: CON_PROJECTION on the guide normal and a CON_ANGLE)
+!> and a coordinate row (CON_ANGLE, or CON_PROJECTION on the guide direction) that drives act on.
+!> A new row kind is one pure routine here with the signature of row_angle (plus aux, d when it
+!> needs them), one index NCON + 1, one case in constraint_row and its unit in con_in_radians
+!> (docs/architecture.md, "Fortran: the constraint vocabulary").  Builders reject any index outside
+!> 1..NCON (con_valid): an unknown kind is an input error, never a fallback.
 module flexmech_markers
+  use, intrinsic :: ieee_arithmetic, only: ieee_value, ieee_quiet_nan
   use flexmech_kinds, only: dp
   implicit none
   private
   public :: marker_state, segment_marker, body_marker, ground_marker, constraint_row
-  public :: row_point, row_angle, row_projection
-  public :: CON_POINT, CON_ANGLE, CON_PROJECTION, MAXCOL
+  public :: row_point, row_angle, row_projection, con_valid, con_in_radians
+  public :: CON_POINT, CON_ANGLE, CON_PROJECTION, NCON, MAXCOL
 
   integer, parameter :: CON_POINT = 1, CON_ANGLE = 2, CON_PROJECTION = 3
+  integer, parameter :: NCON = 3          !< row kinds: the valid indices are 1..NCON
   integer, parameter :: MAXCOL = 7        !< columns of one marker (an interior segment node)
 
   type :: marker_state
@@ -132,8 +140,24 @@ contains
     ms%n = 0
   end subroutine ground_marker
 
+  !> The row kind index is one of the table's (1..NCON) and its integer parameter aux fits it (the
+  !> component 1 or 2 of CON_POINT; the other kinds take any aux).
+  pure logical function con_valid(kind, aux)
+    integer, intent(in) :: kind, aux
+    con_valid = kind >= 1 .and. kind <= NCON
+    if (kind == CON_POINT) con_valid = aux == 1 .or. aux == 2
+  end function con_valid
+
+  !> The row's value is an angle [rad] (else a length [m]): scaled by the mechanism's length where
+  !> rows are compared or conditioned.
+  pure logical function con_in_radians(kind)
+    integer, intent(in) :: kind
+    con_in_radians = kind == CON_ANGLE
+  end function con_in_radians
+
   !> Row of kind CON_* between markers a and b (aux: the component of CON_POINT; d: the direction of
-  !> CON_PROJECTION in a's frame).  Columns: a's then b's (nc = ma%n + mb%n).
+  !> CON_PROJECTION in a's frame).  Columns: a's then b's (nc = ma%n + mb%n).  An index outside the
+  !> table (which every builder rejects first) gives NaN values.
   pure subroutine constraint_row(kind, aux, d, ma, mb, g, gd, acc0, nc, cols, grad)
     integer, intent(in) :: kind, aux
     real(dp), intent(in) :: d(2)
@@ -148,8 +172,10 @@ contains
       call row_point(aux, ma, mb, g, gd, acc0, grad)
     case (CON_ANGLE)
       call row_angle(ma, mb, g, gd, acc0, grad)
-    case default
+    case (CON_PROJECTION)
       call row_projection(d, ma, mb, g, gd, acc0, grad)
+    case default
+      g = ieee_value(g, ieee_quiet_nan); gd = g; acc0 = g; grad = g
     end select
   end subroutine constraint_row
 

@@ -22,8 +22,9 @@
 module flexmech_motion
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_SINGULAR_POSITION, STATUS_NONFINITE
-  use flexmech_mbs, only: mbs_system, mbs_kinematic_sample, mbs_accelerations, mbs_project, mbs_gram_rcond, &
-                          mbs_joint_coordinates, mbs_constraints, mbs_drive_values, mbs_drive_change
+  use flexmech_mbs, only: mbs_system, mbs_accelerations, mbs_joint_coordinates, mbs_constraints, mbs_drive_values, &
+                          mbs_drive_change
+  use flexmech_mbs_solve, only: mbs_kinematic_sample, mbs_project, mbs_gram_rcond
   use flexmech_ode, only: ode_state, ode_start, ode_step, ode_dense, ode_pack, ode_unpack, ODE_OK
   implicit none
   private
