@@ -99,7 +99,7 @@ def ked_steps(h, coef, u, v, p, nsteps=1):
     u0, v0, p0 = np.array([u], float), np.array([v], float), np.array([p], float)
     a0 = -KED_OMEGA**2 * u0
     uf, vf, af, _, status, _, _, nvalid = api.ked_run(
-        nsteps + 1, *KED_SDOF, 1, np.zeros(2), rig, np.zeros((3, 1, nsteps + 1), order="F"), np.ones(1, np.int32),
+        *KED_SDOF, 1, np.zeros(2), rig, np.zeros((3, 1, nsteps + 1), order="F"), np.ones(1, np.int32),
         np.zeros((1, nsteps + 1), order="F"),
         h, *coef, 1, 0, 0, 1e-8, 50, 1e300, u0, v0, a0, p0)
     check_status(status, "ked_run")
