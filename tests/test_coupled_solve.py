@@ -7,6 +7,7 @@ import pytest
 
 import flexmech_py as fm
 from flexmech_py import kernels
+from flexmech_py.mechanism.rows import ROW_KINDS
 
 BAND, CONDENSED, AUTO = 0, 1, -1
 
@@ -137,7 +138,10 @@ def test_kernel_rejects_a_corrupted_flat_description(cases_dir):
     bad = {"ispec one short": (ispec[:-1], rspec), "rspec one long": (ispec, np.append(rspec, 0.0)),
            "no elements in a segment": (np.where(np.arange(ispec.size) == header, 0, ispec), rspec),
            "DOF index past ndof": (np.where(np.arange(ispec.size) == ld0, ndof + 1, ispec), rspec),
-           "marker index past nmk": (np.where(np.arange(ispec.size) == con0 + 1, ispec[6] + 1, ispec), rspec)}
+           "marker index past nmk": (np.where(np.arange(ispec.size) == con0 + 1, ispec[6] + 1, ispec), rspec),
+           "row kind past the table (flexmech_markers NCON)":
+               (np.where(np.arange(ispec.size) == con0, max(ROW_KINDS) + 1, ispec), rspec),
+           "row kind 0": (np.where(np.arange(ispec.size) == con0, 0, ispec), rspec)}
     assert ispec[7] > 0                            # the slider-crank has constraint rows
     for what, (isp, rsp) in bad.items():
         code, res = status(isp, rsp)
