@@ -42,14 +42,16 @@ module flexmech_markers
   integer, parameter :: NCON = 3          !< row kinds: the valid indices are 1..NCON
   integer, parameter :: MAXCOL = 7        !< columns of one marker (an interior segment node)
 
+  !> Set by segment_marker, body_marker or ground_marker; the column arrays hold n valid entries (no
+  !> default initialization: the markers are made in the innermost loops of every model).
   type :: marker_state
-    real(dp) :: r(2) = 0.0_dp, psi = 0.0_dp      !< position [m], frame angle [rad]
-    real(dp) :: rd(2) = 0.0_dp, psid = 0.0_dp    !< their rates
-    real(dp) :: ra0(2) = 0.0_dp, psia0 = 0.0_dp  !< velocity parts of their second derivatives
-    integer :: n = 0                              !< number of columns
-    integer :: col(MAXCOL) = 0                    !< all-DOF numbers of the columns
-    integer :: loc(MAXCOL) = 0                    !< positions in the owner's local vector
-    real(dp) :: dr(2, MAXCOL) = 0.0_dp, dpsi(MAXCOL) = 0.0_dp   !< gradients
+    real(dp) :: r(2), psi            !< position [m], frame angle [rad]
+    real(dp) :: rd(2), psid          !< their rates
+    real(dp) :: ra0(2), psia0        !< velocity parts of their second derivatives
+    integer :: n                     !< number of columns
+    integer :: col(MAXCOL)           !< all-DOF numbers of the columns (1:n)
+    integer :: loc(MAXCOL)           !< positions in the owner's local vector (1:n)
+    real(dp) :: dr(2, MAXCOL), dpsi(MAXCOL)   !< gradients (columns 1:n)
   end type marker_state
 
 contains
@@ -127,9 +129,8 @@ contains
     ms%n = 3
     ms%loc(1:3) = [1, 2, 3]
     ms%col(1:3) = cols
-    ms%dr = 0.0_dp; ms%dpsi = 0.0_dp
-    ms%dr(1, 1) = 1.0_dp; ms%dr(2, 2) = 1.0_dp; ms%dr(:, 3) = [-rs(2), rs(1)]
-    ms%dpsi(3) = 1.0_dp
+    ms%dr(:, 1) = [1.0_dp, 0.0_dp]; ms%dr(:, 2) = [0.0_dp, 1.0_dp]; ms%dr(:, 3) = [-rs(2), rs(1)]
+    ms%dpsi(1:3) = [0.0_dp, 0.0_dp, 1.0_dp]
   end subroutine body_marker
 
   !> A ground point at pos [m] (frame angle 0, no DOF).
@@ -137,6 +138,8 @@ contains
     real(dp), intent(in) :: pos(2)
     type(marker_state), intent(out) :: ms
     ms%r = pos
+    ms%rd = 0.0_dp; ms%ra0 = 0.0_dp
+    ms%psi = 0.0_dp; ms%psid = 0.0_dp; ms%psia0 = 0.0_dp
     ms%n = 0
   end subroutine ground_marker
 
