@@ -210,7 +210,7 @@ class CoupledModel:
         if state is None:       # (a continued run keeps the structure its start took)
             self.solver = self._structure(ispec, rspec, q, v)
         qf, vf, af, lk, lka, ef, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
-            nframes, ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
+            ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
             out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry)
         lf = np.zeros((nc, nframes))      # the interior welds of shared node angles carry none
         lf[keep] = lk[:keep.size]

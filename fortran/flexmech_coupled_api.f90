@@ -49,6 +49,9 @@ contains
                      beta, gamma, out_every, tol, maxit, start, div_limit, seg_link, q, v, a, pa, carry, &
                      qf, vf, af, lf, la, ef, status, fail_step, iters, nvalid, newton)
     integer, intent(in) :: ni, nr, ndof, nc1, nsteps, nframes, nseg
+    ! Python passes none of the sizes: f2py takes them from the arrays' shapes, nframes from out_every
+    !f2py intent(hide) :: ni, nr, ndof, nc1, nsteps, nseg
+    !f2py integer intent(hide), depend(cval, out_every) :: nframes = (out_every > 0 ? (shape(cval, 2) - 1)/out_every + 1 : 1)
     integer, intent(in) :: ispec(ni)
     real(dp), intent(in) :: rspec(nr)
     real(dp), intent(in) :: cval(3, nc1, nsteps + 1)

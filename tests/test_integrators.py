@@ -113,7 +113,7 @@ def cpl_steps(h, coef, u, v, p, nsteps=1):
     q[4], vv[4], pp[4] = u, v, p
     zeros3 = np.zeros((3, 1, nsteps + 1), order="F")
     qf, vf, af, lf, _, ef, status, _, _, nvalid, _ = kernels.cpl.cpl_run(
-        nsteps + 1, *CPL_SDOF, zeros3, 0.0, h, *coef, 1, 1e-14, 25, 0, 1e300, np.array([1], np.int32), q, vv, a, pp,
+        *CPL_SDOF, zeros3, 0.0, h, *coef, 1, 1e-14, 25, 0, 1e300, np.array([1], np.int32), q, vv, a, pp,
         np.zeros(3))
     check_status(status, "cpl_run")
     assert nvalid == nsteps + 1
