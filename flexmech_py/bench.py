@@ -13,18 +13,21 @@ One process, one run (docs/performance.md):
 - banded (``dgbtrf``/``dgbtrs``) against dense (``dgetrf``/``dgetrs``) solves of the effective
   matrix across mesh sizes, with fitted growth exponents;
 - peak memory of long runs with output decimation (tracemalloc and the resident-set high-water
-  mark VmHWM, each in a fresh subprocess), at 10^5 and 10^6 steps.
+  mark VmHWM, each in a fresh subprocess), at 10^5 and 10^6 steps;
+- the scaling of every bundled mechanism in every model over a mesh ladder
+  (:mod:`flexmech_py.bench_scaling`);
+- side by side with Exudyn, when installed (:mod:`flexmech_py.bench_side_by_side`).
 
-Results: tables on stdout, ``bench_ladder.csv``, ``bench_solves.csv``, ``bench_summary.csv`` and
-the log-log plot ``bench.png`` in the output folder.  ``quick=True`` runs a reduced ladder (the
-tests run it).  Kernel, solve and peak timings are CPU time of the calling thread
-(``time.thread_time``; the machine may be shared), subprocesses report wall and CPU time
-(``getrusage`` of the children); minima over repeats where cheap.
+Results: tables on stdout, ``bench_ladder.csv``, ``bench_solves.csv``, ``bench_summary.csv``,
+``bench_seed.csv``, ``bench_scaling.csv``, ``bench_scaling_fits.csv``, ``bench_exudyn*.csv`` and the
+log-log plot ``bench.png`` in the output folder.  ``quick=True`` runs reduced ladders (the tests run
+it).  Kernel, solve and peak timings are CPU time of the calling thread (``time.thread_time``; the
+machine may be shared), subprocesses report wall and CPU time (``getrusage`` of the children);
+minima over repeats where cheap.
 """
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -36,17 +39,19 @@ from pathlib import Path
 
 import numpy as np
 
+from .bench_runs import DT, bench_case, fit_exponent, table, write_csv
+from .bench_scaling import bench_scaling, scaling_summary, scaling_pivot, scaling_rows
+from .bench_side_by_side import exudyn_sections, exudyn_rows, exudyn_report
 from .errors import FlexmechError
 from .inputs import checked_file, checked_folder
 from .outdir import ResultFolder
 from .plots import save_figure
 from .bench_stepping import bench_stepping
 
-__all__ = ["run_bench", "flops_superposition", "flops_newton", "fit_exponent"]
+__all__ = ["run_bench", "flops_superposition", "flops_newton", "fit_exponent", "DT"]
 
 MODELS = ("hac", "classic", "classic-translational", "coupled", "nonlinear")
 SEED = "fourbar_hac.toml"
-DT = 1e-5
 
 
 # ---------------------------------------------------------------------------------------- flop models
@@ -64,36 +69,14 @@ def flops_superposition(nel: int, nlinks: int, n: int, kb: int, model: str = "ha
     return f
 
 
-def flops_newton(n: int, kl: int, ku: int, iterations: float, nc: int = 0) -> dict:
-    """Lower bound for one Newton-Newmark step of the coupled/nonlinear models (modified Newton: the
-    matrix is factorized once per step): a banded LU 2 n kl (kl + ku), a solve 2 n (2 kl + ku) per
-    iteration and one per constraint column (assembly not counted)."""
-    f = {"factorization": 2 * n * kl * (kl + ku), "solve": (iterations + nc) * 2 * n * (2 * kl + ku)}
+def flops_newton(structure: dict, iterations: float, factorizations: float) -> dict:
+    """Floating-point operations of one Newton step of the coupled/nonlinear models as the kernel counts
+    them for the structure it uses (CoupledModel.structure): the factorizations and one solve per
+    iteration (assembly and element evaluation not counted: a lower bound)."""
+    f = {"factorization": factorizations * structure["flops_per_factorization"],
+         "solve": iterations * structure["flops_per_solve"]}
     f["total"] = sum(f.values())
     return f
-
-
-def flops_condensed(interior: list, nb: int, kbb: int, iterations: float, nc: int = 0, kbi: int = 5) -> dict:
-    """Lower bound for one Newton step of the coupled model with the condensed solve (theory.md
-    section 11.3): per segment with m interior elastic DOFs (band kbi), a banded LU 2 m kbi (2 kbi),
-    4 solves for its end-position columns 4 * 2 m (3 kbi) and the 4 x 4 Schur update 2 * 16 m; the
-    condensed system of the nb free end positions (band kbb) factorized, 2 nb kbb (2 kbb); per
-    right-hand side (Newton iterations and constraint columns) a banded solve 2 m (3 kbi), the
-    border products 2 * 2 * 4 m per segment and a condensed solve 2 nb (3 kbb)."""
-    m = float(sum(interior))
-    f = {"factorization": m * (2 * kbi * 2 * kbi + 4 * 2 * 3 * kbi + 32) + 2 * nb * kbb * 2 * kbb,
-         "solve": (iterations + nc) * (m * (2 * 3 * kbi + 16) + 2 * nb * 3 * kbb)}
-    f["total"] = sum(f.values())
-    return f
-
-
-def fit_exponent(x, y) -> float:
-    """Least-squares slope of log y against log x (nan with fewer than 2 points)."""
-    x, y = np.asarray(x, float), np.asarray(y, float)
-    ok = (x > 0) & (y > 0) & np.isfinite(y)
-    if ok.sum() < 2:
-        return float("nan")
-    return float(np.polyfit(np.log(x[ok]), np.log(y[ok]), 1)[0])
 
 
 # ---------------------------------------------------------------------------------------- helpers
@@ -127,16 +110,6 @@ def _seed_dir(cases_dir) -> Path:
         return Path(cases_dir)
     from importlib import resources
     return Path(str(resources.files("flexmech_py") / "cases"))
-
-
-def _case(path, nsteps: int, out_every: int, extra=()):
-    """The case at path run for nsteps of DT; outputs at mid-link nodes dropped (1 element per link has none)."""
-    from .case import load_case
-    case = load_case(path, overrides=[f"solver.dt={DT!r}", f"solver.t_end={nsteps * DT!r}",
-                                      f"solver.output_every={out_every}", *extra])
-    case["outputs"] = {k: sp for k, sp in case["outputs"].items()
-                       if not isinstance(sp.get("at"), str) or sp["at"].endswith((".start", ".end"))}
-    return case
 
 
 # ---------------------------------------------------------------------------------------- sections
@@ -218,7 +191,7 @@ def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
             key = (epl, steps)
             if key not in preps:
                 preps = {k: v for k, v in preps.items() if k[0] == epl}   # keep memory bounded
-                preps[key] = Prepared(_case(seed, steps, 10), elements_per_link=epl)
+                preps[key] = Prepared(bench_case(seed, steps, 10), elements_per_link=epl)
                 # the zero-stiffness check (a dense eigenvalue problem) would cost more than a timing run
                 preps[key]._checked = True
             p = preps[key]
@@ -238,15 +211,9 @@ def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
             fe = p.fe
             if model in ("coupled", "nonlinear"):
                 cm = p.coupled[model]
-                n, kb = int(cm.free_of.max()), cm.mesh.bandwidth
-                it = res.extra["coupled"]["newton"]["mean_per_step"]
-                if kb > 5 + 4:   # the kernel's automatic choice: condensed when the arrowheads widen the band
-                    interior = [3 * int(k) - 1 for k in cm.n_el]
-                    nb = n - sum(interior)
-                    fl = flops_condensed(interior, nb, min(nb - 1, 7), it, len(cm.rows))
-                    kb = 5
-                else:
-                    fl = flops_newton(n, kb, kb, it, len(cm.rows))
+                nw = res.extra["coupled"]["newton"]
+                n, kb, it = int(cm.free_of.max()), cm.solver["band_half_width"], nw["mean_per_step"]
+                fl = flops_newton(cm.solver, it, nw["factorizations_per_step"])
             else:
                 n, kb, it = fe.nfree, fe.bandwidth, float("nan")
                 fl = flops_superposition(fe.nel, len(fe.n_el), n, kb, model)
@@ -266,7 +233,7 @@ def bench_reference(seed: Path, nref: int, reps: int) -> dict:
     from . import reference
     from .simulate import Prepared
 
-    p = Prepared(_case(seed, nref, 1))
+    p = Prepared(bench_case(seed, nref, 1))
     rig = p.rig
     t0 = time.thread_time()
     u_ref = reference.newmark(p.fe, rig, "hac", p.dt)
@@ -277,7 +244,7 @@ def bench_reference(seed: Path, nref: int, reps: int) -> dict:
         uf, _, _ = p.fe.run(rig, "hac", p.dt)
         t_f = min(t_f, time.thread_time() - t0)
     # the Fortran per step from a full-length run (call overhead amortised)
-    pl = Prepared(_case(seed, 25000, 10))
+    pl = Prepared(bench_case(seed, 25000, 10))
     t_long = math.inf
     for _ in range(reps):
         pl.run("hac")
@@ -295,7 +262,7 @@ def bench_solves(seed: Path, quick: bool, progress) -> list[dict]:
     ladder = (1, 2, 4, 8) if quick else tuple(2 ** k for k in range(9))
     rows = []
     for epl in ladder:
-        p = Prepared(_case(seed, 10, 10), elements_per_link=epl)
+        p = Prepared(bench_case(seed, 10, 10), elements_per_link=epl)
         mm, cm, km, _ = p.fe.matrices(p.rig[:, :, 0], "hac")
         s = np.asfortranarray(mm + 0.5 * DT * cm + 0.25 * DT * DT * km)
         b = np.ones(s.shape[0])
@@ -340,7 +307,7 @@ def memory_probe(case_path, nsteps: int, out_every: int) -> dict:
 
     from .simulate import Prepared
 
-    case = _case(case_path, nsteps, out_every)
+    case = bench_case(case_path, nsteps, out_every)
     tracemalloc.start()
     t0 = time.perf_counter()
     res = Prepared(case).run()
@@ -370,78 +337,6 @@ def bench_memory(cases: Path, quick: bool) -> list[dict]:
 
 
 # ---------------------------------------------------------------------------------------- driver
-
-#: side-by-side runs with Exudyn: (model, elements per link, t_end [s]) in full and quick mode
-SIDE_BY_SIDE = {False: [("nonlinear", 16, 0.25), ("coupled", 2, 0.25)], True: [("nonlinear", 4, 0.005), ("coupled", 2, 0.005)]}
-#: alternating runs of each side per row, the smaller CPU time kept (full mode; quick mode one run)
-SIDE_BY_SIDE_REPEATS = {False: 3, True: 1}
-
-
-def bench_side_by_side(seed: Path, quick: bool, progress) -> list[dict]:
-    """The seed four-bar in flexmech and in Exudyn (flexmech_py.bench_exudyn), dt = 1.25e-5 s,
-    generalized-alpha rho_inf = 0.8; [] with one line when Exudyn is not installed."""
-    from . import bench_exudyn
-
-    why = bench_exudyn.unavailable()
-    if why is not None:
-        progress(why)
-        return []
-    rows = []
-    for model, epl, t_end in SIDE_BY_SIDE[quick]:
-        r = bench_exudyn.side_by_side(seed, epl=epl, dt=1.25e-5, t_end=t_end, model=model,
-                                      repeats=SIDE_BY_SIDE_REPEATS[quick])
-        d, dr = r["strain_difference"], r["strain_difference_revolution"] or {}
-        rows.append({"model": model, "elements_per_link": epl, "steps": int(round(t_end / 1.25e-5)),
-                     "flexmech_cpu_s": r["flexmech_cpu_s"], "exudyn_cpu_s": r["exudyn_cpu_s"], "speedup": r["speedup"],
-                     "repeats": len(r["flexmech_cpu_s_all"]),
-                     "newton_per_step": r["newton"]["mean_per_step"],
-                     "strain_coupler_diff": d["strain_coupler_mid"], "strain_follower_diff": d["strain_follower_mid"],
-                     "first_revolution_s": r["first_revolution_s"] or "",
-                     "strain_coupler_diff_rev": dr.get("strain_coupler_mid", ""),
-                     "strain_follower_diff_rev": dr.get("strain_follower_mid", "")})
-        rev = (f"; over the first crank revolution (0-{r['first_revolution_s']:.3g} s) {100 * dr['strain_coupler_mid']:.2g} % "
-               f"and {100 * dr['strain_follower_mid']:.2g} %" if dr else "")
-        best = f", the smaller of {len(r['flexmech_cpu_s_all'])} runs each" if len(r["flexmech_cpu_s_all"]) > 1 else ""
-        progress(f"  {model}, {epl} el/link: flexmech {r['flexmech_cpu_s']:.3g} s, Exudyn {r['exudyn_cpu_s']:.3g} s CPU{best} "
-                 f"({r['speedup']:.2f}x); midspan strains differ by {100 * d['strain_coupler_mid']:.2g} % (coupler), "
-                 f"{100 * d['strain_follower_mid']:.2g} % (follower) of flexmech's peak over the run{rev}")
-    return rows
-
-
-#: the manipulator side by side: (elements per link, t_end [s]) in full and quick mode
-SIDE_BY_SIDE_MANIPULATOR = {False: (8, 0.25), True: (4, 0.005)}
-
-
-def bench_side_by_side_manipulator(cases: Path, quick: bool, progress) -> list[dict]:
-    """The seed manipulator in flexmech (nonlinear) and in Exudyn, dt = 1.25e-5 s, generalized-alpha
-    0.8, frames at every step; [] when Exudyn is not installed (bench_side_by_side says so)."""
-    from . import bench_exudyn
-
-    if bench_exudyn.unavailable() is not None:
-        return []
-    epl, t_end = SIDE_BY_SIDE_MANIPULATOR[quick]
-    r = bench_exudyn.manipulator_side_by_side(cases / "manipulator_bricout.toml", epl=epl, t_end=t_end,
-                                              repeats=SIDE_BY_SIDE_REPEATS[quick])
-    row = {"model": "nonlinear", "elements_per_link": epl, "steps": int(round(t_end / 1.25e-5)),
-           "flexmech_cpu_s": r["flexmech_cpu_s"], "exudyn_cpu_s": r["exudyn_cpu_s"], "speedup": r["speedup"],
-           "repeats": len(r["flexmech_cpu_s_all"])}
-    for fc, d in r["strain_difference"].items():
-        for k, v in d.items():
-            row[f"{k.replace('_mid', '')}_diff_{int(fc)}hz"] = v
-    progress(f"  manipulator, {epl} el/link: flexmech {r['flexmech_cpu_s']:.3g} s, Exudyn {r['exudyn_cpu_s']:.3g} s CPU "
-             f"({r['speedup']:.2f}x); midspan strains low-passed at 300 Hz differ by "
-             f"{100 * r['strain_difference'][300.0]['strain_link1_mid']:.2g} % (link 1), "
-             f"{100 * r['strain_difference'][300.0]['strain_link2_mid']:.2g} % (link 2) of flexmech's peak")
-    return [row]
-
-
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    with open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-
 
 def plot_title(ladder: list[dict]) -> str:
     """bench.png's title: the mesh sizes the ladder ran."""
@@ -549,16 +444,6 @@ def _memory_rows(memory: list[dict]) -> list[dict]:
             for m in memory for k in ("tracemalloc_peak_MB", "maxrss_MB", "wall_s")]
 
 
-def _exudyn_rows(exudyn: list[dict], exudyn_manipulator: list[dict]) -> list[dict]:
-    """Summary rows of the side-by-side runs with Exudyn (CPU time ratios)."""
-    rows = [{"metric": f"exudyn.{r['model']}.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
-             "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed four-bar, {r['steps']} steps of 1.25e-5 s"}
-            for r in exudyn]
-    return rows + [{"metric": f"exudyn.manipulator.{r['elements_per_link']}_per_link.speedup", "value": r["speedup"],
-                    "unit": "1", "note": f"Exudyn CPU / flexmech CPU, seed manipulator, {r['steps']} steps of 1.25e-5 s"}
-                   for r in exudyn_manipulator]
-
-
 def run_bench(out_dir="bench", quick: bool = False, cases_dir=None, progress=print) -> dict:
     """Run every measurement; write the CSV files and the PNG into out_dir (a
     :class:`~flexmech_py.outdir.ResultFolder`: whole or not at all); return all results."""
@@ -593,43 +478,36 @@ def _measure(out: Path, cases: Path, quick: bool, progress) -> dict:
     solves = bench_solves(seed, quick, progress)
     progress("memory of long runs (subprocesses)")
     memory = bench_memory(cases, quick)
-    progress("side by side with Exudyn (seed four-bar, seed manipulator)")
-    exudyn = bench_side_by_side(seed, quick, progress)
-    exudyn_manipulator = bench_side_by_side_manipulator(cases, quick, progress)
+    progress("scaling on every bundled mechanism and model")
+    scaling = bench_scaling(cases, quick, progress)
+    progress("side by side with Exudyn (seed four-bar, seed manipulator, plate six-bar)")
+    side = exudyn_sections(seed, cases, quick, progress)
+
     progress("stepping from Python, one step per call (seed four-bar)")
     stepping = bench_stepping(seed, quick, progress)
 
     summary = (_startup_rows(startup, peak) + _seed_rows(seeds, ref) + _scaling_rows(ladder, solves)
-               + _memory_rows(memory) + _exudyn_rows(exudyn, exudyn_manipulator)
+               + scaling_rows(scaling) + _memory_rows(memory) + exudyn_rows(side)
                + [{"metric": f"stepping_ratio_{r['model']}", "value": r["ratio"], "unit": "1",
                    "note": f"{r['overhead_us_per_call']:.3g} us per call"} for r in stepping])
     summary.append({"metric": "bench_wall", "value": time.perf_counter() - t_all, "unit": "s", "note": "quick" if quick else "full"})
 
-    paths = [out / "bench_ladder.csv", out / "bench_solves.csv", out / "bench_summary.csv", out / "bench_seed.csv"]
-    for path, rows in zip(paths, (ladder, solves, summary, seeds)):
-        _write_csv(path, rows)
-    for name, rows in (("bench_stepping.csv", stepping), ("bench_exudyn.csv", exudyn),
-                       ("bench_exudyn_manipulator.csv", exudyn_manipulator)):
-        if rows:
-            paths.append(out / name)
-            _write_csv(paths[-1], rows)
+    paths = [out / "bench_ladder.csv", out / "bench_solves.csv", out / "bench_summary.csv", out / "bench_seed.csv",
+             out / "bench_scaling.csv", out / "bench_scaling_fits.csv"]
+    for path, rows in zip(paths, (ladder, solves, summary, seeds, scaling, scaling_summary(scaling))):
+        write_csv(path, rows)
+    if stepping:
+        paths.append(out / "bench_stepping.csv")
+        write_csv(paths[-1], stepping)
+    for name in ("exudyn", "exudyn_manipulator", "exudyn_mechanism"):
+        if side[name]:
+            paths.append(out / f"bench_{name}.csv")
+            write_csv(paths[-1], side[name])
     png = _plot(out / "bench.png", ladder, solves)
     if png is not None:
         paths.append(png)
     return {"startup": startup, "seeds": seeds, "peak": peak, "ladder": ladder, "reference": ref, "solves": solves,
-            "memory": memory, "stepping": stepping, "exudyn": exudyn, "exudyn_manipulator": exudyn_manipulator,
-            "summary": summary,
-            "paths": paths}
-
-
-def table(rows: list[dict], keys) -> str:
-    """A fixed-width text table of the given columns."""
-    def fmt(v):   # not applicable (nan): "-"
-        return ("-" if math.isnan(v) else f"{v:.4g}") if isinstance(v, float) else str(v)
-    cols = [[k] + [fmt(r[k]) for r in rows] for k in keys]
-    w = [max(len(c) for c in col) for col in cols]
-    lines = ["  ".join(c[i].rjust(wi) for c, wi in zip(cols, w)) for i in range(len(rows) + 1)]
-    return "\n".join(lines[:1] + ["  ".join("-" * wi for wi in w)] + lines[1:])
+            "memory": memory, "scaling": scaling, "stepping": stepping, **side, "summary": summary, "paths": paths}
 
 
 def report(res: dict) -> str:
@@ -645,24 +523,3 @@ def report(res: dict) -> str:
            table(res["solves"], ["elements_per_link", "dofs", "bandwidth", "banded_us", "dense_us"]),
            "", "long runs (output every 1000th step)",
            table(res["memory"], ["steps", "frames", "tracemalloc_peak_MB", "maxrss_MB", "wall_s"]),
-           "", "stepping from Python, one step per call, against the batch run (seed four-bar; CPU)",
-           table(res["stepping"], ["model", "steps", "batch_us_per_step", "ratio", "overhead_us_per_call",
-                                   "max_rel_difference"]),
-           "", "side by side with Exudyn (seed four-bar, dt = 1.25e-5 s, generalized-alpha 0.8; CPU of the time integration)",
-           table(res["exudyn"], ["model", "elements_per_link", "steps", "flexmech_cpu_s", "exudyn_cpu_s", "speedup",
-                                 "newton_per_step", "strain_coupler_diff", "strain_follower_diff", "first_revolution_s",
-                                 "strain_coupler_diff_rev", "strain_follower_diff_rev"])
-           if res.get("exudyn") else "  (not run: Exudyn is not installed)",
-           *(["", "side by side with Exudyn (seed manipulator, frames at every step; strain differences of the "
-                  "low-passed signals, relative to flexmech's peak)",
-              table(res["exudyn_manipulator"], list(res["exudyn_manipulator"][0]))]
-             if res.get("exudyn_manipulator") else []),
-           "", "summary", table(res["summary"], ["metric", "value", "unit", "note"])]
-    return "\n".join(out)
-
-
-if __name__ == "__main__":   # python -m flexmech_py.bench --memory-probe CASE NSTEPS OUT_EVERY (used by bench_memory)
-    if len(sys.argv) == 5 and sys.argv[1] == "--memory-probe":
-        print(json.dumps(memory_probe(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
-    else:
-        raise SystemExit("usage: python -m flexmech_py.bench --memory-probe CASE NSTEPS OUT_EVERY (or: flexmech bench)")

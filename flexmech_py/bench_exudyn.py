@@ -26,7 +26,9 @@ import time
 
 import numpy as np
 
-__all__ = ["unavailable", "side_by_side", "manipulator_side_by_side", "SEED_TORQUE"]
+__all__ = ["unavailable", "side_by_side", "manipulator_side_by_side", "SEED_TORQUE", "link_geometry", "cable_links",
+           "coord_marker", "ground_pin", "tie_nodes", "midspan_sensors", "midspan_strain", "solve_dynamic", "smallest_times",
+           "relative_difference"]
 
 SEED_TORQUE = (1.0, 0.5)       # N m: tau = a + b sin(alpha) (cases/fourbar_hac.toml, [drive])
 
@@ -61,7 +63,7 @@ def run_flexmech(case, model: str = "nonlinear", columns=("strain_coupler_mid", 
             "newton": r.extra["coupled"]["newton"], "rigid": p.rm}
 
 
-def _link_geometry(case, rm) -> list[tuple]:
+def link_geometry(case, rm) -> list[tuple]:
     """(start x, y, angle, length, rho A, EA, EI, half depth) of every link at t = 0."""
     km = rm.motion
     out = []
@@ -72,9 +74,11 @@ def _link_geometry(case, rm) -> list[tuple]:
     return out
 
 
-def _cable_links(geometry, epl: int):
+def cable_links(geometry, epl: int, rates=None):
     """A new Exudyn system with every link of ``geometry`` as epl ANCF cable elements on straight
-    nodes: (system container, mbs, ground node, nodes per link, elements per link)."""
+    nodes: (system container, mbs, ground node, nodes per link, elements per link).  ``rates``: per
+    link (vx, vy, omega) of its start and its rotation, the nodes' initial velocities of that rigid
+    motion (default at rest)."""
     import exudyn as exu
     from exudyn.itemInterface import NodePoint2DSlope1, NodePointGround, ObjectANCFCable2D
 
@@ -82,10 +86,13 @@ def _cable_links(geometry, epl: int):
     mbs = sc.AddSystem()
     ground = mbs.AddNode(NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
     nodes, elems = [], []
-    for x0, y0, ang, length, rho_a, ea, ei, _ in geometry:
+    for li, (x0, y0, ang, length, rho_a, ea, ei, _) in enumerate(geometry):
         c, s = np.cos(ang), np.sin(ang)
-        ns = [mbs.AddNode(NodePoint2DSlope1(referenceCoordinates=[x0 + k * length / epl * c, y0 + k * length / epl * s,
-                                                                  c, s])) for k in range(epl + 1)]
+        vx, vy, om = (0.0, 0.0, 0.0) if rates is None else rates[li]
+        ns = [mbs.AddNode(NodePoint2DSlope1(
+            referenceCoordinates=[x0 + k * length / epl * c, y0 + k * length / epl * s, c, s],
+            initialVelocities=[vx - om * k * length / epl * s, vy + om * k * length / epl * c, -om * s, om * c]))
+              for k in range(epl + 1)]
         elems.append([mbs.AddObject(ObjectANCFCable2D(nodeNumbers=[ns[k], ns[k + 1]], length=length / epl,
                                                       massPerLength=rho_a, bendingStiffness=ei, axialStiffness=ea))
                       for k in range(epl)])
@@ -93,27 +100,27 @@ def _cable_links(geometry, epl: int):
     return sc, mbs, ground, nodes, elems
 
 
-def _coord(mbs, node, i):
+def coord_marker(mbs, node, i):
     """A marker on coordinate i of a node."""
     from exudyn.itemInterface import MarkerNodeCoordinate
 
     return mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=node, coordinate=i))
 
 
-def _tie(mbs, na, nb):
+def tie_nodes(mbs, na, nb):
     """Equal position displacements of two nodes (of the same reference position): a pin."""
     from exudyn.itemInterface import CoordinateConstraint
 
     for i in (0, 1):
-        mbs.AddObject(CoordinateConstraint(markerNumbers=[_coord(mbs, na, i), _coord(mbs, nb, i)]))
+        mbs.AddObject(CoordinateConstraint(markerNumbers=[coord_marker(mbs, na, i), coord_marker(mbs, nb, i)]))
 
 
-def _ground(mbs, ground, node):
+def ground_pin(mbs, ground, node):
     """The node's position held at its reference (a pin to the ground)."""
     from exudyn.itemInterface import CoordinateConstraint
 
     for i in (0, 1):
-        mbs.AddObject(CoordinateConstraint(markerNumbers=[_coord(mbs, ground, 0), _coord(mbs, node, i)]))
+        mbs.AddObject(CoordinateConstraint(markerNumbers=[coord_marker(mbs, ground, 0), coord_marker(mbs, node, i)]))
 
 
 def _mass_point(mbs, node, mass):
@@ -123,10 +130,10 @@ def _mass_point(mbs, node, mass):
     ref = mbs.GetNodeParameter(node, "referenceCoordinates")
     pm = mbs.AddNode(NodePoint2D(referenceCoordinates=[ref[0], ref[1]]))
     mbs.AddObject(ObjectMassPoint2D(mass=mass, nodeNumber=pm))
-    _tie(mbs, node, pm)
+    tie_nodes(mbs, node, pm)
 
 
-def _midspan_sensors(mbs, elems, geometry, epl: int, links) -> list:
+def midspan_sensors(mbs, elems, geometry, epl: int, links) -> list:
     """Per link in links, the curvature sensors at its midspan: at a node (even epl) the two elements
     there, whose mean is what flexmech reads at a node; else the middle of the middle element."""
     import exudyn as exu
@@ -143,15 +150,17 @@ def _midspan_sensors(mbs, elems, geometry, epl: int, links) -> list:
     return groups
 
 
-def _midspan_strain(mbs, group, half_depth):
-    """The strain [-] of one _midspan_sensors group: mean curvature x the half depth."""
+def midspan_strain(mbs, group, half_depth):
+    """The strain [-] of one midspan_sensors group: mean curvature x the half depth."""
     return np.mean([mbs.GetSensorStoredData(s)[:, 1] for s in group], axis=0) * half_depth
 
 
-def _solve(mbs, nsteps: int, t_end: float, rho_inf: float, write_period: float) -> float:
-    """Assemble and integrate (generalized-alpha, Newton tolerance 1e-8, sparse solver, sensors every
-    write_period [s]); the calling thread's CPU time of the integration [s] (Exudyn runs
-    single-threaded here: parallel.numberOfThreads = 1 by default), as flexmech's kernel time."""
+def solve_dynamic(mbs, nsteps: int, t_end: float, rho_inf: float, write_period: float,
+                  absolute_tolerance: float | None = None) -> float:
+    """Assemble and integrate (generalized-alpha, Newton tolerance 1e-8 relative and, when given,
+    absolute_tolerance on the residual per coordinate, sparse solver, sensors every write_period
+    [s]); the calling thread's CPU time of the integration [s] (Exudyn runs single-threaded here:
+    parallel.numberOfThreads = 1 by default), as flexmech's kernel time."""
     import exudyn as exu
 
     mbs.Assemble()
@@ -160,6 +169,8 @@ def _solve(mbs, nsteps: int, t_end: float, rho_inf: float, write_period: float) 
     ti.numberOfSteps, ti.endTime, ti.verboseMode = nsteps, t_end, 0
     ti.generalizedAlpha.spectralRadius = rho_inf
     ti.newton.relativeTolerance = 1e-8
+    if absolute_tolerance is not None:
+        ti.newton.absoluteTolerance = absolute_tolerance
     ss.solution.file.write = False
     ss.solution.sensors.writePeriod = write_period
     ss.show.statistics = False
@@ -170,7 +181,7 @@ def _solve(mbs, nsteps: int, t_end: float, rho_inf: float, write_period: float) 
     return time.thread_time() - c0
 
 
-def _smallest_times(repeats: int, run_pair):
+def smallest_times(repeats: int, run_pair):
     """run_pair() -> (flexmech result, Exudyn result) repeats times, alternating; the last results with
     each side's smallest CPU time, and all the times ([flexmech], [Exudyn])."""
     fx_cpu, ex_cpu = [], []
@@ -187,15 +198,15 @@ def build_exudyn(case, geometry, epl: int, masses):
     import exudyn as exu
     from exudyn.itemInterface import LoadCoordinate
 
-    sc, mbs, ground, nodes, elems = _cable_links(geometry, epl)
+    sc, mbs, ground, nodes, elems = cable_links(geometry, epl)
     mech = case.mechanism
     for j in mech.joints:     # pins at link ends: tied to the ground or to each other
         ends = [None if pr.body is None else nodes[mech.link_index(pr.body.name)][0 if pr.point == "start" else -1]
                 for pr in mech.joint_points(j)]
         if None in ends:
-            _ground(mbs, ground, ends[0] if ends[1] is None else ends[1])
+            ground_pin(mbs, ground, ends[0] if ends[1] is None else ends[1])
         else:
-            _tie(mbs, *ends)
+            tie_nodes(mbs, *ends)
     for (li, end), mass in masses:
         _mass_point(mbs, nodes[li][-1 if end else 0], mass)
 
@@ -219,8 +230,8 @@ def build_exudyn(case, geometry, epl: int, masses):
         tau, sx, sy, n2 = torque(t)
         return tau * sx / n2
 
-    mbs.AddLoad(LoadCoordinate(markerNumber=_coord(mbs, root, 2), load=0.0, loadUserFunction=load_sx))
-    mbs.AddLoad(LoadCoordinate(markerNumber=_coord(mbs, root, 3), load=0.0, loadUserFunction=load_sy))
+    mbs.AddLoad(LoadCoordinate(markerNumber=coord_marker(mbs, root, 2), load=0.0, loadUserFunction=load_sx))
+    mbs.AddLoad(LoadCoordinate(markerNumber=coord_marker(mbs, root, 3), load=0.0, loadUserFunction=load_sy))
     return sc, mbs, nodes, elems
 
 
@@ -232,13 +243,13 @@ def run_exudyn(case, geometry, epl: int, dt: float, t_end: float, rho_inf: float
 
     nsteps = int(round(t_end / dt))
     sc, mbs, nodes, elems = build_exudyn(case, geometry, epl, masses)
-    coupler, follower = _midspan_sensors(mbs, elems, geometry, epl, (1, 2))
+    coupler, follower = midspan_sensors(mbs, elems, geometry, epl, (1, 2))
     root_sensor = mbs.AddSensor(SensorNode(nodeNumber=nodes[0][0], storeInternal=True,
                                            outputVariableType=exu.OutputVariableType.CoordinatesTotal))
-    cpu = _solve(mbs, nsteps, t_end, rho_inf, 10 * dt)
+    cpu = solve_dynamic(mbs, nsteps, t_end, rho_inf, 10 * dt)
     root = mbs.GetSensorStoredData(root_sensor)
-    return {"t": root[:, 0], "strain_coupler_mid": _midspan_strain(mbs, coupler, geometry[1][7]),
-            "strain_follower_mid": _midspan_strain(mbs, follower, geometry[2][7]), "cpu_s": cpu, "steps": nsteps,
+    return {"t": root[:, 0], "strain_coupler_mid": midspan_strain(mbs, coupler, geometry[1][7]),
+            "strain_follower_mid": midspan_strain(mbs, follower, geometry[2][7]), "cpu_s": cpu, "steps": nsteps,
             "crank_angle": np.unwrap(np.arctan2(root[:, 4], root[:, 3])) - geometry[0][2]}
 
 
@@ -252,7 +263,7 @@ def _seed_masses(case) -> list:
     return out
 
 
-def _relative_difference(a, b) -> float:
+def relative_difference(a, b) -> float:
     """max |a - b| relative to max |a| (flexmech's peak)."""
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(a)), 1e-300))
 
@@ -263,7 +274,7 @@ def compare(fx: dict, ex: dict, t_max: float) -> dict:
     for k in ("strain_coupler_mid", "strain_follower_mid"):
         t = fx["t"][fx["t"] <= t_max]
         a = fx[k][: t.size]
-        out[k] = _relative_difference(a, np.interp(t, ex["t"], ex[k]))
+        out[k] = relative_difference(a, np.interp(t, ex["t"], ex[k]))
     return out
 
 
@@ -287,9 +298,9 @@ def side_by_side(case_path, epl: int = 16, dt: float = 1.25e-5, t_end: float = 0
 
     def run_pair():
         fx = run_flexmech(case, model)
-        return fx, run_exudyn(case, _link_geometry(case, fx["rigid"]), epl, dt, t_end, rho_inf, _seed_masses(case))
+        return fx, run_exudyn(case, link_geometry(case, fx["rigid"]), epl, dt, t_end, rho_inf, _seed_masses(case))
 
-    fx, ex, fx_cpu, ex_cpu = _smallest_times(repeats, run_pair)
+    fx, ex, fx_cpu, ex_cpu = smallest_times(repeats, run_pair)
     diff = compare(fx, ex, t_end if t_compare is None else t_compare)
     rev = first_revolution(fx)
     return {"model": model, "elements_per_link": epl, "dt": dt, "t_end": t_end, "rho_inf": rho_inf,
@@ -330,9 +341,9 @@ def build_exudyn_manipulator(case, geometry, epl: int):
             or set(masses) - {"link1.end", "link2.end"} or any(set(d) - {"joint", "law", "constant"} for d in case["drives"])):
         raise ValueError("the Exudyn side by side models a two-link arm with constant torques at base and joint_2, "
                          "masses at the link ends and a rotary inertia at link 1's end only")
-    sc, mbs, ground, nodes, elems = _cable_links(geometry, epl)
-    _ground(mbs, ground, nodes[0][0])            # base pin
-    _tie(mbs, nodes[0][-1], nodes[1][0])         # elbow pin
+    sc, mbs, ground, nodes, elems = cable_links(geometry, epl)
+    ground_pin(mbs, ground, nodes[0][0])            # base pin
+    tie_nodes(mbs, nodes[0][-1], nodes[1][0])         # elbow pin
 
     def rigid_marker(li, end):
         return mbs.AddMarker(MarkerBodyRigid(bodyNumber=elems[li][-1 if end else 0],
@@ -357,11 +368,11 @@ def run_exudyn_manipulator(case, geometry, epl: int, dt: float, t_end: float, rh
     at the midspan node for even epl) at every step, CPU time of the solve."""
     nsteps = int(round(t_end / dt))
     sc, mbs, elems = build_exudyn_manipulator(case, geometry, epl)
-    groups = _midspan_sensors(mbs, elems, geometry, epl, (0, 1))
-    cpu = _solve(mbs, nsteps, t_end, rho_inf, dt)
+    groups = midspan_sensors(mbs, elems, geometry, epl, (0, 1))
+    cpu = solve_dynamic(mbs, nsteps, t_end, rho_inf, dt)
     out = {"t": mbs.GetSensorStoredData(groups[0][0])[:, 0], "cpu_s": cpu}
     for li, group in enumerate(groups):
-        out[f"strain_link{li + 1}_mid"] = _midspan_strain(mbs, group, geometry[li][7])
+        out[f"strain_link{li + 1}_mid"] = midspan_strain(mbs, group, geometry[li][7])
     return out
 
 
@@ -385,14 +396,14 @@ def manipulator_side_by_side(case_path, epl: int = 8, dt: float = 1.25e-5, t_end
 
     def run_pair():
         fx = run_flexmech(case, "nonlinear", ("strain_link1_mid", "strain_link2_mid"))
-        return fx, run_exudyn_manipulator(case, _link_geometry(case, fx["rigid"]), epl, dt, t_end, rho_inf)
+        return fx, run_exudyn_manipulator(case, link_geometry(case, fx["rigid"]), epl, dt, t_end, rho_inf)
 
-    fx, ex, fx_cpu, ex_cpu = _smallest_times(repeats, run_pair)
+    fx, ex, fx_cpu, ex_cpu = smallest_times(repeats, run_pair)
     diff = {}
     for fc in cutoffs:
         diff[fc] = {}
         for k in ("strain_link1_mid", "strain_link2_mid"):
-            diff[fc][k] = _relative_difference(low_pass(fx["t"], fx[k], fc),
+            diff[fc][k] = relative_difference(low_pass(fx["t"], fx[k], fc),
                                                low_pass(fx["t"], np.interp(fx["t"], ex["t"], ex[k]), fc))
     return {"elements_per_link": epl, "dt": dt, "t_end": t_end, "rho_inf": rho_inf,
             "flexmech_cpu_s": fx["cpu_s"], "exudyn_cpu_s": ex["cpu_s"], "speedup": ex["cpu_s"] / fx["cpu_s"],

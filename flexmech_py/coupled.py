@@ -15,7 +15,11 @@ from . import kernels
 from .coupled_layout import CON_ANGLE, CON_POINT, CON_PROJECTION, Layout, LinkMesh, Row, SharedAngles, \
     flat_description, force_constant_positions, marker_key, node_segment, start_value
 
-__all__ = ["CoupledModel", "LinkMesh", "validity", "CON_POINT", "CON_ANGLE", "CON_PROJECTION"]
+__all__ = ["CoupledModel", "LinkMesh", "validity", "CON_POINT", "CON_ANGLE", "CON_PROJECTION", "SOLVER_PATHS"]
+
+#: the linear algebra of a Newton step (fortran/flexmech_coupled_solve.f90: PATH_*)
+SOLVER_PATHS = ("band, multipliers by their Schur complement", "saddle band",
+                "condensed segments, multipliers by their Schur complement", "bordered saddle band")
 
 
 class CoupledModel:
@@ -26,7 +30,8 @@ class CoupledModel:
     ``n_el``, ``ld`` (maxld, nseg) 1-based all-DOF numbers of each segment's local vector, ``ndof``,
     ``free_of`` (1-based, 0 = fixed), ``q_fixed``, ``bodies``, ``markers``, ``rows``, ``joints``
     {name: JointModel}, ``forces``, ``mesh`` (the flexible links' mesh view for results);
-    ``last_run`` the last run's frames and final state."""
+    ``last_run`` the last run's frames and final state; ``solver`` the structure of its linear algebra
+    (:meth:`structure`, taken at a run's start)."""
 
     def __init__(self, layout: Layout):
         self.layout = layout
@@ -36,8 +41,10 @@ class CoupledModel:
         self.bodies, self.markers, self.rows = layout.bodies, layout.markers, layout.rows
         self.joints, self.forces, self.node_ends = layout.joints, layout.forces, layout.node_ends
         self.last_run = None
+        self.solver = None
         self._flat = None
         self._kflat = None
+        self._by_link = None      # {link: (segment numbers, their end nodes k1)}, built on first use
         #: the nonlinear model with solver.node_angles = "shared": the kernel integrates one absolute
         #: angle per node (coupled_layout.SharedAngles); None: chord-relative angles and weld rows
         shared = layout.split and layout.case["solver"].get("node_angles", "relative") == "shared"
@@ -63,8 +70,29 @@ class CoupledModel:
         return self.seg_slice(segs[0])[0:2], self.seg_slice(segs[-1])[2:4]
 
     def node_segment(self, li: int, k: int) -> tuple[int, int]:
-        """(segment, node within it) of mesh node k of link li: the first segment holding it."""
-        return node_segment(self.segments, li, k)
+        """(segment, node within it) of mesh node k of link li: the first segment holding it (a
+        bisection: the nonlinear model has a segment per element, and outputs ask for every node)."""
+        segs, ends = self._link_segments(li)
+        si = segs[min(int(np.searchsorted(ends, k, side="left")), len(segs) - 1)]
+        if not self.segments[si][1] <= k <= self.segments[si][2]:
+            return node_segment(self.segments, li, k)       # (raises: k is not on the link)
+        return si, k - self.segments[si][1]
+
+    def element_segment(self, li: int, e: int) -> tuple[int, int]:
+        """(segment, element within it) of element e (0-based, along the link) of link li."""
+        segs, ends = self._link_segments(li)
+        si = segs[min(int(np.searchsorted(ends, e, side="right")), len(segs) - 1)]
+        return si, e - self.segments[si][1]
+
+    def _link_segments(self, li: int) -> tuple[list[int], np.ndarray]:
+        if self._by_link is None:
+            by = {}
+            for si, (l2, _, k1) in enumerate(self.segments):   # (a link's segments in order along it)
+                by.setdefault(l2, ([], []))
+                by[l2][0].append(si)
+                by[l2][1].append(k1)
+            self._by_link = {l2: (sg, np.asarray(ends)) for l2, (sg, ends) in by.items()}
+        return self._by_link[li]
 
     def body_of(self, bi: int):
         """The rigid-body entry (index, DOFs, m, J_C, J_S) of mechanism body bi (None for a flexible link)."""
@@ -189,8 +217,10 @@ class CoupledModel:
             div_limit = DIVERGENCE_FACTOR * max(self.case["links"][li]["length"] for li, _, _ in self.segments)
         seg_link = np.array([li + 1 for li, _, _ in self.segments], np.int32)
         ispec, rspec = self._spec(gravity, rayleigh, kernel=True)
+        if state is None:       # (a continued run keeps the structure its start took)
+            self.solver = self._structure(ispec, rspec, q, v)
         qf, vf, af, lk, lka, ef, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
-            nframes, ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
+            ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
             out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry)
         lf = np.zeros((nc, nframes))      # the interior welds of shared node angles carry none
         lf[keep] = lk[:keep.size]
@@ -210,6 +240,27 @@ class CoupledModel:
                              step=int(fail), data={"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "iters": iters,
                                                    "q": q, "v": v, "a": a, "p": p, "newton": newton})
         return qf, vf, af, lf, ef, iters
+
+    def structure(self, q, v) -> dict:
+        """The linear algebra a run takes at the state (q, v) (all DOFs, the layout's angles), with the
+        solver modes set now (kernels.cpl.cpl_set_solver, cpl_set_multipliers): ``path`` (one of
+        :data:`SOLVER_PATHS`), ``band_unknowns`` and ``band_half_width`` of its band, ``dense_unknowns``
+        (the border, or the rows of a Schur complement), and the floating-point operations of one
+        factorization and of one solve (machine-independent: their growth with the mesh shows a
+        quadratic cost; docs/theory.md section 12.6)."""
+        ispec, rspec = self._spec((0.0, 0.0), (0.0, 0.0), kernel=True)
+        q, v = np.asarray(q, float), np.asarray(v, float)
+        if self.shared is not None:
+            q, v, _ = self.shared.to_kernel(q, v, np.zeros_like(q))
+        return self._structure(ispec, rspec, q, v)
+
+    @staticmethod
+    def _structure(ispec, rspec, q, v) -> dict:
+        info, status = kernels.cpl.cpl_structure(ispec, rspec, q, v)
+        kernels.check_status(status, "cpl_structure")
+        return {"path": SOLVER_PATHS[int(info[0])], "band_unknowns": int(info[1]), "band_half_width": int(info[2]),
+                "dense_unknowns": int(info[3]), "flops_per_factorization": float(info[4]),
+                "flops_per_solve": float(info[5])}
 
     def dense(self, q, v, a, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), t=0.0):
         """Residual (all DOFs, no constraint forces), M, C_v, K_t (dense, free DOFs), [kinetic,

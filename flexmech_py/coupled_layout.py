@@ -22,15 +22,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .coupled_ordering import bordered_numbering
 from .errors import CaseError
+from .mechanism.rows import CON_ANGLE, CON_POINT, CON_PROJECTION
 from .model import link_mesh, rcm_free_numbering, uniform_mesh
 
 __all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "JOINT_ROWS", "HOLDING", "CON_POINT", "CON_ANGLE",
            "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",
            "start_value", "flat_description", "force_constant_positions"]
 
-# constraint kinds (flexmech_markers) and marker kinds (flexmech_coupled_system)
-CON_POINT, CON_ANGLE, CON_PROJECTION = 1, 2, 3
+# marker kinds (flexmech_coupled_system); the constraint kinds: mechanism.rows
 MK_GROUND, MK_NODE, MK_BODY = 0, 1, 2
 J_FLOOR = 1e-6     # a rigid body without rotary inertia: J_S = J_FLOOR m lref^2 in the iteration matrix
 
@@ -167,7 +168,10 @@ class Layout:
     ``ld``, ``n_el``, ``free_of``, ``q_fixed`` and ``mesh``.  ``hold_forced``: a force-driven joint
     whose elastic condition holds it (HOLDING: a torque-driven crank's default ``clamp``) also gets a
     ``hold`` row, as the superposition models' elastic problem holds it; the frozen eigenproblem of
-    ``flexmech modes`` uses it (a run leaves the joint to its force, whatever its condition)."""
+    ``flexmech modes`` uses it (a run leaves the joint to its force, whatever its condition).
+    The nonlinear model's free numbering is that of its bordered saddle band
+    (:mod:`flexmech_py.coupled_ordering`): ``border`` = (border DOFs, border flag per row); the coupled
+    model's is reverse Cuthill-McKee (``border`` None)."""
 
     def __init__(self, case, split: bool, hold_forced: bool = False):
         self.case, self.split, self.mech = case, split, case.mechanism
@@ -189,6 +193,7 @@ class Layout:
         self._lumped()
         self.n_el = np.array([k1 - k0 for _, k0, k1 in self.segments], np.int32)
         self.ld = self._ld_array()
+        self.border = None
         self.free_of = self._free_numbering()
         self.q_fixed = self._q_fixed()
         self.mesh = self._mesh()
@@ -267,8 +272,22 @@ class Layout:
             mask[[self.dof[("r", node)], self.dof[("r", node, 1)]]] = False
         if not mask.any():
             raise CaseError("joints", "the coupled model has no free DOF")
-        cliques = [np.array(c) for c in self.seg_cols()] + [b[1] for b in self.bodies]
-        return rcm_free_numbering(cliques, mask)
+        cols = [np.array(c) for c in self.seg_cols()]
+        if self.split:
+            free_of, nbd, rb = bordered_numbering(cols, [b[1] for b in self.bodies], self.row_patterns(cols), mask)
+            self.border = (nbd, rb)
+            return free_of
+        return rcm_free_numbering(cols + [b[1] for b in self.bodies], mask)
+
+    def row_patterns(self, cols, rows=None) -> list:
+        """The DOFs every row's gradient can touch (its markers' columns; a node of a one-element
+        segment: the segment's end positions and the node's angle) given the segments' DOFs cols."""
+        def marker_dofs(m):
+            kind, idx, node, _ = self.markers[m]
+            if kind == MK_NODE:
+                return list(cols[idx][:4]) + [cols[idx][4 if node == 0 else 5]]
+            return list(self.bodies[idx][1]) if kind == MK_BODY else []
+        return [np.array(marker_dofs(r.a) + marker_dofs(r.b), int) for r in (self.rows if rows is None else rows)]
 
     def _q_fixed(self) -> np.ndarray:
         q = np.zeros(len(self.dof))
@@ -371,10 +390,11 @@ class Layout:
                         uniform=[f is not None and uniform_mesh(f) for f in self.fracs])
 
     def _bandwidth(self) -> int:
-        kl = 0
+        """The half width of S's band over the free DOFs (the nonlinear model: its interior chains')."""
+        kl, top = 0, int(self.free_of.max()) - (self.border[0] if self.border else 0)
         for col in self.seg_cols():
             f = self.free_of[np.array(col)]
-            f = f[f > 0]
+            f = f[(f > 0) & (f <= top)]
             if f.size:
                 kl = max(kl, int(f.max() - f.min()))
         return kl
@@ -390,13 +410,15 @@ class SharedAngles:
     :meth:`to_kernel` and :meth:`from_kernel` carry states and frames between the two.
 
     ``ld``, ``free_of``: the kernel's segment DOFs and free numbering (a later element's th_0 DOF is
-    unused, its start angle is the th_1 DOF of the element before); ``keep``: indices of the layout's
+    unused, its start angle is the th_1 DOF of the element before; numbered for the bordered saddle
+    band, ``border`` = (border DOFs, border flag per kept row)); ``keep``: indices of the layout's
     rows the kernel enforces (all but the interior welds); ``pos`` (nseg, 4) the 0-based DOFs of
     xs, ys, xe, ye; ``rel`` and ``abs`` (nseg, 2): the DOFs of th_0, th_1 in the layout and of the node
     angles in the kernel; ``unused`` the DOFs the kernel does not use."""
 
     ld: np.ndarray
     free_of: np.ndarray
+    border: tuple
     keep: np.ndarray
     pos: np.ndarray
     rel: np.ndarray
@@ -416,11 +438,12 @@ class SharedAngles:
         kcols = np.concatenate([cols[:, :4], ab], axis=1)
         mask = lay.free_of > 0
         mask[unused] = False
-        free_of = rcm_free_numbering(list(kcols) + [b[1] for b in lay.bodies], mask)
+        keep = np.array([i for i, r in enumerate(lay.rows) if r.role != "interior"], int)
+        free_of, nbd, rb = bordered_numbering(list(kcols), [b[1] for b in lay.bodies],
+                                              lay.row_patterns(kcols, [lay.rows[i] for i in keep]), mask)
         ld = lay.ld.copy(order="F")
         ld[4:6] = ab.T + 1
-        keep = np.array([i for i, r in enumerate(lay.rows) if r.role != "interior"], int)
-        return cls(ld, free_of, keep, cols[:, :4].copy(), rel, ab, unused)
+        return cls(ld, free_of, (nbd, rb), keep, cols[:, :4].copy(), rel, ab, unused)
 
     def _chord(self, q, v, a):
         """Chord angle, angular velocity and acceleration of every element (nseg, ...)."""
@@ -473,9 +496,9 @@ def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0),
                      shared: SharedAngles | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(ispec, rspec) of flexmech_coupled_system: coupled_build (layout documented there); with ``shared``
     the nonlinear model's kernel description (shared node angles, no interior welds)."""
-    ld, free_of, rows = lay.ld, lay.free_of, lay.rows
+    ld, free_of, rows, border = lay.ld, lay.free_of, lay.rows, lay.border
     if shared is not None:
-        ld, free_of, rows = shared.ld, shared.free_of, [lay.rows[i] for i in shared.keep]
+        ld, free_of, rows, border = shared.ld, shared.free_of, [lay.rows[i] for i in shared.keep], shared.border
     nseg, maxn = len(lay.segments), int(lay.n_el.max())
     links = lay.case["links"]
     laws = [d.packed(0.0) for _, d in lay.forces]
@@ -499,6 +522,7 @@ def flat_description(lay: Layout, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0),
     ispec += [i for r in rows for i in (r.kind, r.a + 1, r.b + 1, r.aux)] + dv
     ispec += [int(shared is not None)] * nseg
     ispec += [int(lay.split)] * nseg          # shallow-arch axial strain: the nonlinear model's elements
+    ispec += [-1] + [0] * len(rows) if border is None else [border[0]] + list(border[1])
     wn = np.zeros((nseg, maxn + 1))
     prop = []
     for si, (li, k0, k1) in enumerate(lay.segments):

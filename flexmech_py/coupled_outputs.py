@@ -153,8 +153,7 @@ def _element_parts(cm: CoupledModel, li: int, frac: float) -> list:
         parts = [(e, (frac - f[e]) / (f[e + 1] - f[e]))]
     out = []
     for e, xi in parts:
-        si = next(i for i, (l2, k0, k1) in enumerate(cm.segments) if l2 == li and k0 <= e < k1)
-        out.append((si, e - cm.segments[si][1], xi))
+        out.append((*cm.element_segment(li, e), xi))
     return out
 
 
@@ -488,6 +487,7 @@ class Diagnostics:
                 "newton": {"iterations": self.iterations, "mean_per_step": self.iterations / max(nsteps, 1),
                            "max_per_step": self.max_iterations, "factorizations": self.factorizations,
                            "factorizations_per_step": self.factorizations / max(nsteps, 1)},
+                "solver": self.cm.solver,
                 "link_length_drift": {"max_relative": self.stretch, "bound": 1e-3, "within_bound": self.stretch < 1e-3},
                 "joint_closure_error_m": max(viol["point_m"], viol["guide_normal_m"]),
                 "constraint_violation": viol,

@@ -596,7 +596,6 @@ class FEModel:
 
         rig = np.asfortranarray(rig, float)
         nsteps = rig.shape[2] - 1
-        nframes = nsteps // out_every + 1
         nf = self.nfree
         u = np.zeros(nf) if u0 is None else np.array(u0, float)
         v = np.zeros(nf) if v0 is None else np.array(v0, float)
@@ -608,7 +607,7 @@ class FEModel:
             q_free = np.ones(1, np.int32)
             q_val = np.zeros((1, nsteps + 1), order="F")
         uf, vf, af, nf, status, fail, geo_iters, nvalid = kernels.api.ked_run(
-            nframes, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
+            *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
             self.slave_values(rig),
             np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, alpha_m, alpha_f, beta, gamma,
             out_every, int(a0 is None), GEOMETRIC_CODE[geometric], geo_tol, geo_maxit, float(div_limit), u, v, a, p)

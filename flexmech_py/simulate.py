@@ -452,7 +452,7 @@ class Prepared:
         model (one per element); the rigid-body solution on the grid is their reference."""
         case, sol, oe = self.case, self.case["solver"], self.out_every
         if model not in self.coupled:
-            check_mesh(case, model)      # the model's own arrays (sizes.DOF2_BYTES)
+            check_mesh(case, model)      # the model's own arrays (sizes.MODEL_ELEMENT_BYTES, DOF2_BYTES)
             self.coupled[model] = CoupledModel.from_case(case, split=(model == "nonlinear"))
         cm = self.coupled[model]
         integ = integrator_of(sol, model)

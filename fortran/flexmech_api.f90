@@ -121,6 +121,9 @@ contains
                      init_accel, geo_mode, geo_tol, geo_maxit, div_limit, u0, v0, a0, p0, uf, vf, af, nf, &
                      status, fail_step, geo_iters, nvalid)
     integer, intent(in) :: nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nframes, nsl1, nnz
+    ! Python passes none of the sizes: f2py takes them from the arrays' shapes, nframes from out_every
+    !f2py intent(hide) :: nlinks, ndof, nel, nlm, nri, nq, nsteps, nfree, nsl1, nnz
+    !f2py integer intent(hide), depend(rig, out_every) :: nframes = (out_every > 0 ? (shape(rig, 2) - 1)/out_every + 1 : 1)
     integer, intent(in) :: sl_of(ndof), sl_ptr(nsl1), sl_col(nnz)
     real(dp), intent(in) :: sl_val(3, nnz, nsteps + 1)
     integer, intent(in) :: free_of(ndof), el_link(nel), el_dof(6, nel)

@@ -10,13 +10,14 @@ module flexmech_coupled_api
   use flexmech_coupled_rows, only: coupled_rows
   use flexmech_coupled_element, only: coupled_set_inertia
   use flexmech_coupled_assembly, only: coupled_dense, coupled_residual
-  use flexmech_coupled_run, only: coupled_run, coupled_set_newton, coupled_set_start, coupled_set_solver, &
-                                  coupled_set_multipliers
+  use flexmech_coupled_run, only: coupled_run, coupled_set_newton, coupled_set_start
+  use flexmech_coupled_solve, only: coupled_set_solver, coupled_set_multipliers, newton_solver, ns_setup, ns_structure
+  use flexmech_coupled_storage, only: link_mats
   use flexmech_coupled_post, only: coupled_post
   implicit none
   private
   public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_set_start, cpl_set_inertia, cpl_residuals, cpl_rows
-  public :: cpl_set_multipliers
+  public :: cpl_set_multipliers, cpl_structure
 
 contains
 
@@ -48,6 +49,9 @@ contains
                      beta, gamma, out_every, tol, maxit, start, div_limit, seg_link, q, v, a, pa, carry, &
                      qf, vf, af, lf, la, ef, status, fail_step, iters, nvalid, newton)
     integer, intent(in) :: ni, nr, ndof, nc1, nsteps, nframes, nseg
+    ! Python passes none of the sizes: f2py takes them from the arrays' shapes, nframes from out_every
+    !f2py intent(hide) :: ni, nr, ndof, nc1, nsteps, nseg
+    !f2py integer intent(hide), depend(cval, out_every) :: nframes = (out_every > 0 ? (shape(cval, 2) - 1)/out_every + 1 : 1)
     integer, intent(in) :: ispec(ni)
     real(dp), intent(in) :: rspec(nr)
     real(dp), intent(in) :: cval(3, nc1, nsteps + 1)
@@ -70,8 +74,8 @@ contains
   end subroutine cpl_run
 
   !> Linear solver of every later cpl_run in this process: mode -1 (default) automatic, 1 condensed
-  !> onto the segment-end positions, 0 the whole band (docs/theory.md section 11).  status 4 for
-  !> another mode.
+  !> onto the segment-end positions, 0 the whole band, 2 the bordered saddle band of a layout that
+  !> has one (the nonlinear model; docs/theory.md sections 11.3, 12.6).  status 4 for another mode.
   subroutine cpl_set_solver(mode, status)
     integer, intent(in) :: mode
     integer, intent(out) :: status
@@ -184,5 +188,26 @@ contains
     end if
     call coupled_post(sys, qf, vf, af, lf, tf, meas, meas_dir, mks, mv, dvals, rend)
   end subroutine cpl_post
+
+  !> The linear algebra a cpl_run would use now (the solver modes set), at the configuration (q, v):
+  !> info = [path (0 band with the multipliers' Schur complement, 1 saddle band, 2 condensed segments,
+  !> 3 bordered saddle band), unknowns in the band, its half width, unknowns eliminated densely,
+  !> floating-point operations of one factorization, of one solve] (flexmech_coupled_solve:
+  !> ns_structure; machine-independent).
+  subroutine cpl_structure(ni, nr, ndof, ispec, rspec, q, v, info, status)
+    integer, intent(in) :: ni, nr, ndof
+    integer, intent(in) :: ispec(ni)
+    real(dp), intent(in) :: rspec(nr), q(ndof), v(ndof)
+    real(dp), intent(out) :: info(6)
+    integer, intent(out) :: status
+    type(coupled_system) :: sys
+    type(link_mats) :: lm
+    type(newton_solver) :: ns
+    info = 0.0_dp
+    call build_checked(ispec, rspec, ndof, huge(1), sys, status)
+    if (status /= STATUS_OK) return
+    call ns_setup(sys, q, v, lm, ns)
+    info = ns_structure(sys, lm, ns)
+  end subroutine cpl_structure
 
 end module flexmech_coupled_api

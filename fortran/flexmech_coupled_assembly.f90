@@ -3,11 +3,11 @@
 !> tests and the modal analysis.
 module flexmech_coupled_assembly
   use flexmech_kinds, only: dp
-  use flexmech_assembly, only: band_to_dense
   use flexmech_markers, only: marker_state, MAXCOL
   use flexmech_coupled_system, only: coupled_system
-  use flexmech_coupled_rows, only: drive_load
-  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_zero, lm_band_setup, lm_band_finish
+  use flexmech_coupled_rows, only: drive_load, row_patterns
+  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_zero, lm_band_setup, lm_bordered_setup, lm_band_finish, &
+                                      lm_dense
   use flexmech_coupled_element, only: link_eval, segment_residual
   implicit none
   private
@@ -150,23 +150,32 @@ contains
 
   !> Dense residual (all DOFs, without constraint forces), iteration-matrix parts over the free DOFs and
   !> energies at one state and time t (for tests and analysis): mm = M, cm = C_v, km = K_t,
-  !> energy = [kinetic, potential].  A rigid body's diagonal in mm is [m, m, J_S].
+  !> energy = [kinetic, potential].  A rigid body's diagonal in mm is [m, m, J_S].  S is stored as a
+  !> run stores it (one-element segments straight into the band or the bordered saddle band).
   subroutine coupled_dense(sys, q, v, a, t, res, mm, cm, km, energy)
     type(coupled_system), intent(in) :: sys
     real(dp), intent(in) :: q(:), v(:), a(:), t
     real(dp), intent(out) :: res(:), mm(:, :), cm(:, :), km(:, :), energy(2)
     type(link_mats) :: lm
+    integer :: ngnz(max(1, sys%nc)), gnz(2*MAXCOL, max(1, sys%nc))
     call lm_setup(sys, 1, lm)
-    call lm_band_setup(sys, lm)       ! as a run's band: one-element segments straight into it
+    if (sys%nbd >= 0) then
+      call row_patterns(sys, q, v, ngnz, gnz)
+      call lm_bordered_setup(sys, lm, ngnz, gnz)
+    else
+      call lm_band_setup(sys, lm)
+    end if
     call assemble(sys, q, v, a, t, .true., 0.0_dp, 0.0_dp, res, lm, energy)
     call lm_band_finish(sys, lm)
-    mm = band_to_dense(lm%ab, sys%kl, sys%ku, sys%nfree)
+    call lm_dense(sys, lm, mm)
     call assemble(sys, q, v, a, t, .true., 1.0_dp, 0.0_dp, res, lm, energy)
     call lm_band_finish(sys, lm)
-    cm = band_to_dense(lm%ab, sys%kl, sys%ku, sys%nfree) - mm
+    call lm_dense(sys, lm, cm)
+    cm = cm - mm
     call assemble(sys, q, v, a, t, .true., 0.0_dp, 1.0_dp, res, lm, energy)
     call lm_band_finish(sys, lm)
-    km = band_to_dense(lm%ab, sys%kl, sys%ku, sys%nfree) - mm
+    call lm_dense(sys, lm, km)
+    km = km - mm
     call assemble(sys, q, v, a, t, .false., 0.0_dp, 0.0_dp, res, lm, energy)   ! the energies (and res)
   end subroutine coupled_dense
 

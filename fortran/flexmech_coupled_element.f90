@@ -284,10 +284,8 @@ contains
     real(dp), intent(inout), optional :: msum(:), csum(:)
     type(link_mats), intent(inout) :: lm
     integer :: n, idx(6), i, j, nl, ncl, cl(10)
-    real(dp) :: jth(2), bth(2)
     real(dp) :: cs, sn, ell, g(2), om, al0, al, nm(2, 6), de(6), dv(6), da(6)
-    real(dp) :: ul(2), uld(2), uldd(2), rot(2, 2), ru(2), rou(2), roud(2), rd(2), rdd(2)
-    real(dp) :: jac(2, 10), bv(2, 10), bq(2, 10), ac(2, 2), w0(2), cdot(2), c(2), rn(2), bc(2), blk(10, 10)
+    real(dp) :: ul(2), uld(2), uldd(2), rot(2, 2), ru(2), rou(2), roud(2), rd(2), rdd(2), jac(2, 10)
     n = sys%n_el(l); nl = 3*n + 3
     idx = elem_index(n, e)
     call chord(q, v, a, cs, sn, ell, g, om, al0, al)
@@ -328,6 +326,20 @@ contains
       r(cl(j)) = r(cl(j)) + dm*(rdd(1)*jac(1, j) + rdd(2)*jac(2, j))
     end do
     if (.not. want) return
+    call mass_point_block(l, q, v, idx, ncl, cl, jac, ell, g, om, al, ru, rou, roud, dm, cc, ck, lm, msum, csum)
+  end subroutine mass_point
+
+  !> mass_point's blocks of S (and, with msum, its angle-column sums) for a mass dm on the columns
+  !> cl(1:ncl) of segment l with J = dr/dq' (jac) there: dm J^T (J + cc dr''/dv + ck dr''/dq) with
+  !> dr''/dq at fixed chord; ell, g, om, al the chord quantities, ru = R u, rou = Omega R u,
+  !> roud = R Omega u' of the point.
+  subroutine mass_point_block(l, q, v, idx, ncl, cl, jac, ell, g, om, al, ru, rou, roud, dm, cc, ck, lm, msum, csum)
+    integer, intent(in) :: l, idx(6), ncl, cl(10)
+    real(dp), intent(in) :: q(:), v(:), jac(2, 10), ell, g(2), om, al, ru(2), rou(2), roud(2), dm, cc, ck
+    type(link_mats), intent(inout) :: lm
+    real(dp), intent(inout), optional :: msum(:), csum(:)
+    integer :: i, j
+    real(dp) :: jth(2), bth(2), bv(2, 10), bq(2, 10), ac(2, 2), w0(2), cdot(2), c(2), rn(2), bc(2), blk(10, 10)
     ! dr''/dv: chord velocity through omega and alpha0, elastic velocities through 2 omega R Omega N
     c = q(3:4) - q(1:2); cdot = v(3:4) - v(1:2)
     w0 = -(2.0_dp/ell**2)*(om*c + (c(1)*cdot(1) + c(2)*cdot(2))*g)
@@ -362,7 +374,7 @@ contains
       msum(cl(i)) = msum(cl(i)) + dm*dot_product(jac(:, i), jth)
       csum(cl(i)) = csum(cl(i)) + dm*dot_product(jac(:, i), bth)
     end do
-  end subroutine mass_point
+  end subroutine mass_point_block
 
   !> Rotary inertias turning with segment l (psi = phi + th_k at their node): residual, kinetic energy
   !> and (if want) their blocks of S and angle-column sums; ell, g, om, al the chord quantities.

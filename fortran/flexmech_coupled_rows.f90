@@ -9,7 +9,7 @@ module flexmech_coupled_rows
   use flexmech_coupled_system, only: coupled_system, MK_GROUND, MK_NODE, MK_BODY, NPAR
   implicit none
   private
-  public :: get_marker, eval_row, drive_load, coupled_rows
+  public :: get_marker, eval_row, drive_load, coupled_rows, row_patterns
 
 contains
 
@@ -74,6 +74,30 @@ contains
                       theta, t)
     end if
   end subroutine drive_load
+
+  !> The free DOFs on which every row's gradient can be nonzero (the columns of its two markers),
+  !> without repetitions: gnz(1:ngnz(ic), ic), ic = 1..nc (gnz: (2 MAXCOL, >= nc)); at any (q, v).
+  pure subroutine row_patterns(sys, q, v, ngnz, gnz)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:)
+    integer, intent(out) :: ngnz(:), gnz(:, :)
+    integer :: ic, k, f, ncl, cols(2*MAXCOL)
+    real(dp) :: gv, gd, ac, grad(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    ngnz = 0
+    gnz = 0
+    do ic = 1, sys%nc
+      call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
+                    q, v, gv, gd, ac, ncl, cols, grad, ma, mb)
+      do k = 1, ncl
+        f = sys%free_of(cols(k))
+        if (f == 0) cycle
+        if (any(gnz(1:ngnz(ic), ic) == f)) cycle
+        ngnz(ic) = ngnz(ic) + 1
+        gnz(ngnz(ic), ic) = f
+      end do
+    end do
+  end subroutine row_patterns
 
   !> Values g (nc, ns) of the constraint rows (not wrapped) and their gradients gq (nc, ndof, ns) over
   !> all DOFs at each of ns configurations q(:, s) (velocities v enter the rates only, not returned).

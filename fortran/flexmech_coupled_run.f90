@@ -7,45 +7,24 @@
 !> (NEWTON_AUTO, docs/theory.md 12.2).  M and C_v are exact; K_t holds the elastic, chord and elastic
 !> inertial terms, and for the nonlinear model's absolute node angles the whole derivative of the
 !> residual (docs/theory.md 12.1); the coupled model's chord dependence of the inertia, the constraint
-!> curvature and the force laws' dependence on the configuration are in the residual only.
+!> curvature and the force laws' dependence on the configuration are in the residual only.  The
+!> linear algebra of a correction (the structure of S with the constraint rows): flexmech_coupled_solve.
 module flexmech_coupled_run
-  use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
-                             STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
+  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
   use flexmech_markers, only: marker_state, CON_POINT, CON_ANGLE, MAXCOL
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap
   use flexmech_coupled_rows, only: eval_row, drive_load
-  use flexmech_coupled_storage, only: link_mats, lm_setup, lm_band_setup, lm_band_finish, lm_factor, lm_solve
+  use flexmech_coupled_storage, only: link_mats
   use flexmech_coupled_assembly, only: assemble, assemble_residual
-  use flexmech_saddle_band, only: saddle_system, saddle_setup, saddle_factor, saddle_solve, saddle_flops
+  use flexmech_coupled_solve, only: newton_solver, ns_setup, ns_factor, ns_rows, ns_correction, ns_gdot
   use flexmech_alternation, only: alternation_monitor, alt_setup, alt_step, alt_take
   implicit none
   private
   public :: coupled_run, coupled_elastic_measure
   public :: coupled_set_newton, NEWTON_MODIFIED, NEWTON_FULL, NEWTON_AUTO
   public :: coupled_set_start, START_ACCELERATION, START_VELOCITY
-  public :: coupled_set_solver, SOLVER_AUTO, SOLVER_BAND, SOLVER_CONDENSED
-  public :: coupled_set_multipliers, MULT_AUTO, MULT_SCHUR, MULT_SADDLE
 
-  !> Linear solver of the iteration matrix in coupled_run (docs/theory.md section 11, "The solve"):
-  !> SOLVER_CONDENSED eliminates every segment's elastic DOFs (a band of half width <= 5) onto the
-  !> shared end-position DOFs and solves the condensed band system; SOLVER_BAND factorizes the whole
-  !> free-DOF band matrix (half bandwidth 3 x elements per segment + 2); SOLVER_AUTO (default) takes
-  !> the condensed solve when the whole band is wider than the interior band + 4, i.e. when the
-  !> segments' arrowheads widen it (2 or more elements per segment); with one element per segment
-  !> (the nonlinear model) the whole band is narrow and its one LAPACK call beats one per segment.
-  integer, parameter :: SOLVER_AUTO = -1, SOLVER_BAND = 0, SOLVER_CONDENSED = 1
-  integer :: solver_mode = SOLVER_AUTO
-  !> How a Newton step reaches the constraint rows' multipliers when S is factorized as one band
-  !> (docs/theory.md section 11.3): MULT_SCHUR by the dense Schur complement G' S^-1 G (m solves and
-  !> a dense LU per factorization: cheap for the few rows of a mechanism's joints), MULT_SADDLE by the
-  !> band LU of the whole saddle-point system with the multipliers interleaved (flexmech_saddle_band:
-  !> linear in the number of rows, for the nonlinear model's weld per interior node), MULT_AUTO
-  !> (default) the one of fewer flops by saddle_flops.  The condensed solve always uses the Schur
-  !> complement.
-  integer, parameter :: MULT_AUTO = -1, MULT_SCHUR = 0, MULT_SADDLE = 1
-  integer :: multiplier_mode = MULT_AUTO
   !> When coupled_run rebuilds and factorizes the iteration matrix within a step (docs/theory.md
   !> section 12.2): NEWTON_MODIFIED once per step (at the predictor), NEWTON_FULL at every iteration,
   !> NEWTON_AUTO (default) once per step and again whenever an iteration contracts the correction by
@@ -64,23 +43,36 @@ module flexmech_coupled_run
   !> than this fraction of the mechanism's size
   real(dp), parameter :: RESTART_MOVE = 0.05_dp
 
+  !> The state of one coupled_run: the integration constants, the step's predictor and work arrays,
+  !> the Newton iteration's history, the solver (storage of S and the constraint gradients), the
+  !> bookkeeping of the inputs' work and the multipliers' alternation, and the counters returned.
+  type :: run_state
+    real(dp) :: dt = 0.0_dp, tol = 0.0_dp, alpha_m = 0.0_dp, alpha_f = 0.0_dp, beta = 0.0_dp, gamma = 0.0_dp
+    real(dp) :: c1 = 1.0_dp, betap = 0.0_dp, gammap = 0.0_dp   !< 1/(1 - alpha_m); beta', gamma' of S
+    real(dp) :: lref = 1.0_dp          !< length scale of the mechanism [m] (floor of the Newton test)
+    real(dp) :: t = 0.0_dp             !< time of the step being taken [s]
+    integer :: maxit = 0, nf = 0, nc = 0
+    real(dp), allocatable :: res(:), qs(:), vs(:), w(:), qn(:)   !< (ndof) residual, predictor, q_n
+    real(dp), allocatable :: lam(:), lamn(:), gsh(:)             !< (max(1, nc)) multipliers, at t_n, shift
+    integer, allocatable :: freeidx(:)                           !< (nf) the free DOFs
+    ! the Newton iteration of the step
+    integer :: it = 0, kat = 0          !< iteration of the step, of its current attempt
+    !> restarts at q_n that kept the predictor's matrix: (1) converged with it, (2) rebuilt it after all
+    integer :: restart_kept(2) = 0
+    real(dp) :: da_norm = 0.0_dp, a_norm = 0.0_dp, da_prev = 0.0_dp
+    logical :: converged = .false., refresh = .true., second = .false., kept = .false.
+    ! the work of the inputs and the energies of the last assembly
+    real(dp) :: work = 0.0_dp, energy(2) = 0.0_dp
+    real(dp), allocatable :: g0(:), lam0(:), g1(:)                  !< (max(1, nc)) row values, multipliers
+    real(dp), allocatable :: th0(:), tau0(:), th1(:), tau1(:)       !< (max(1, nd)) force drive states
+    type(link_mats) :: lm
+    type(newton_solver) :: ns
+    type(alternation_monitor) :: alt     !< the multipliers' step-to-step alternation
+    integer :: iters = 0                 !< Newton iterations of the run
+    real(dp) :: newton(4) = 0.0_dp       !< coupled_run's newton output
+  end type run_state
+
 contains
-
-  !> Select the linear solver of coupled_run (SOLVER_AUTO, SOLVER_BAND or SOLVER_CONDENSED;
-  !> module-wide, for tests and benchmarks).  status = STATUS_BAD_INPUT for another value.
-  subroutine coupled_set_solver(mode, status)
-    integer, intent(in) :: mode
-    integer, intent(out) :: status
-    call set_mode(mode, SOLVER_AUTO, SOLVER_CONDENSED, solver_mode, status)
-  end subroutine coupled_set_solver
-
-  !> Select how coupled_run reaches the multipliers (MULT_AUTO, MULT_SCHUR or MULT_SADDLE;
-  !> status STATUS_BAD_INPUT otherwise).
-  subroutine coupled_set_multipliers(mode, status)
-    integer, intent(in) :: mode
-    integer, intent(out) :: status
-    call set_mode(mode, MULT_AUTO, MULT_SADDLE, multiplier_mode, status)
-  end subroutine coupled_set_multipliers
 
   !> Matrix refresh policy of every later coupled_run (NEWTON_*); status STATUS_BAD_INPUT otherwise.
   subroutine coupled_set_newton(mode, status)
@@ -178,29 +170,15 @@ contains
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), la(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
-    real(dp), allocatable :: res(:), qs(:), vs(:), rf(:), w(:), gt(:, :), x(:, :), amat(:, :)
-    real(dp), allocatable :: qn(:), lamn(:), lam(:), dlam(:), gval(:), acc0(:), g0(:), lam0(:), th0(:), tau0(:), gsh(:)
-    real(dp), allocatable :: th1(:), tau1(:), g1(:)      ! step_work's drive states and row values
-    integer, allocatable :: ipiv(:), freeidx(:), ipc(:), gnz(:, :), ngnz(:)
-    integer :: nsteps, n, it, frame, info, itmax_frame, nf, nc, kat
-    !> restarts at q_n that kept the predictor's matrix: (1) converged with it, (2) rebuilt it after all
-    integer :: restart_kept(2)
-    real(dp) :: energy(2), work, da_norm, a_norm, da_prev, c1, betap, gammap, lref, t
-    logical :: converged, refactor, use_cond, refresh, second, use_saddle, kept
-    type(link_mats) :: lm
-    type(saddle_system) :: sd
-    type(alternation_monitor) :: alt     ! the multipliers' step-to-step alternation
+    type(run_state) :: rs
+    integer :: nsteps, n, itmax_frame
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
     nsteps = size(cval, 3) - 1
-    nf = sys%nfree
-    nc = sys%nc
-    refactor = .false.
-    restart_kept = 0
     if (out_every < 1 .or. dt <= 0.0_dp .or. nsteps < 0 .or. size(qf, 2) /= nsteps/out_every + 1 .or. &
-        size(cval, 2) < nc .or. size(lf, 1) < nc .or. size(la, 1) < nc .or. size(la, 2) /= size(qf, 2) .or. &
+        size(cval, 2) < sys%nc .or. size(lf, 1) < sys%nc .or. size(la, 1) < sys%nc .or. size(la, 2) /= size(qf, 2) .or. &
         beta <= 0.0_dp .or. gamma < 0.5_dp .or. &
         alpha_m >= 1.0_dp .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. &
-        size(seg_link) /= sys%nseg .or. size(p) /= sys%ndof .or. size(carry) < max(1, nc) + 2 .or. &
+        size(seg_link) /= sys%nseg .or. size(p) /= sys%ndof .or. size(carry) < max(1, sys%nc) + 2 .or. &
         start < 0 .or. start > 2) then
       status = STATUS_BAD_INPUT
       return
@@ -209,443 +187,366 @@ contains
       status = STATUS_BAD_INPUT
       return
     end if
-    c1 = 1.0_dp/(1.0_dp - alpha_m)
-    betap = beta*(1.0_dp - alpha_f)*c1
-    ! length scale of the mechanism [m] (largest nodal coordinate at the start): the absolute floor of
-    ! the Newton test, for steps where the accelerations themselves vanish (a smooth start from rest)
-    lref = max(maxval(abs(q)), tiny(1.0_dp))
-    if (start == 2) lref = carry(size(carry) - 1)
-    gammap = gamma*(1.0_dp - alpha_f)*c1
-    call setup_work()
-    if (start == 2) then
-      lam = 0.0_dp
-      lam(1:nc) = carry(1:nc)
-      work = carry(size(carry))
-      call assemble(sys, q, v, a, t0, .false., 0.0_dp, 0.0_dp, res, lm, energy)
-    else
-      call initial_acceleration()
-      if (status /= STATUS_OK) return
-      if (start == 1) p = a
-      work = 0.0_dp
-    end if
-    call drive_state(t0, th0, tau0)
-    call row_values(g0)
-    lam0 = lam
-    frame = 1
-    qf(:, 1) = q; vf(:, 1) = v; af(:, 1) = a; lf(1:nc, 1) = lam(1:nc)
-    ef(:, 1) = [energy(1), energy(2), work, 0.0_dp]
-    call alt_setup(alt, nc)
-    call alt_step(alt, lam(1:nc))
-    la = 0.0_dp
-    nvalid = 1
-    call save_carry()
-    itmax_frame = 0
-    do n = 1, nsteps
-      t = t0 + n*dt
-      w(freeidx) = alpha_f*a(freeidx) - alpha_m*p(freeidx)     ! zero for Newmark
-      qs = q + dt*v + (dt*dt*(0.5_dp - beta))*p + (dt*dt*beta*c1)*w
-      vs = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
-      call newton_iterations(n)
-      if (status == STATUS_OK .and. .not. converged) status = STATUS_NEWTON
-      if (status /= STATUS_OK) then
-        fail_step = n
-        return
-      end if
-      q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
-      v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
-      p(freeidx) = c1*((1.0_dp - alpha_f)*a(freeidx) + w(freeidx))
-      itmax_frame = max(itmax_frame, it)
-      if (coupled_elastic_measure(sys, seg_link, q) > div_limit) then
-        status = STATUS_DIVERGED
-        fail_step = n
-        return
-      end if
-      call step_work(t)
-      call alt_step(alt, lam(1:nc))
-      if (mod(n, out_every) == 0) then
-        call assemble(sys, q, v, a, t, .false., 0.0_dp, 0.0_dp, res, lm, energy)
-        frame = frame + 1
-        qf(:, frame) = q; vf(:, frame) = v; af(:, frame) = a; lf(1:nc, frame) = lam(1:nc)
-        call alt_take(alt, la(1:nc, frame))
-        ef(:, frame) = [energy(1), energy(2), work, real(itmax_frame, dp)]
-        nvalid = frame
-        itmax_frame = 0
-      end if
-    end do
-    call save_carry()
-
-  contains
-
-    !> The band or condensed storage of S, the work arrays, the free-DOF index and the constraint
-    !> gradients' nonzero pattern.
-    subroutine setup_work()
-      integer :: i
-      real(dp) :: fl(2)
-      call lm_setup(sys, nc, lm)
-      use_cond = lm%cond .and. (solver_mode == SOLVER_CONDENSED .or. &
-                                (solver_mode == SOLVER_AUTO .and. sys%kl > lm%kbi + 4))
-      if (.not. use_cond) call lm_band_setup(sys, lm)     ! S as one band, in lm%ab
-      allocate (res(sys%ndof), qs(sys%ndof), vs(sys%ndof), rf(nf), ipiv(nf), w(sys%ndof), freeidx(nf), qn(sys%ndof))
-      w = 0.0_dp
-      allocate (gt(nf, max(1, nc)), x(nf, max(1, nc)), amat(max(1, nc), max(1, nc)), lam(max(1, nc)), &
-                dlam(max(1, nc)), lamn(max(1, nc)), gval(max(1, nc)), acc0(max(1, nc)), g0(max(1, nc)), ipc(max(1, nc)), &
-                lam0(max(1, nc)), gsh(max(1, nc)), gnz(2*MAXCOL, max(1, nc)), ngnz(max(1, nc)), th0(max(1, sys%nd)), &
-                tau0(max(1, sys%nd)), th1(max(1, sys%nd)), tau1(max(1, sys%nd)), g1(max(1, nc)))
-      gt = 0.0_dp
-      do i = 1, sys%ndof
-        if (sys%free_of(i) > 0) freeidx(sys%free_of(i)) = i
-      end do
-      call gradient_pattern()
-      use_saddle = .false.
-      if (nc > 0 .and. .not. use_cond .and. multiplier_mode /= MULT_SCHUR) then
-        call saddle_setup(nf, nc, sys%kl, ngnz, gnz, sd)
-        fl = saddle_flops(nf, nc, sys%kl, sd%ka)
-        use_saddle = multiplier_mode == MULT_SADDLE .or. fl(2) < fl(1)
-      end if
-    end subroutine setup_work
-
-    !> The Newton iterations of step n (predictor qs, vs set): converged, it and the state at the
-    !> accepted iterate; status on a failed factorization or solve.
-    subroutine newton_iterations(n)
-      integer, intent(in) :: n
-      converged = .false.
-      kept = .false.
-      da_prev = huge(1.0_dp)
-      refresh = .true.
-      qn = q; lamn = lam
-      second = .false.
-      kat = 0
-      if (start_mode == START_VELOCITY) call put_at(q, dt)
-      if (start_mode == START_POSITION) call restart_at_qn()
-      do it = 1, merge(2*maxit, maxit, start_mode /= START_ACCELERATION)
-        q(freeidx) = qs(freeidx) + (betap*dt*dt)*a(freeidx)
-        v(freeidx) = vs(freeidx) + (gammap*dt)*a(freeidx)
-        if (refresh) then
-          call assemble(sys, q, v, a, t, .true., gammap*dt, betap*dt*dt, res, lm, energy)
-        else
-          call assemble_residual(sys, q, v, a, t, res, lm)
+    call run_setup(rs, sys, dt, alpha_m, alpha_f, beta, gamma, tol, maxit, q, v)
+    if (start == 2) rs%lref = carry(size(carry) - 1)
+    call run_start(rs, sys, cval, t0, start, q, v, a, p, carry, status)
+    if (status == STATUS_OK) then
+      call store_frame(rs, 1, 0, q, v, a, qf, vf, af, lf, ef)
+      call alt_setup(rs%alt, rs%nc)
+      call alt_step(rs%alt, rs%lam(1:rs%nc))
+      la = 0.0_dp
+      nvalid = 1
+      call save_carry(rs, carry)
+      itmax_frame = 0
+      do n = 1, nsteps
+        call run_step(rs, sys, cval(1, :, n + 1), t0 + n*dt, q, v, a, p, status)
+        if (status == STATUS_OK) then
+          if (coupled_elastic_measure(sys, seg_link, q) > div_limit) status = STATUS_DIVERGED
         end if
-        if (refresh) then
-          call factor()
-          if (status /= STATUS_OK) exit
-        end if
-        call constraints(n + 1)      ! gradients (matrix part only after a factorization), values, G^T lam in res
-        if (status /= STATUS_OK) exit
-        gsh(1:nc) = gval(1:nc)/(betap*dt*dt)
-        call correction(gsh(1:nc))
-        if (status /= STATUS_OK) exit
-        iters = iters + 1
-        kat = kat + 1                ! iterations of this attempt
-        refresh = newton_mode == NEWTON_FULL .or. &
-                  (newton_mode == NEWTON_AUTO .and. kat > 1 .and. da_norm > NEWTON_RATE*da_prev)
-        if (it == 1 .and. start_mode == START_VELOCITY .and. betap*dt*dt*da_norm > RESTART_MOVE*lref) then
-          ! the start q_n + dt v_n was far (an unresolved stiff mode's velocity): start again at q_n,
-          ! with the predictor's matrix while that has served the run's earlier restarts (NEWTON_AUTO)
-          call restart_at_qn()
-          kept = newton_mode == NEWTON_AUTO .and. restart_kept(1) >= restart_kept(2)
-          refresh = .not. kept
-          cycle
-        end if
-        if (kept .and. refresh) then     ! the kept matrix contracted too little: rebuilt after all
-          restart_kept(2) = restart_kept(2) + 1
-          kept = .false.
-        end if
-        if (accepted()) then
-          converged = .true.
-          if (kept) restart_kept(1) = restart_kept(1) + 1
+        if (status /= STATUS_OK) then
+          fail_step = n
           exit
         end if
-        da_prev = da_norm
-        if (it == maxit .and. start_mode /= START_ACCELERATION) then
-          ! not converged from the start: a second attempt of maxit iterations from q_n, the
-          ! matrix rebuilt at every iteration
-          call restart_at_qn()
-          second = .true.
+        itmax_frame = max(itmax_frame, rs%it)
+        call step_work(rs, sys, q, v)
+        call alt_step(rs%alt, rs%lam(1:rs%nc))
+        if (mod(n, out_every) == 0) then
+          call assemble(sys, q, v, a, rs%t, .false., 0.0_dp, 0.0_dp, rs%res, rs%lm, rs%energy)
+          nvalid = nvalid + 1
+          call store_frame(rs, nvalid, itmax_frame, q, v, a, qf, vf, af, lf, ef)
+          call alt_take(rs%alt, la(1:rs%nc, nvalid))
+          itmax_frame = 0
         end if
-        refresh = refresh .or. second
       end do
-    end subroutine newton_iterations
-
-    !> One Newton correction at the assembled residual: solve S da + G dlam = -R, G' da = -shift
-    !> (shift (nc): the rows' residual in the units of G' a) by the saddle band or the multipliers'
-    !> Schur complement, update a and lam; newton(1:3) = [|R|, |da|, |a|].
-    subroutine correction(shift)
-      real(dp), intent(in) :: shift(:)
-      integer :: i
-      do i = 1, nf
-        rf(i) = -res(freeidx(i))
-      end do
-      newton(1) = norm2(rf)
-      if (use_saddle) then
-        call saddle_correction(shift)
-      else
-        call schur_correction(shift)
-      end if
-      if (status /= STATUS_OK) return
-      a_norm = 0.0_dp
-      do i = 1, nf         ! a loop: a(freeidx) = a(freeidx) + rf would copy through the heap
-        a(freeidx(i)) = a(freeidx(i)) + rf(i)
-        a_norm = a_norm + a(freeidx(i))**2
-      end do
-      da_norm = sqrt(sum(rf**2)); a_norm = sqrt(a_norm)
-      newton(2:3) = [da_norm, a_norm]
-    end subroutine correction
-
-    !> rf = -R on entry, da on return, lam updated: [S G; G' 0] [da; dlam] = [-R; -shift] as one band.
-    subroutine saddle_correction(shift)
-      real(dp), intent(in) :: shift(:)
-      dlam(1:nc) = -shift
-      call saddle_solve(sd, rf, dlam(1:nc), status)
-      if (status /= STATUS_OK) return
-      if (.not. ieee_is_finite(sum(abs(rf)) + sum(abs(dlam(1:nc))))) then
-        status = STATUS_NONFINITE
-        return
-      end if
-      lam(1:nc) = lam(1:nc) + dlam(1:nc)
-    end subroutine saddle_correction
-
-    !> The same by S^-1 and the multipliers' Schur complement: da = S^-1 (-R) - X dlam with
-    !> (G' X) dlam = G' S^-1 (-R) + shift.
-    subroutine schur_correction(shift)
-      real(dp), intent(in) :: shift(:)
-      integer :: i
-      call band_solve_rhs(rf)
-      if (status /= STATUS_OK .or. nc == 0) return
-      do i = 1, nc
-        dlam(i) = gdot(i, rf) + shift(i)
-      end do
-      call small_solve(dlam)
-      if (status /= STATUS_OK) return
-      do i = 1, nc
-        rf = rf - x(:, i)*dlam(i)
-      end do
-      lam(1:nc) = lam(1:nc) + dlam(1:nc)
-    end subroutine schur_correction
-
-    !> Accept the iterate: the correction within tol of the accelerations (or the position correction
-    !> below 1e-2 tol of the mechanism size), or stagnated at the round-off level of the residual (no
-    !> further contraction while already within sqrt(tol): the stiff chord terms limit the attainable
-    !> precision), or the error left after it, estimated from the contraction rate rho of the last two
-    !> corrections (|a - a*| ~ rho/(1 - rho) |da|), within tol.
-    logical function accepted()
-      real(dp) :: rho
-      rho = da_norm/da_prev
-      accepted = da_norm <= tol*(a_norm + 1.0e-30) .or. betap*dt*dt*da_norm <= 1.0e-2_dp*tol*lref .or. &
-                 (kat > 1 .and. rho < 0.5_dp .and. rho/(1.0_dp - rho)*da_norm <= tol*(a_norm + 1.0e-30)) .or. &
-                 (kat > 1 .and. da_norm >= 0.5_dp*da_prev .and. da_norm <= sqrt(tol)*(a_norm + 1.0e-30))
-    end function accepted
-
-    !> Start the step's iteration (again) at the last step's position q_n and multipliers: the
-    !> acceleration that puts q at qn, a fresh contraction history.
-    subroutine restart_at_qn()
-      lam = lamn
-      call put_at(qn, 0.0_dp)
-      da_prev = huge(1.0_dp)
-      kat = 0
-    end subroutine restart_at_qn
-
-    !> The acceleration a (free DOFs) that puts the step's position q = qs + betap dt^2 a at
-    !> qb + h v (h [s]: 0 for qb itself).
-    subroutine put_at(qb, h)
-      real(dp), intent(in) :: qb(:), h
-      integer :: i, j
-      do i = 1, nf             ! a loop: vector subscripts would copy through the heap
-        j = freeidx(i)
-        a(j) = (qb(j) + h*v(j) - qs(j))/(betap*dt*dt)
-      end do
-    end subroutine put_at
-
-    !> The state a continuation needs besides (q, v, a, p): multipliers, lref, work.
-    subroutine save_carry()
-      carry = 0.0_dp
-      carry(1:nc) = lam(1:nc)
-      carry(size(carry) - 1) = lref
-      carry(size(carry)) = work
-    end subroutine save_carry
-
-    !> Free DOFs on which row ic's gradient can be nonzero (the columns of its two markers), without
-    !> repetitions: gnz(1:ngnz(ic), ic).
-    subroutine gradient_pattern()
-      integer :: ic, k, f, ncl, cols(2*MAXCOL)
-      real(dp) :: gv, gd, ac, grad(2*MAXCOL)
-      type(marker_state) :: ma, mb
-      ngnz = 0
-      do ic = 1, nc
-        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
-                      q, v, gv, gd, ac, ncl, cols, grad, ma, mb)
-        do k = 1, ncl
-          f = sys%free_of(cols(k))
-          if (f == 0) cycle
-          if (any(gnz(1:ngnz(ic), ic) == f)) cycle
-          ngnz(ic) = ngnz(ic) + 1
-          gnz(ngnz(ic), ic) = f
-        end do
-      end do
-    end subroutine gradient_pattern
-
-    !> Consistent initial acceleration and multipliers at t0: [M G; G^T 0] [a; lam] = [-R(q, v, 0);
-    !> cval'' - acc0], by iterative refinement with S = M (a rigid body's J_S stands for a zero inertia
-    !> in S; the refinement removes its effect).
-    subroutine initial_acceleration()
-      integer :: k, j
-      real(dp) :: dn, an, dn_prev, shift(max(1, nc))
-      dn_prev = huge(1.0_dp)
-      a(freeidx) = 0.0_dp
-      lam = 0.0_dp
-      do k = 1, max(1, maxit)
-        call assemble(sys, q, v, a, t0, k == 1, 0.0_dp, 0.0_dp, res, lm, energy)
-        if (k == 1) then
-          call factor()
-          if (status /= STATUS_OK) return
-        end if
-        call constraints(1)
-        if (status /= STATUS_OK) return
-        do j = 1, nc        ! the rows' acceleration residual G a - (cval'' - acc0)
-          shift(j) = gdot(j, a(freeidx)) - (cval(3, j, 1) - acc0(j))
-        end do
-        call correction(shift(1:nc))
-        if (status /= STATUS_OK) return
-        dn = da_norm; an = a_norm
-        if (dn <= 1.0e-3_dp*tol*(an + 1.0e-30) .or. dn > 0.5_dp*dn_prev) exit   ! converged, or round-off
-        dn_prev = dn
-      end do
-      call assemble(sys, q, v, a, t0, .false., 0.0_dp, 0.0_dp, res, lm, energy)
-    end subroutine initial_acceleration
-
-    !> G(:, ic)^T y over the gradient's nonzero pattern.
-    pure real(dp) function gdot(ic, y)
-      integer, intent(in) :: ic
-      real(dp), intent(in) :: y(:)
-      integer :: k
-      gdot = 0.0_dp
-      do k = 1, ngnz(ic)
-        gdot = gdot + gt(gnz(k, ic), ic)*y(gnz(k, ic))
-      end do
-    end function gdot
-
-    !> Values of the rows (the constraint functions, not their errors).
-    subroutine row_values(gv)
-      real(dp), intent(out) :: gv(:)
-      integer :: ic, ncl, cols(2*MAXCOL)
-      real(dp) :: gd, ac, grad(2*MAXCOL)
-      type(marker_state) :: ma, mb
-      do ic = 1, nc
-        if (sys%con(1, ic) == CON_POINT .or. sys%con(4, ic) /= 1) cycle   ! only moving rows do work
-        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
-                      q, v, gv(ic), gd, ac, ncl, cols, grad, ma, mb)
-      end do
-    end subroutine row_values
-
-    !> Coordinates and generalized forces of the force drives at time tt.
-    subroutine drive_state(tt, th, tau)
-      real(dp), intent(in) :: tt
-      real(dp), intent(out) :: th(:), tau(:)
-      integer :: i2, ncl, cols(2*MAXCOL)
-      real(dp) :: grad(2*MAXCOL)
-      type(marker_state) :: ma, mb
-      do i2 = 1, sys%nd
-        call drive_load(sys, i2, q, v, tt, tau(i2), th(i2), ncl, cols, grad, ma, mb)
-      end do
-    end subroutine drive_state
-
-    !> Work of the inputs over the step just taken, trapezoidal: force drives tau d theta, moving rows
-    !> (kinematic drives, whose generalized force is -lam) -lam d g.
-    subroutine step_work(tt)
-      real(dp), intent(in) :: tt
-      real(dp) :: dth
-      integer :: i2
-      call drive_state(tt, th1, tau1)
-      do i2 = 1, sys%nd
-        dth = th1(i2) - th0(i2)
-        if (sys%dv(1, i2) == CON_ANGLE) dth = wrap(dth)
-        work = work + 0.5_dp*(tau0(i2) + tau1(i2))*dth
-      end do
-      th0 = th1; tau0 = tau1
-      call row_values(g1)
-      do i2 = 1, nc
-        if (sys%con(1, i2) == CON_POINT .or. sys%con(4, i2) /= 1) cycle
-        dth = g1(i2) - g0(i2)
-        if (sys%con(1, i2) == CON_ANGLE) dth = wrap(dth)
-        work = work - 0.5_dp*(lam0(i2) + lam(i2))*dth
-      end do
-      g0 = g1
-      lam0 = lam
-    end subroutine step_work
-
-    !> Constraint gradients (X = S^-1 G and the Schur matrix when S was just factorized), errors
-    !> gval = g - cval (angles: principal value), velocity parts acc0 of g'', and G^T lam in res.
-    subroutine constraints(k)
-      integer, intent(in) :: k
-      integer :: ic, j, f, ncl, cols(2*MAXCOL)
-      real(dp) :: gv, gd, grad(2*MAXCOL)
-      type(marker_state) :: ma, mb
-      do ic = 1, nc
-        call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
-                      q, v, gv, gd, acc0(ic), ncl, cols, grad, ma, mb)
-        gval(ic) = gv - cval(1, ic, k)
-        if (sys%con(1, ic) == CON_ANGLE) gval(ic) = wrap(gval(ic))
-        do j = 1, ngnz(ic)
-          gt(gnz(j, ic), ic) = 0.0_dp
-        end do
-        do j = 1, ncl
-          res(cols(j)) = res(cols(j)) + lam(ic)*grad(j)
-          f = sys%free_of(cols(j))
-          if (f > 0) gt(f, ic) = gt(f, ic) + grad(j)
-        end do
-      end do
-      if (nc > 0 .and. refactor .and. use_saddle) then
-        call saddle_factor(sd, lm%ab, gt, ngnz, gnz, status)
-        refactor = .false.
-      else if (nc > 0 .and. refactor) then
-        x(:, 1:nc) = gt(:, 1:nc)
-        if (use_cond) then
-          call lm_solve(sys, lm, nc, x, nf, status)
-          if (status /= STATUS_OK) return
-        else
-          call dgbtrs('N', nf, sys%kl, sys%ku, nc, lm%ab, size(lm%ab, 1), ipiv, x, nf, info)
-        end if
-        do j = 1, nc
-          do ic = 1, nc
-            amat(ic, j) = gdot(ic, x(:, j))
-          end do
-        end do
-        call dgetrf(nc, nc, amat, size(amat, 1), ipc, info)
-        status = lapack_status(info)
-        refactor = .false.
-      end if
-    end subroutine constraints
-
-    !> Factorize S (assembled in lm): condensed, or the whole band (reference).
-    subroutine factor()
-      newton(4) = newton(4) + 1.0_dp
-      if (use_cond) then
-        call lm_factor(sys, lm, status)
-      else
-        call lm_band_finish(sys, lm)
-        if (.not. use_saddle) then   ! (the saddle band takes S in once the gradients are known)
-          call dgbtrf(nf, nf, sys%kl, sys%ku, lm%ab, size(lm%ab, 1), ipiv, info)
-          status = lapack_status(info)
-        end if
-      end if
-      refactor = .true.
-    end subroutine factor
-
-    subroutine band_solve_rhs(xx)
-      real(dp), intent(inout) :: xx(:)
-      if (use_cond) then
-        call lm_solve(sys, lm, 1, xx, nf, status)
-      else
-        call dgbtrs('N', nf, sys%kl, sys%ku, 1, lm%ab, size(lm%ab, 1), ipiv, xx, nf, info)
-      end if
-      if (.not. ieee_is_finite(sum(abs(xx)))) status = STATUS_NONFINITE
-    end subroutine band_solve_rhs
-
-    subroutine small_solve(xx)
-      real(dp), intent(inout) :: xx(:)
-      call dgetrs('N', nc, 1, amat, size(amat, 1), ipc, xx, size(xx), info)
-      if (.not. ieee_is_finite(sum(abs(xx(1:nc))))) status = STATUS_NONFINITE
-    end subroutine small_solve
-
+      if (status == STATUS_OK) call save_carry(rs, carry)
+    end if
+    iters = rs%iters
+    newton = rs%newton
   end subroutine coupled_run
+
+  !> The run's constants, the solver (the storage of S, the constraint gradients' pattern, the path)
+  !> and the work arrays; lref from the configuration q.
+  subroutine run_setup(rs, sys, dt, alpha_m, alpha_f, beta, gamma, tol, maxit, q, v)
+    type(run_state), intent(inout) :: rs
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: dt, alpha_m, alpha_f, beta, gamma, tol, q(:), v(:)
+    integer, intent(in) :: maxit
+    integer :: nc1, nd1
+    rs%dt = dt; rs%alpha_m = alpha_m; rs%alpha_f = alpha_f; rs%beta = beta; rs%gamma = gamma
+    rs%tol = tol; rs%maxit = maxit
+    rs%nf = sys%nfree
+    rs%nc = sys%nc
+    rs%c1 = 1.0_dp/(1.0_dp - alpha_m)
+    rs%betap = beta*(1.0_dp - alpha_f)*rs%c1
+    ! length scale of the mechanism [m] (largest nodal coordinate at the start): the absolute floor of
+    ! the Newton test, for steps where the accelerations themselves vanish (a smooth start from rest)
+    rs%lref = max(maxval(abs(q)), tiny(1.0_dp))
+    rs%gammap = gamma*(1.0_dp - alpha_f)*rs%c1
+    call ns_setup(sys, q, v, rs%lm, rs%ns)
+    allocate (rs%res(sys%ndof), rs%qs(sys%ndof), rs%vs(sys%ndof), rs%w(sys%ndof), rs%qn(sys%ndof), rs%freeidx(rs%nf))
+    rs%freeidx = rs%ns%freeidx
+    rs%w = 0.0_dp
+    nc1 = max(1, rs%nc); nd1 = max(1, sys%nd)
+    allocate (rs%lam(nc1), rs%lamn(nc1), rs%g0(nc1), rs%lam0(nc1), rs%gsh(nc1), rs%g1(nc1), &
+              rs%th0(nd1), rs%tau0(nd1), rs%th1(nd1), rs%tau1(nd1))
+  end subroutine run_setup
+
+  !> The state at t0 (see coupled_run's start) and the inputs' state the work is counted from.
+  subroutine run_start(rs, sys, cval, t0, start, q, v, a, p, carry, status)
+    type(run_state), intent(inout) :: rs
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: cval(:, :, :), t0, carry(:)
+    integer, intent(in) :: start
+    real(dp), intent(inout) :: q(:), v(:), a(:), p(:)
+    integer, intent(out) :: status
+    status = STATUS_OK
+    if (start == 2) then
+      rs%lam = 0.0_dp
+      rs%lam(1:rs%nc) = carry(1:rs%nc)
+      rs%work = carry(size(carry))
+      call assemble(sys, q, v, a, t0, .false., 0.0_dp, 0.0_dp, rs%res, rs%lm, rs%energy)
+    else
+      call initial_acceleration(rs, sys, cval, t0, q, v, a, status)
+      if (status /= STATUS_OK) return
+      if (start == 1) p = a
+      rs%work = 0.0_dp
+    end if
+    call drive_state(sys, t0, q, v, rs%th0, rs%tau0)
+    call row_values(sys, q, v, rs%g0)
+    rs%lam0 = rs%lam
+  end subroutine run_start
+
+  !> Frame k of the outputs: the state, multipliers, energies of the last assembly, work and the most
+  !> Newton iterations of a step since the last frame (itmax).
+  subroutine store_frame(rs, k, itmax, q, v, a, qf, vf, af, lf, ef)
+    type(run_state), intent(in) :: rs
+    integer, intent(in) :: k, itmax
+    real(dp), intent(in) :: q(:), v(:), a(:)
+    real(dp), intent(inout) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), ef(:, :)
+    qf(:, k) = q; vf(:, k) = v; af(:, k) = a; lf(1:rs%nc, k) = rs%lam(1:rs%nc)
+    ef(:, k) = [rs%energy(1), rs%energy(2), rs%work, real(itmax, dp)]
+  end subroutine store_frame
+
+  !> One step to time t (cv: the rows' values there): predictor, Newton iterations, update of
+  !> (q, v, a, p); STATUS_NEWTON when the iterations do not converge.
+  subroutine run_step(rs, sys, cv, t, q, v, a, p, status)
+    type(run_state), intent(inout) :: rs
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: cv(:), t
+    real(dp), intent(inout) :: q(:), v(:), a(:), p(:)
+    integer, intent(out) :: status
+    real(dp) :: dt, c1
+    dt = rs%dt; c1 = rs%c1
+    rs%t = t
+    associate (fi => rs%freeidx)
+      rs%w(fi) = rs%alpha_f*a(fi) - rs%alpha_m*p(fi)     ! zero for Newmark
+      rs%qs = q + dt*v + (dt*dt*(0.5_dp - rs%beta))*p + (dt*dt*rs%beta*c1)*rs%w
+      rs%vs = v + (dt*(1.0_dp - rs%gamma))*p + (dt*rs%gamma*c1)*rs%w
+      call newton_iterations(rs, sys, cv, q, v, a, status)
+      if (status == STATUS_OK .and. .not. rs%converged) status = STATUS_NEWTON
+      if (status /= STATUS_OK) return
+      q(fi) = rs%qs(fi) + (rs%betap*dt*dt)*a(fi)
+      v(fi) = rs%vs(fi) + (rs%gammap*dt)*a(fi)
+      p(fi) = c1*((1.0_dp - rs%alpha_f)*a(fi) + rs%w(fi))
+    end associate
+  end subroutine run_step
+
+  !> The Newton iterations of the step (predictor qs, vs set; cv the rows' values at its end):
+  !> converged, it and the state at the accepted iterate; status on a failed factorization or solve.
+  subroutine newton_iterations(rs, sys, cv, q, v, a, status)
+    type(run_state), intent(inout) :: rs
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: cv(:)
+    real(dp), intent(inout) :: q(:), v(:), a(:)
+    integer, intent(out) :: status
+    real(dp) :: h2
+    integer :: it
+    status = STATUS_OK
+    h2 = rs%betap*rs%dt*rs%dt
+    rs%converged = .false.
+    rs%kept = .false.
+    rs%da_prev = huge(1.0_dp)
+    rs%refresh = .true.
+    rs%qn = q; rs%lamn = rs%lam
+    rs%second = .false.
+    rs%kat = 0
+    if (start_mode == START_VELOCITY) call put_at(rs, v, a, q, rs%dt)
+    if (start_mode == START_POSITION) call restart_at_qn(rs, v, a)
+    do it = 1, merge(2*rs%maxit, rs%maxit, start_mode /= START_ACCELERATION)
+      rs%it = it
+      call newton_iteration(rs, sys, cv, q, v, a, status)
+      if (status /= STATUS_OK) exit
+      if (rs%it == 1 .and. start_mode == START_VELOCITY .and. h2*rs%da_norm > RESTART_MOVE*rs%lref) then
+        ! the start q_n + dt v_n was far (an unresolved stiff mode's velocity): start again at q_n,
+        ! with the predictor's matrix while that has served the run's earlier restarts (NEWTON_AUTO)
+        call restart_at_qn(rs, v, a)
+        rs%kept = newton_mode == NEWTON_AUTO .and. rs%restart_kept(1) >= rs%restart_kept(2)
+        rs%refresh = .not. rs%kept
+        cycle
+      end if
+      if (rs%kept .and. rs%refresh) then     ! the kept matrix contracted too little: rebuilt after all
+        rs%restart_kept(2) = rs%restart_kept(2) + 1
+        rs%kept = .false.
+      end if
+      if (accepted(rs)) then
+        rs%converged = .true.
+        if (rs%kept) rs%restart_kept(1) = rs%restart_kept(1) + 1
+        exit
+      end if
+      rs%da_prev = rs%da_norm
+      if (rs%it == rs%maxit .and. start_mode /= START_ACCELERATION) then
+        ! not converged from the start: a second attempt of maxit iterations from q_n, the
+        ! matrix rebuilt at every iteration
+        call restart_at_qn(rs, v, a)
+        rs%second = .true.
+      end if
+      rs%refresh = rs%refresh .or. rs%second
+    end do
+  end subroutine newton_iterations
+
+  !> One Newton iteration at the current acceleration a: the iterate (q, v), the residual (and S,
+  !> factorized, when refresh), the rows and the correction of (a, lam); refresh for the next.
+  subroutine newton_iteration(rs, sys, cv, q, v, a, status)
+    type(run_state), intent(inout) :: rs
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: cv(:)
+    real(dp), intent(inout) :: q(:), v(:), a(:)
+    integer, intent(out) :: status
+    real(dp) :: dt
+    dt = rs%dt
+    associate (fi => rs%freeidx)
+      q(fi) = rs%qs(fi) + (rs%betap*dt*dt)*a(fi)
+      v(fi) = rs%vs(fi) + (rs%gammap*dt)*a(fi)
+    end associate
+    if (rs%refresh) then
+      call assemble(sys, q, v, a, rs%t, .true., rs%gammap*dt, rs%betap*dt*dt, rs%res, rs%lm, rs%energy)
+      call factor(rs, sys, status)
+      if (status /= STATUS_OK) return
+    else
+      call assemble_residual(sys, q, v, a, rs%t, rs%res, rs%lm)
+    end if
+    ! gradients (the factorization's part with them after a factorization), values, G^T lam in res
+    call ns_rows(sys, rs%lm, rs%ns, q, v, cv, rs%lam, rs%res, status)
+    if (status /= STATUS_OK) return
+    rs%gsh(1:rs%nc) = rs%ns%gval(1:rs%nc)/(rs%betap*dt*dt)
+    call ns_correction(sys, rs%lm, rs%ns, rs%res, rs%gsh, a, rs%lam, rs%da_norm, rs%a_norm, rs%newton, status)
+    if (status /= STATUS_OK) return
+    rs%iters = rs%iters + 1
+    rs%kat = rs%kat + 1                ! iterations of this attempt
+    rs%refresh = newton_mode == NEWTON_FULL .or. &
+                 (newton_mode == NEWTON_AUTO .and. rs%kat > 1 .and. rs%da_norm > NEWTON_RATE*rs%da_prev)
+  end subroutine newton_iteration
+
+  !> Accept the iterate: the correction within tol of the accelerations (or the position correction
+  !> below 1e-2 tol of the mechanism size), or stagnated at the round-off level of the residual (no
+  !> further contraction while already within sqrt(tol): the stiff chord terms limit the attainable
+  !> precision), or the error left after it, estimated from the contraction rate rho of the last two
+  !> corrections (|a - a*| ~ rho/(1 - rho) |da|), within tol.
+  logical function accepted(rs)
+    type(run_state), intent(in) :: rs
+    real(dp) :: rho, tol, an
+    rho = rs%da_norm/rs%da_prev
+    tol = rs%tol
+    an = rs%a_norm + 1.0e-30
+    associate (da => rs%da_norm, kat => rs%kat)
+      accepted = da <= tol*an .or. rs%betap*rs%dt*rs%dt*da <= 1.0e-2_dp*tol*rs%lref .or. &
+                 (kat > 1 .and. rho < 0.5_dp .and. rho/(1.0_dp - rho)*da <= tol*an) .or. &
+                 (kat > 1 .and. da >= 0.5_dp*rs%da_prev .and. da <= sqrt(tol)*an)
+    end associate
+  end function accepted
+
+  !> Start the step's iteration (again) at the last step's position q_n and multipliers: the
+  !> acceleration that puts q at qn, a fresh contraction history.
+  subroutine restart_at_qn(rs, v, a)
+    type(run_state), intent(inout) :: rs
+    real(dp), intent(in) :: v(:)
+    real(dp), intent(inout) :: a(:)
+    rs%lam = rs%lamn
+    call put_at(rs, v, a, rs%qn, 0.0_dp)
+    rs%da_prev = huge(1.0_dp)
+    rs%kat = 0
+  end subroutine restart_at_qn
+
+  !> The acceleration a (free DOFs) that puts the step's position q = qs + betap dt^2 a at
+  !> qb + h v (h [s]: 0 for qb itself).
+  subroutine put_at(rs, v, a, qb, h)
+    type(run_state), intent(in) :: rs
+    real(dp), intent(in) :: v(:), qb(:), h
+    real(dp), intent(inout) :: a(:)
+    integer :: i, j
+    do i = 1, rs%nf             ! a loop: vector subscripts would copy through the heap
+      j = rs%freeidx(i)
+      a(j) = (qb(j) + h*v(j) - rs%qs(j))/(rs%betap*rs%dt*rs%dt)
+    end do
+  end subroutine put_at
+
+  !> The state a continuation needs besides (q, v, a, p): multipliers, lref, work.
+  subroutine save_carry(rs, carry)
+    type(run_state), intent(in) :: rs
+    real(dp), intent(out) :: carry(:)
+    carry = 0.0_dp
+    carry(1:rs%nc) = rs%lam(1:rs%nc)
+    carry(size(carry) - 1) = rs%lref
+    carry(size(carry)) = rs%work
+  end subroutine save_carry
+
+  !> Consistent initial acceleration and multipliers at t0: [M G; G^T 0] [a; lam] = [-R(q, v, 0);
+  !> cval'' - acc0], by iterative refinement with S = M (a rigid body's J_S stands for a zero inertia
+  !> in S; the refinement removes its effect).
+  subroutine initial_acceleration(rs, sys, cval, t0, q, v, a, status)
+    type(run_state), intent(inout) :: rs
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: cval(:, :, :), t0, q(:), v(:)
+    real(dp), intent(inout) :: a(:)
+    integer, intent(out) :: status
+    integer :: k, j
+    real(dp) :: dn, an, dn_prev, shift(max(1, rs%nc))
+    status = STATUS_OK
+    dn_prev = huge(1.0_dp)
+    a(rs%freeidx) = 0.0_dp
+    rs%lam = 0.0_dp
+    do k = 1, max(1, rs%maxit)
+      call assemble(sys, q, v, a, t0, k == 1, 0.0_dp, 0.0_dp, rs%res, rs%lm, rs%energy)
+      if (k == 1) then
+        call factor(rs, sys, status)
+        if (status /= STATUS_OK) return
+      end if
+      call ns_rows(sys, rs%lm, rs%ns, q, v, cval(1, :, 1), rs%lam, rs%res, status)
+      if (status /= STATUS_OK) return
+      do j = 1, rs%nc        ! the rows' acceleration residual G a - (cval'' - acc0)
+        shift(j) = ns_gdot(rs%ns, j, a(rs%freeidx)) - (cval(3, j, 1) - rs%ns%acc0(j))
+      end do
+      call ns_correction(sys, rs%lm, rs%ns, rs%res, shift, a, rs%lam, rs%da_norm, rs%a_norm, rs%newton, status)
+      if (status /= STATUS_OK) return
+      dn = rs%da_norm; an = rs%a_norm
+      if (dn <= 1.0e-3_dp*rs%tol*(an + 1.0e-30) .or. dn > 0.5_dp*dn_prev) exit   ! converged, or round-off
+      dn_prev = dn
+    end do
+    call assemble(sys, q, v, a, t0, .false., 0.0_dp, 0.0_dp, rs%res, rs%lm, rs%energy)
+  end subroutine initial_acceleration
+
+  !> Values of the rows (the constraint functions, not their errors) at (q, v): only the moving rows'
+  !> (the others do no work).
+  subroutine row_values(sys, q, v, gv)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:)
+    real(dp), intent(inout) :: gv(:)
+    integer :: ic, ncl, cols(2*MAXCOL)
+    real(dp) :: gd, ac, grad(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    do ic = 1, sys%nc
+      if (sys%con(1, ic) == CON_POINT .or. sys%con(4, ic) /= 1) cycle   ! only moving rows do work
+      call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
+                    q, v, gv(ic), gd, ac, ncl, cols, grad, ma, mb)
+    end do
+  end subroutine row_values
+
+  !> Coordinates th and generalized forces tau of the force drives at time tt and (q, v).
+  subroutine drive_state(sys, tt, q, v, th, tau)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: tt, q(:), v(:)
+    real(dp), intent(out) :: th(:), tau(:)
+    integer :: i2, ncl, cols(2*MAXCOL)
+    real(dp) :: grad(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    do i2 = 1, sys%nd
+      call drive_load(sys, i2, q, v, tt, tau(i2), th(i2), ncl, cols, grad, ma, mb)
+    end do
+  end subroutine drive_state
+
+  !> Work of the inputs over the step just taken (to rs%t), trapezoidal: force drives tau d theta,
+  !> moving rows (kinematic drives, whose generalized force is -lam) -lam d g.
+  subroutine step_work(rs, sys, q, v)
+    type(run_state), intent(inout) :: rs
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:)
+    real(dp) :: dth
+    integer :: i2
+    call drive_state(sys, rs%t, q, v, rs%th1, rs%tau1)
+    do i2 = 1, sys%nd
+      dth = rs%th1(i2) - rs%th0(i2)
+      if (sys%dv(1, i2) == CON_ANGLE) dth = wrap(dth)
+      rs%work = rs%work + 0.5_dp*(rs%tau0(i2) + rs%tau1(i2))*dth
+    end do
+    rs%th0 = rs%th1; rs%tau0 = rs%tau1
+    call row_values(sys, q, v, rs%g1)
+    do i2 = 1, rs%nc
+      if (sys%con(1, i2) == CON_POINT .or. sys%con(4, i2) /= 1) cycle
+      dth = rs%g1(i2) - rs%g0(i2)
+      if (sys%con(1, i2) == CON_ANGLE) dth = wrap(dth)
+      rs%work = rs%work - 0.5_dp*(rs%lam0(i2) + rs%lam(i2))*dth
+    end do
+    rs%g0 = rs%g1
+    rs%lam0 = rs%lam
+  end subroutine step_work
+
+  !> Factorize the assembled S (flexmech_coupled_solve: its path) and count it.
+  subroutine factor(rs, sys, status)
+    type(run_state), intent(inout) :: rs
+    type(coupled_system), intent(in) :: sys
+    integer, intent(out) :: status
+    rs%newton(4) = rs%newton(4) + 1.0_dp
+    call ns_factor(sys, rs%lm, rs%ns, status)
+  end subroutine factor
 
 end module flexmech_coupled_run

@@ -1,16 +1,19 @@
 !> The iteration matrix S = M + cc C_v + ck K_t of the coupled and nonlinear models, stored by segment
-!> blocks (link_mats), and its factorization and solves: the whole free-DOF band (LAPACK) or the
+!> blocks (link_mats), and its factorization and solves: the whole free-DOF band (LAPACK), the
 !> condensed form (every segment's interior DOFs eliminated onto the shared end positions;
-!> docs/theory.md section 11.3, "The solve").
+!> docs/theory.md section 11.3, "The solve"), or the nonlinear model's bordered saddle band, into
+!> which the one-element segments write straight (flexmech_saddle_band, docs/theory.md section 12.6).
 module flexmech_coupled_storage
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: dgbtrf, dgbtrs, lapack_status, STATUS_OK, STATUS_NONFINITE
-  use flexmech_assembly, only: band_rows, band_add_element6, half_bandwidth
+  use flexmech_assembly, only: band_rows, band_add_element6, half_bandwidth, band_to_dense
   use flexmech_coupled_system, only: coupled_system, elem_index
+  use flexmech_saddle_band, only: saddle_system, saddle_setup, saddle_zero, saddle_add6, saddle_add_diag, &
+                                  saddle_s_entry
   implicit none
   private
-  public :: link_mats, lm_setup, lm_band_setup, lm_zero, lm_put_one, lm_band_finish
+  public :: link_mats, lm_setup, lm_band_setup, lm_bordered_setup, lm_zero, lm_put_one, lm_band_finish, lm_dense
   public :: lm_add, lm_add_block, lm_block_get, lm_block_put, lm_factor, lm_solve
 
   !> Iteration matrix S = M + cc C_v + ck K_t stored by segment blocks.  Local DOFs of segment l:
@@ -37,6 +40,10 @@ module flexmech_coupled_storage
     !> written since they were zeroed, and lm_zero leaves them
     logical :: blocks_clean = .false.
     integer :: kd = 0                    !< lm%ab's diagonal row, kl + ku + 1
+    !> the saddle-point system of the multipliers (flexmech_saddle_band); when bordered, S itself lives
+    !> there (lm_bordered_setup: the one-element segments and rigid bodies write straight into it)
+    type(saddle_system) :: sd
+    logical :: bordered = .false.
     real(dp), allocatable :: bb(:, :, :), bi(:, :), ib(:, :), ai(:, :), z(:, :), sb(:, :), yi(:, :), yb(:, :), dg(:)
     !> assemble's work: a segment's all-DOF numbers and its local [R, q, v, a] (maxld; allocated once
     !> by lm_setup, so that no evaluation allocates; never referenced through lm by link_eval)
@@ -254,6 +261,36 @@ contains
     lm%inband = .false.
   end subroutine lm_band_setup
 
+  !> S in the nonlinear model's bordered saddle band (sys%nbd >= 0; every segment one element): its
+  !> order from the free numbering, the border flags and the rows' gradient patterns ngnz, gnz
+  !> (flexmech_coupled_rows: row_patterns), S's pattern the segments' cliques.
+  subroutine lm_bordered_setup(sys, lm, ngnz, gnz)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: ngnz(:), gnz(:, :)
+    call saddle_setup(sys%nfree, sys%nc, sys%nbd, sys%row_border, ngnz, gnz, lm%sd, cliques=lm%fl(1:6, :))
+    allocate (lm%inband(sys%nseg))
+    lm%inband = .false.
+    lm%bordered = .true.
+  end subroutine lm_bordered_setup
+
+  !> S as a dense matrix over the free DOFs (after lm_band_finish; the tests' matrices).
+  subroutine lm_dense(sys, lm, s)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(in) :: lm
+    real(dp), intent(out) :: s(:, :)
+    integer :: i, j
+    if (.not. lm%bordered) then
+      s = band_to_dense(lm%ab, sys%kl, sys%ku, sys%nfree)
+      return
+    end if
+    do j = 1, sys%nfree
+      do i = 1, sys%nfree
+        s(i, j) = saddle_s_entry(lm%sd, i, j)
+      end do
+    end do
+  end subroutine lm_dense
+
   !> S = 0 before an assembly: the segment blocks (unless no segment wrote them, blocks_clean), the
   !> rigid bodies' diagonal and lm%ab if there is one.
   subroutine lm_zero(lm)
@@ -262,18 +299,27 @@ contains
       lm%bb = 0.0_dp; lm%bi = 0.0_dp; lm%ib = 0.0_dp; lm%ai = 0.0_dp
     end if
     lm%dg = 0.0_dp
+    if (lm%bordered) then
+      call saddle_zero(lm%sd)
+      lm%inband = .false.
+    end if
     if (.not. allocated(lm%ab)) return
     lm%ab = 0.0_dp
     lm%inband = .false.
   end subroutine lm_zero
 
   !> The whole 6 x 6 block s6 of one-element segment l (local DOFs [xs ys xe ye th_0 th_1]): straight
-  !> into lm%ab when there is one, else into the segment blocks.
+  !> into the bordered saddle band or lm%ab when there is one, else into the segment blocks.
   pure subroutine lm_put_one(sys, lm, l, s6)
     type(coupled_system), intent(in) :: sys
     type(link_mats), intent(inout) :: lm
     integer, intent(in) :: l
     real(dp), intent(in) :: s6(6, 6)
+    if (lm%bordered) then
+      call saddle_add6(lm%sd, lm%fl(1:6, l), s6)
+      lm%inband(l) = .true.
+      return
+    end if
     if (.not. allocated(lm%ab)) then
       call lm_block_put(lm, l, s6)
       return
@@ -288,6 +334,19 @@ contains
     type(coupled_system), intent(in) :: sys
     type(link_mats), intent(inout) :: lm
     integer :: l, nl, m, o, i, j, ii, jj, fi, fj, d
+    real(dp) :: s6(6, 6)
+    if (lm%bordered) then     ! every segment is one element (those of the Gauss-point path: by block)
+      do l = 1, sys%nseg
+        if (lm%inband(l)) cycle
+        call lm_block_get(lm, l, s6)
+        call saddle_add6(lm%sd, lm%fl(1:6, l), s6)
+      end do
+      do fi = 1, sys%nfree
+        if (lm%dg(fi) /= 0.0_dp) call saddle_add_diag(lm%sd, fi, lm%dg(fi))
+      end do
+      lm%blocks_clean = all(lm%inband)
+      return
+    end if
     d = lm%kd
     do l = 1, sys%nseg
       if (lm%inband(l)) cycle

@@ -30,7 +30,7 @@ module flexmech_coupled_system
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT
   use flexmech_beam, only: beam_mass, beam_stiffness
-  use flexmech_markers, only: CON_POINT, CON_ANGLE, CON_PROJECTION
+  use flexmech_markers, only: CON_POINT, con_valid
   use flexmech_assembly, only: half_bandwidth
   implicit none
   private
@@ -59,6 +59,11 @@ module flexmech_coupled_system
     !> (nseg) 1: the segment is one co-rotational element whose axial strain holds its mean w'^2/2
     !> (shallow arch, the nonlinear model, docs/theory.md section 12.4), 0: the chord stretch alone
     integer, allocatable :: arch(:)
+    !> the nonlinear model's bordered saddle band (flexmech_saddle_band, docs/theory.md section 12.6):
+    !> nbd >= 0 the last nbd free DOFs are border DOFs, row_border(nc) /= 0 marks the border rows;
+    !> nbd = -1: no such layout (the coupled model: its own solves, flexmech_coupled_storage)
+    integer :: nbd = -1
+    integer, allocatable :: row_border(:)
     !> (6, 6, total elements) per element: G = int psi psi^T dm over psi = [1 - xi, xi, H_v0, H_th0,
     !> H_v1, H_th1] (the shapes of shape_fn; distributed mass and point masses; long_element_inertia)
     real(dp), allocatable :: gram6(:, :, :)
@@ -99,7 +104,7 @@ contains
   !>   [nseg, nrb, ndof, maxn, npm, nri, nmk, nc, nd, nh, nth, ntab,
   !>    n_el(nseg), ld(3 maxn + 3, nseg), rb_dof(3, nrb), free_of(ndof), pm_seg(npm), pm_el(npm),
   !>    ri_seg(nri), ri_node(nri), mk_kind(nmk), mk_idx(nmk), mk_node(nmk), con(4, nc), dv(5, nd),
-  !>    absang(nseg), arch(nseg)]
+  !>    absang(nseg), arch(nseg), nbd, row_border(nc)]
   !> rspec (reals):
   !>   [prop(4, nseg), wn(maxn + 1, nseg), rb_m(3, nrb), pm_prop(2, npm), ri_j(nri), mk_pos(2, nmk),
   !>    con_dir(2, nc), dv_dir(2, nd), dv_par(4, nd), dv_harm(2 nh, nd), dv_th(3, nth, nd),
@@ -143,7 +148,7 @@ contains
     ns = sys%nseg; ml = 3*sys%maxn + 3; sys%maxld = ml
     if (ns < 1 .or. sys%maxn < 1 .or. sys%ndof < 1) return
     if (size(ispec) /= COUPLED_NSPEC_HEADER + ns*(1 + ml) + 3*sys%nrb + sys%ndof + 2*sys%npm + 2*sys%nri &
-        + 3*sys%nmk + 4*sys%nc + 5*sys%nd + 2*ns) return
+        + 3*sys%nmk + 5*sys%nc + 5*sys%nd + 2*ns + 1) return
     if (size(rspec) /= ns*(4 + sys%maxn + 1) + 3*sys%nrb + 2*sys%npm + sys%nri + 2*sys%nmk + 2*sys%nc &
         + (2 + NPAR + 2*sys%nh + 3*sys%nth)*sys%nd + 5*ntab + 4) return
     sizes_read = .true.
@@ -170,7 +175,9 @@ contains
     sys%con = reshape(ispec(o + 1:o + 4*sys%nc), [4, sys%nc]); o = o + 4*sys%nc
     sys%dv = reshape(ispec(o + 1:o + 5*sys%nd), [5, sys%nd]); o = o + 5*sys%nd
     sys%absang = ispec(o + 1:o + ns); o = o + ns
-    sys%arch = ispec(o + 1:o + ns)
+    sys%arch = ispec(o + 1:o + ns); o = o + ns
+    sys%nbd = ispec(o + 1); o = o + 1
+    sys%row_border = ispec(o + 1:o + sys%nc)
   end subroutine unpack_integers
 
   !> The real blocks of rspec (layout: coupled_build) into sys.
@@ -209,6 +216,8 @@ contains
     if (any(sys%arch < 0) .or. any(sys%arch > 1) .or. any(sys%arch == 1 .and. sys%n_el /= 1)) return
     sys%nfree = maxval([0, sys%free_of])
     if (sys%nfree < 1 .or. any(sys%prop <= 0.0_dp)) return
+    if (sys%nbd < -1 .or. sys%nbd > sys%nfree .or. any(sys%row_border < 0) .or. any(sys%row_border > 1)) return
+    if (sys%nbd >= 0 .and. sys%maxn /= 1) return      ! the bordered band holds one-element segments
     do s = 1, ns
       nl = 3*sys%n_el(s) + 3
       if (any(sys%ld(1:nl, s) < 1) .or. any(sys%ld(1:nl, s) > sys%ndof)) return
@@ -241,12 +250,11 @@ contains
       end select
     end do
     do i = 1, sys%nc
-      if (sys%con(1, i) < CON_POINT .or. sys%con(1, i) > CON_PROJECTION) return
+      if (.not. con_valid(sys%con(1, i), sys%con(4, i))) return
       if (any(sys%con(2:3, i) < 1) .or. any(sys%con(2:3, i) > sys%nmk)) return
-      if (sys%con(1, i) == CON_POINT .and. (sys%con(4, i) < 1 .or. sys%con(4, i) > 2)) return
     end do
     do i = 1, sys%nd
-      if (sys%dv(1, i) /= CON_ANGLE .and. sys%dv(1, i) /= CON_PROJECTION) return
+      if (sys%dv(1, i) == CON_POINT .or. .not. con_valid(sys%dv(1, i), 0)) return   ! a coordinate row
       if (any(sys%dv(2:3, i) < 1) .or. any(sys%dv(2:3, i) > sys%nmk)) return
       if (sys%dv(5, i) > 0) then
         if (sys%dv(4, i) < 1 .or. sys%dv(4, i) + sys%dv(5, i) - 1 > ntab .or. sys%dv(5, i) < 2) return

@@ -117,23 +117,7 @@ contains
         sys%el_free(i, e) = free_of(el_dof(i, e))
       end do
     end do
-    sys%el_len = el_prop(1, :)
-    sys%el_z0 = el_prop(2, :)
-    sys%el_ea = el_prop(4, :)
-    allocate (sys%nax(sys%nel), sys%kg(6, 6, sys%nel))
-    sys%nax = 0.0_dp
-    do e = 1, sys%nel
-      sys%kg(:, :, e) = beam_geometric(el_prop(1, e))
-    end do
-    allocate (sys%m(6, 6, sys%nel), sys%k(6, 6, sys%nel), sys%g(6, 6, sys%nel), &
-              sys%c(6, 6, sys%nel), sys%m0(6, 4, sys%nel))
-    do e = 1, sys%nel
-      sys%m(:, :, e) = beam_mass(el_prop(3, e), el_prop(1, e))
-      sys%k(:, :, e) = beam_stiffness(el_prop(4, e), el_prop(5, e), el_prop(1, e))
-      sys%g(:, :, e) = beam_gyroscopic(el_prop(3, e), el_prop(1, e))
-      sys%c(:, :, e) = beam_centrifugal(el_prop(3, e), el_prop(1, e))
-      sys%m0(:, :, e) = beam_hac_coupling(el_prop(3, e), el_prop(1, e))
-    end do
+    call init_elements(sys, el_prop)
     sys%lm_link = lm_link
     sys%lm_dof = lm_dof
     sys%lm_mass = lm_prop(1, :)
@@ -164,6 +148,28 @@ contains
     end do
     sys%ku = sys%kl
   end subroutine ked_init
+
+  !> The elements' lengths, places, axial stiffnesses and matrices (flexmech_beam) from el_prop(5, nel).
+  subroutine init_elements(sys, el_prop)
+    class(ked_system), intent(inout) :: sys
+    real(dp), intent(in) :: el_prop(:, :)  !< (5, nel) [L m, zeta0 m, rho*A kg/m, E*A N, E*I N m^2]
+    integer :: e
+    sys%el_len = el_prop(1, :)
+    sys%el_z0 = el_prop(2, :)
+    sys%el_ea = el_prop(4, :)
+    allocate (sys%nax(sys%nel), sys%kg(6, 6, sys%nel))
+    sys%nax = 0.0_dp
+    allocate (sys%m(6, 6, sys%nel), sys%k(6, 6, sys%nel), sys%g(6, 6, sys%nel), &
+              sys%c(6, 6, sys%nel), sys%m0(6, 4, sys%nel))
+    do e = 1, sys%nel
+      sys%kg(:, :, e) = beam_geometric(el_prop(1, e))
+      sys%m(:, :, e) = beam_mass(el_prop(3, e), el_prop(1, e))
+      sys%k(:, :, e) = beam_stiffness(el_prop(4, e), el_prop(5, e), el_prop(1, e))
+      sys%g(:, :, e) = beam_gyroscopic(el_prop(3, e), el_prop(1, e))
+      sys%c(:, :, e) = beam_centrifugal(el_prop(3, e), el_prop(1, e))
+      sys%m0(:, :, e) = beam_hac_coupling(el_prop(3, e), el_prop(1, e))
+    end do
+  end subroutine init_elements
 
   !> The slave rows and the items that touch a slaved DOF (an item without one keeps the direct path).
   subroutine init_slaves(sys, free_of, sl_of, sl_ptr, sl_col)
@@ -434,7 +440,7 @@ contains
     real(dp), intent(out) :: r(:)        !< (nfree) residual
     integer :: e, i, j, n
     integer :: idx(6)
-    real(dp) :: cs, sn, om, al, ce(6, 6), ke(6, 6), se(6, 6), me(6, 6), ue(6), ve(6), re(6), a(2), mi, cm
+    real(dp) :: cs, sn, om, al, ce(6, 6), ke(6, 6), se(6, 6), me(6, 6), ue(6), ve(6), re(6), cm
     real(dp) :: ul(6), vl(6)
     integer :: jprev
     logical :: qs, general
@@ -493,6 +499,20 @@ contains
         if (idx(i) > 0) r(idx(i)) = r(idx(i)) + re(i)
       end do
     end do
+    call assemble_lumped(sys, rig, cm, cc, general, v, ab, r)
+    if (general) call assemble_slaved(sys, rig, cm, cc, ck, qs, u, v, ab, r)
+  end subroutine ked_assemble
+
+  !> ked_assemble's lumped inertias: the point masses (their rigid acceleration load) and the rotary
+  !> inertias (with the link's angular acceleration, except for the classic-translational load model);
+  !> items touching a slaved DOF are left to assemble_slaved (general).
+  subroutine assemble_lumped(sys, rig, cm, cc, general, v, ab, r)
+    class(ked_system), intent(in) :: sys
+    real(dp), intent(in) :: rig(:, :), cm, cc, v(:)
+    logical, intent(in) :: general
+    real(dp), intent(inout) :: ab(:, :), r(:)
+    integer :: i, j, n
+    real(dp) :: a(2), mi
     do i = 1, sys%nlm
       mi = sys%lm_mass(i)
       a = point_accel(rig(:, sys%lm_link(i)), sys%lm_z(i))
@@ -517,8 +537,7 @@ contains
       r(j) = r(j) - mi*sys%ray_m*v(j)
       if (sys%load_model /= LOAD_CLASSIC_TRANSLATIONAL) r(j) = r(j) - mi*rig(3, sys%ri_link(i))
     end do
-    if (general) call assemble_slaved(sys, rig, cm, cc, ck, qs, u, v, ab, r)
-  end subroutine ked_assemble
+  end subroutine assemble_lumped
 
   !> The items touching a slaved DOF (skipped by ked_assemble's direct loops) through gen_add.
   subroutine assemble_slaved(sys, rig, cm, cc, ck, qs, u, v, ab, r)

@@ -1,4 +1,4 @@
-!> Explicit interfaces to the LAPACK routines flexmech uses, and the
+!> Explicit interfaces to the LAPACK (and BLAS) routines flexmech uses, and the
 !> status codes every compiled routine returns.
 !>
 !> Status codes (the only place they are defined; Python turns them into
@@ -22,7 +22,7 @@ module flexmech_lapack
   use flexmech_kinds, only: dp
   implicit none
   private
-  public :: dgbtrf, dgbtrs, dgetrf, dgetrs, dgecon
+  public :: dgbtrf, dgbtrs, dgetrf, dgetrs, dgecon, dtbsv
   public :: STATUS_OK, STATUS_SINGULAR, STATUS_NONFINITE, STATUS_LAPACK_ARG, STATUS_BAD_INPUT, STATUS_NEWTON, &
             STATUS_DIVERGED, STATUS_SINGULAR_POSITION, STATUS_ASSEMBLY
   public :: lapack_status
@@ -70,6 +70,13 @@ module flexmech_lapack
       real(dp), intent(inout) :: b(ldb, *)
       integer, intent(out) :: info
     end subroutine dgetrs
+    subroutine dtbsv(uplo, trans, diag, n, k, a, lda, x, incx)
+      import :: dp
+      character, intent(in) :: uplo, trans, diag
+      integer, intent(in) :: n, k, lda, incx
+      real(dp), intent(in) :: a(lda, *)
+      real(dp), intent(inout) :: x(*)
+    end subroutine dtbsv
   end interface
 
 contains

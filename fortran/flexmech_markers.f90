@@ -12,36 +12,46 @@
 !>   rigid-body point s (body frame, from the centre of mass):  r = r_C + R(phi) s,  psi = phi
 !>     DOFs [x_C, y_C, phi]
 !>   ground point: r fixed, psi = 0, no DOF.
-!> A constraint row (or a joint coordinate) is a scalar function of two markers a, b (one routine per
-!> kind), returned as its value g, rate g', the velocity part acc0 of g'' and its gradient over the
-!> columns of a (first ma%n entries) then of b (next mb%n entries; a column may repeat when the two
-!> markers share a DOF: gradients add):
-!>   CON_POINT       (r_a - r_b)_i, i = aux (1: x, 2: y)             revolute, weld (point rows)
-!>   CON_ANGLE       psi_b - psi_a                                    weld, prismatic, kinematic drive
-!>                                                                    and torque on a revolute
-!>   CON_PROJECTION  e . (r_b - r_a), e = R(psi_a) d, d fixed in a   prismatic normal row (d the guide
-!>                                                                    normal), slide coordinate (d the
-!>                                                                    guide direction)
-!> A new constraint kind is one routine here and one case in constraint_row.
+!> A constraint row (or a joint coordinate) is a scalar function of two markers a, b, returned as its
+!> value g, rate g', the velocity part acc0 of g'' and its gradient over the columns of a (first ma%n
+!> entries) then of b (next mb%n entries; a column may repeat when the two markers share a DOF:
+!> gradients add).  Every model (the rigid-body solver flexmech_mbs, the coupled and nonlinear models
+!> through flexmech_coupled_rows) evaluates its rows here, by the index of the row kind: this table is
+!> the one constraint vocabulary (its Python mirror: flexmech_py/mechanism/rows.py).
+!>   index  name            routine          value unit  g; parameters (aux integer, d(2) real)
+!>   1      CON_POINT       row_point        m           (r_a - r_b)_i, i = aux (1: x, 2: y)
+!>   2      CON_ANGLE       row_angle        rad         psi_b - psi_a
+!>   3      CON_PROJECTION  row_projection   m           e . (r_b - r_a), e = R(psi_a) d, d fixed in a's frame
+!> A joint kind is a list of rows of these kinds on its two markers (revolute: two CON_POINT rows;
+!> weld: two CON_POINT and a CON_ANGLE; prismatic: CON_PROJECTION on the guide normal and a CON_ANGLE)
+!> and a coordinate row (CON_ANGLE, or CON_PROJECTION on the guide direction) that drives act on.
+!> A new row kind is one pure routine here with the signature of row_angle (plus aux, d when it
+!> needs them), one index NCON + 1, one case in constraint_row and its unit in con_in_radians
+!> (docs/architecture.md, "Fortran: the constraint vocabulary").  Builders reject any index outside
+!> 1..NCON (con_valid): an unknown kind is an input error, never a fallback.
 module flexmech_markers
+  use, intrinsic :: ieee_arithmetic, only: ieee_value, ieee_quiet_nan
   use flexmech_kinds, only: dp
   implicit none
   private
   public :: marker_state, segment_marker, body_marker, ground_marker, constraint_row
-  public :: row_point, row_angle, row_projection
-  public :: CON_POINT, CON_ANGLE, CON_PROJECTION, MAXCOL
+  public :: row_point, row_angle, row_projection, con_valid, con_in_radians
+  public :: CON_POINT, CON_ANGLE, CON_PROJECTION, NCON, MAXCOL
 
   integer, parameter :: CON_POINT = 1, CON_ANGLE = 2, CON_PROJECTION = 3
+  integer, parameter :: NCON = 3          !< row kinds: the valid indices are 1..NCON
   integer, parameter :: MAXCOL = 7        !< columns of one marker (an interior segment node)
 
+  !> Set by segment_marker, body_marker or ground_marker; the column arrays hold n valid entries (no
+  !> default initialization: the markers are made in the innermost loops of every model).
   type :: marker_state
-    real(dp) :: r(2) = 0.0_dp, psi = 0.0_dp      !< position [m], frame angle [rad]
-    real(dp) :: rd(2) = 0.0_dp, psid = 0.0_dp    !< their rates
-    real(dp) :: ra0(2) = 0.0_dp, psia0 = 0.0_dp  !< velocity parts of their second derivatives
-    integer :: n = 0                              !< number of columns
-    integer :: col(MAXCOL) = 0                    !< all-DOF numbers of the columns
-    integer :: loc(MAXCOL) = 0                    !< positions in the owner's local vector
-    real(dp) :: dr(2, MAXCOL) = 0.0_dp, dpsi(MAXCOL) = 0.0_dp   !< gradients
+    real(dp) :: r(2), psi            !< position [m], frame angle [rad]
+    real(dp) :: rd(2), psid          !< their rates
+    real(dp) :: ra0(2), psia0        !< velocity parts of their second derivatives
+    integer :: n                     !< number of columns
+    integer :: col(MAXCOL)           !< all-DOF numbers of the columns (1:n)
+    integer :: loc(MAXCOL)           !< positions in the owner's local vector (1:n)
+    real(dp) :: dr(2, MAXCOL), dpsi(MAXCOL)   !< gradients (columns 1:n)
   end type marker_state
 
 contains
@@ -119,9 +129,8 @@ contains
     ms%n = 3
     ms%loc(1:3) = [1, 2, 3]
     ms%col(1:3) = cols
-    ms%dr = 0.0_dp; ms%dpsi = 0.0_dp
-    ms%dr(1, 1) = 1.0_dp; ms%dr(2, 2) = 1.0_dp; ms%dr(:, 3) = [-rs(2), rs(1)]
-    ms%dpsi(3) = 1.0_dp
+    ms%dr(:, 1) = [1.0_dp, 0.0_dp]; ms%dr(:, 2) = [0.0_dp, 1.0_dp]; ms%dr(:, 3) = [-rs(2), rs(1)]
+    ms%dpsi(1:3) = [0.0_dp, 0.0_dp, 1.0_dp]
   end subroutine body_marker
 
   !> A ground point at pos [m] (frame angle 0, no DOF).
@@ -129,11 +138,29 @@ contains
     real(dp), intent(in) :: pos(2)
     type(marker_state), intent(out) :: ms
     ms%r = pos
+    ms%rd = 0.0_dp; ms%ra0 = 0.0_dp
+    ms%psi = 0.0_dp; ms%psid = 0.0_dp; ms%psia0 = 0.0_dp
     ms%n = 0
   end subroutine ground_marker
 
+  !> The row kind index is one of the table's (1..NCON) and its integer parameter aux fits it (the
+  !> component 1 or 2 of CON_POINT; the other kinds take any aux).
+  pure logical function con_valid(kind, aux)
+    integer, intent(in) :: kind, aux
+    con_valid = kind >= 1 .and. kind <= NCON
+    if (kind == CON_POINT) con_valid = aux == 1 .or. aux == 2
+  end function con_valid
+
+  !> The row's value is an angle [rad] (else a length [m]): scaled by the mechanism's length where
+  !> rows are compared or conditioned.
+  pure logical function con_in_radians(kind)
+    integer, intent(in) :: kind
+    con_in_radians = kind == CON_ANGLE
+  end function con_in_radians
+
   !> Row of kind CON_* between markers a and b (aux: the component of CON_POINT; d: the direction of
-  !> CON_PROJECTION in a's frame).  Columns: a's then b's (nc = ma%n + mb%n).
+  !> CON_PROJECTION in a's frame).  Columns: a's then b's (nc = ma%n + mb%n).  An index outside the
+  !> table (which every builder rejects first) gives NaN values.
   pure subroutine constraint_row(kind, aux, d, ma, mb, g, gd, acc0, nc, cols, grad)
     integer, intent(in) :: kind, aux
     real(dp), intent(in) :: d(2)
@@ -148,8 +175,10 @@ contains
       call row_point(aux, ma, mb, g, gd, acc0, grad)
     case (CON_ANGLE)
       call row_angle(ma, mb, g, gd, acc0, grad)
-    case default
+    case (CON_PROJECTION)
       call row_projection(d, ma, mb, g, gd, acc0, grad)
+    case default
+      g = ieee_value(g, ieee_quiet_nan); gd = g; acc0 = g; grad = g
     end select
   end subroutine constraint_row
 

@@ -1,48 +1,56 @@
-!> Rigid-body mechanics of a planar mechanism described as bodies, markers, typed joints and drives
+!> Rigid-body mechanics of a planar mechanism described as bodies, markers, joints and drives
 !> (docs/theory.md section 17).  The same description serves every model: it is built in Python
-!> (flexmech_py/mechanism) and packed into two flat arrays (mbs_build documents their layout).
+!> (flexmech_py/mechanism) and packed into two flat arrays (mbs_build documents their layout); the
+!> position-level solvers on it are in flexmech_mbs_solve.
 !>
 !> Coordinates: z = [x_1, y_1, phi_1, ..., x_nb, y_nb, phi_nb], per moving body the position of its
 !> centre of mass [m] and the angle of its frame [rad]; mass matrix M = diag(m, m, J_C) (constant).
 !> A marker k is a point fixed on body b (b = 0: the ground) at s_k in the body frame, relative to the
-!> centre of mass: r_k = c_b + R(phi_b) s_k (ground: r_k = s_k).
+!> centre of mass: r_k = c_b + R(phi_b) s_k (ground: r_k = s_k), frame angle phi_b (flexmech_markers:
+!> body_marker, ground_marker).
 !>
-!> Joint kinds (each a set of constraint rows Phi(z) = 0 on two markers P on body a, Q on body b):
-!>   JOINT_REVOLUTE   r_P - r_Q = 0                                   2 rows; coordinate phi_b - phi_a [rad]
-!>   JOINT_PRISMATIC  n . (r_Q - r_P) = 0,  phi_b - phi_a - ref = 0   2 rows; coordinate u . (r_Q - r_P) [m]
-!>                    u = R(phi_a) axis, n = R(phi_a) Omega axis, the guide fixed to body a through P
-!>   JOINT_WELD       r_P - r_Q = 0,  phi_b - phi_a - ref = 0         3 rows; coordinate phi_b - phi_a [rad]
-!> A kinematic drive adds one row g_j(z) - f(t) = 0 on the coordinate g_j of its joint; a force drive
-!> adds the generalized force tau dg_j/dz (flexmech_drivelaw).  Rows are ordered joint by joint, then
-!> drive by drive; the multipliers lambda of M z'' + Phi_z^T lambda = Q are the constraint forces
-!> (the force body a exerts on body b at a revolute is +lambda; a kinematic drive applies -lambda).
-!> Acceleration equations Phi_z z'' = gamma, velocity equations Phi_z z' = nu (nu = f' on drive rows).
+!> A joint is a list of constraint rows g(z) - ref = 0 on its two markers P (on body a) and Q (on
+!> body b), each of a row kind of flexmech_markers (the one constraint vocabulary of every model,
+!> evaluated by its constraint_row), and one coordinate row g_j(z) (its joint coordinate, which drives
+!> act on and the outputs report).  Python writes them per joint kind (flexmech_py/mechanism/joints.py);
+!> this module never asks which kind a joint is.  The kinds of today:
+!>   revolute   CON_POINT (x), CON_POINT (y)                        coordinate CON_ANGLE phi_b - phi_a [rad]
+!>   prismatic  CON_PROJECTION (d = guide normal), CON_ANGLE - ref  coordinate CON_PROJECTION (d = guide) [m]
+!>   weld       CON_POINT (x), CON_POINT (y), CON_ANGLE - ref       coordinate CON_ANGLE [rad]
+!> (the guide fixed to body a through P; d in a's frame).  A kinematic drive adds one row
+!> g_j(z) - f(t) = 0 on the coordinate of its joint; a force drive adds the generalized force
+!> tau dg_j/dz (flexmech_drivelaw).  Rows are ordered joint by joint, then drive by drive; the
+!> multipliers lambda of M z'' + Phi_z^T lambda = Q are the constraint forces (the force body a exerts
+!> on body b at a revolute is +lambda; a kinematic drive applies -lambda).  Acceleration equations
+!> Phi_z z'' = gamma (gamma = -acc0 of the rows), velocity equations Phi_z z' = nu (nu = f' on drive rows).
 module flexmech_mbs
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
-  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_SINGULAR, STATUS_NONFINITE, &
-                             STATUS_SINGULAR_POSITION, STATUS_ASSEMBLY
-  use flexmech_dense, only: lu_factor, lu_solve, pivot_ratio, det_sign
+  use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_SINGULAR, STATUS_NONFINITE
+  use flexmech_dense, only: lu_factor, lu_solve
   use flexmech_drivelaw, only: kinematic_law, force_law, LAW_FORCE
+  use flexmech_markers, only: marker_state, body_marker, ground_marker, constraint_row, con_valid, &
+                              con_in_radians, CON_POINT, MAXCOL
   use flexmech_ode, only: ode_problem
   implicit none
   private
-  public :: mbs_system, mbs_build, mbs_constraints, mbs_forces, mbs_accelerations, mbs_project, &
-            mbs_solve_positions, mbs_joint_coordinates, mbs_kinematic_sample, mbs_gram_rcond, mbs_nspec_header, &
-            mbs_drive_values, mbs_drive_change
-  public :: JOINT_REVOLUTE, JOINT_PRISMATIC, JOINT_WELD
+  public :: mbs_system, mbs_build, mbs_constraints, mbs_forces, mbs_accelerations, mbs_joint_coordinates, &
+            mbs_nspec_header, mbs_drive_values, mbs_drive_change, factor_augmented, solve_augmented
 
-  integer, parameter :: JOINT_REVOLUTE = 1, JOINT_PRISMATIC = 2, JOINT_WELD = 3
   integer, parameter :: NPAR = 4                   !< parameters per drive law (flexmech_drivelaw)
-  integer, parameter :: mbs_nspec_header = 7       !< integers before the first block of ispec
+  integer, parameter :: mbs_nspec_header = 8       !< integers before the first block of ispec
 
   type, extends(ode_problem) :: mbs_system
-    integer :: nb = 0, n = 0, nmk = 0, nj = 0, nd = 0, nrow = 0, nh = 0, nth = 0
+    integer :: nb = 0, n = 0, nmk = 0, nj = 0, nd = 0, ncr = 0, nrow = 0, nh = 0, nth = 0, ntab = 0
     real(dp), allocatable :: mass(:), inertia(:)   !< (nb) [kg], [kg m^2] about the centre of mass
     integer, allocatable :: mk_body(:)             !< (nmk) body of each marker, 0 = ground
     real(dp), allocatable :: mk_pos(:, :)          !< (2, nmk) position in its body frame from the COM [m]
-    integer, allocatable :: jt_kind(:), jt_mk(:, :), jt_row(:)   !< (nj), (2, nj) [P, Q], first row
-    real(dp), allocatable :: jt_axis(:, :), jt_ref(:)            !< (2, nj) guide direction in a's frame; ref angle
+    integer, allocatable :: jt_mk(:, :)            !< (2, nj) markers [P, Q] of each joint
+    integer, allocatable :: jt_coord(:, :)         !< (2, nj) coordinate row [kind, aux]
+    real(dp), allocatable :: jt_dir(:, :)          !< (2, nj) its direction d (a's frame)
+    integer, allocatable :: jt_row(:)              !< (nj + 1) joint j's rows: jt_row(j) .. jt_row(j + 1) - 1
+    integer, allocatable :: cr(:, :)               !< (3, ncr) the joints' rows [joint, kind, aux]
+    real(dp), allocatable :: cr_dir(:, :), cr_ref(:)   !< (2, ncr) direction d; (ncr) value held [m or rad]
     integer, allocatable :: dv_joint(:), dv_kind(:), dv_tab(:, :), dv_row(:)   !< dv_row 0: force drive
     real(dp), allocatable :: dv_par(:, :), dv_harm(:, :), dv_th(:, :, :)
     real(dp), allocatable :: tab_t(:), tab_c(:, :)
@@ -57,62 +65,120 @@ module flexmech_mbs
 
 contains
 
-  !> Unpack the flat description.  ispec (integers):
-  !>   [nb, nmk, nj, nd, ntab, nh, nth,  mk_body(nmk),  jt_kind(nj),  jt_mk(2, nj),
+  !> Unpack and check the flat description.  ispec (integers):
+  !>   [nb, nmk, nj, nd, ntab, nh, nth, ncr,  mk_body(nmk),  jt_mk(2, nj),  jt_coord(2, nj) = [kind, aux],
+  !>    cr(3, ncr) = [joint, kind, aux] (rows ordered by joint),
   !>    dv_joint(nd), dv_kind(nd), dv_tab(2, nd) = [first knot, knots] (0 knots: no table)]
   !> rspec (reals):
-  !>   [mass(nb), inertia(nb), grav(2), lref,  mk_pos(2, nmk),  jt_axis(2, nj), jt_ref(nj),
+  !>   [mass(nb), inertia(nb), grav(2), lref,  mk_pos(2, nmk),  jt_dir(2, nj),  cr_dir(2, ncr), cr_ref(ncr),
   !>    dv_par(4, nd), dv_harm(2 nh, nd), dv_th(3, nth, nd),  tab_t(ntab), tab_c(4, ntab)]
+  !> Row kinds and their parameters (aux, d): flexmech_markers; an unknown kind is STATUS_BAD_INPUT.
   subroutine mbs_build(ispec, rspec, sys, status)
     integer, intent(in) :: ispec(:)
     real(dp), intent(in) :: rspec(:)
     type(mbs_system), intent(out) :: sys
     integer, intent(out) :: status
-    integer :: i, o, r, ntab, j
+    integer :: r
     status = STATUS_BAD_INPUT
     if (size(ispec) < mbs_nspec_header) return
-    sys%nb = ispec(1); sys%nmk = ispec(2); sys%nj = ispec(3); sys%nd = ispec(4); ntab = ispec(5)
-    sys%nh = ispec(6); sys%nth = ispec(7)
+    if (any(ispec(1:mbs_nspec_header) < 0) .or. ispec(1) < 1) return
+    sys%nb = ispec(1); sys%nmk = ispec(2); sys%nj = ispec(3); sys%nd = ispec(4); sys%ntab = ispec(5)
+    sys%nh = ispec(6); sys%nth = ispec(7); sys%ncr = ispec(8)
     sys%n = 3*sys%nb
-    if (sys%nb < 1 .or. sys%nmk < 0 .or. sys%nj < 0 .or. sys%nd < 0 .or. ntab < 0 .or. sys%nh < 0 .or. sys%nth < 0) return
-    if (size(ispec) /= mbs_nspec_header + sys%nmk + 3*sys%nj + 4*sys%nd) return
-    if (size(rspec) /= 2*sys%nb + 3 + 2*sys%nmk + 3*sys%nj + (NPAR + 2*sys%nh + 3*sys%nth)*sys%nd + 5*ntab) return
+    if (size(ispec) /= mbs_nspec_header + sys%nmk + 4*sys%nj + 3*sys%ncr + 4*sys%nd) return
+    if (size(rspec) /= 2*sys%nb + 3 + 2*sys%nmk + 2*sys%nj + 3*sys%ncr + (NPAR + 2*sys%nh + 3*sys%nth)*sys%nd &
+        + 5*sys%ntab) return
+    call unpack_ints(ispec, sys)
+    call unpack_reals(rspec, sys)
+    if (.not. valid(sys)) return
+    call number_rows(sys)
+    r = sys%nrow
+    allocate (sys%phi(r), sys%jac(max(r, 1), sys%n), sys%gam(r), sys%nu(r), sys%q(sys%n))
+    allocate (sys%aug(sys%n + r, sys%n + r), sys%sol(sys%n + r), sys%ipiv(sys%n + r))
+    status = STATUS_OK
+  end subroutine mbs_build
+
+  !> The integer blocks of ispec (layout: mbs_build).
+  subroutine unpack_ints(ispec, sys)
+    integer, intent(in) :: ispec(:)
+    type(mbs_system), intent(inout) :: sys
+    integer :: o
     o = mbs_nspec_header
     sys%mk_body = ispec(o + 1:o + sys%nmk); o = o + sys%nmk
-    sys%jt_kind = ispec(o + 1:o + sys%nj); o = o + sys%nj
     sys%jt_mk = reshape(ispec(o + 1:o + 2*sys%nj), [2, sys%nj]); o = o + 2*sys%nj
+    sys%jt_coord = reshape(ispec(o + 1:o + 2*sys%nj), [2, sys%nj]); o = o + 2*sys%nj
+    sys%cr = reshape(ispec(o + 1:o + 3*sys%ncr), [3, sys%ncr]); o = o + 3*sys%ncr
     sys%dv_joint = ispec(o + 1:o + sys%nd); o = o + sys%nd
     sys%dv_kind = ispec(o + 1:o + sys%nd); o = o + sys%nd
     sys%dv_tab = reshape(ispec(o + 1:o + 2*sys%nd), [2, sys%nd])
+  end subroutine unpack_ints
+
+  !> The real blocks of rspec (layout: mbs_build).
+  subroutine unpack_reals(rspec, sys)
+    real(dp), intent(in) :: rspec(:)
+    type(mbs_system), intent(inout) :: sys
+    integer :: o, nd
+    nd = sys%nd
     o = 0
     sys%mass = rspec(o + 1:o + sys%nb); o = o + sys%nb
     sys%inertia = rspec(o + 1:o + sys%nb); o = o + sys%nb
     sys%grav = rspec(o + 1:o + 2); sys%lref = rspec(o + 3); o = o + 3
     sys%mk_pos = reshape(rspec(o + 1:o + 2*sys%nmk), [2, sys%nmk]); o = o + 2*sys%nmk
-    sys%jt_axis = reshape(rspec(o + 1:o + 2*sys%nj), [2, sys%nj]); o = o + 2*sys%nj
-    sys%jt_ref = rspec(o + 1:o + sys%nj); o = o + sys%nj
-    sys%dv_par = reshape(rspec(o + 1:o + NPAR*sys%nd), [NPAR, sys%nd]); o = o + NPAR*sys%nd
-    sys%dv_harm = reshape(rspec(o + 1:o + 2*sys%nh*sys%nd), [2*sys%nh, sys%nd]); o = o + 2*sys%nh*sys%nd
-    sys%dv_th = reshape(rspec(o + 1:o + 3*sys%nth*sys%nd), [3, sys%nth, sys%nd]); o = o + 3*sys%nth*sys%nd
-    sys%tab_t = rspec(o + 1:o + ntab); o = o + ntab
-    sys%tab_c = reshape(rspec(o + 1:o + 4*ntab), [4, ntab])
-    ! checks of indices and values
+    sys%jt_dir = reshape(rspec(o + 1:o + 2*sys%nj), [2, sys%nj]); o = o + 2*sys%nj
+    sys%cr_dir = reshape(rspec(o + 1:o + 2*sys%ncr), [2, sys%ncr]); o = o + 2*sys%ncr
+    sys%cr_ref = rspec(o + 1:o + sys%ncr); o = o + sys%ncr
+    sys%dv_par = reshape(rspec(o + 1:o + NPAR*nd), [NPAR, nd]); o = o + NPAR*nd
+    sys%dv_harm = reshape(rspec(o + 1:o + 2*sys%nh*nd), [2*sys%nh, nd]); o = o + 2*sys%nh*nd
+    sys%dv_th = reshape(rspec(o + 1:o + 3*sys%nth*nd), [3, sys%nth, nd]); o = o + 3*sys%nth*nd
+    sys%tab_t = rspec(o + 1:o + sys%ntab); o = o + sys%ntab
+    sys%tab_c = reshape(rspec(o + 1:o + 4*sys%ntab), [4, sys%ntab])
+  end subroutine unpack_reals
+
+  !> Indices and values of an unpacked description are in range; every row kind is one of
+  !> flexmech_markers' (a joint coordinate: not a point component); the joints' rows in joint order.
+  logical function valid(sys)
+    type(mbs_system), intent(in) :: sys
+    integer :: i
+    valid = .false.
     if (any(sys%mass <= 0.0_dp) .or. any(sys%inertia < 0.0_dp) .or. .not. sys%lref > 0.0_dp) return
     if (any(sys%mk_body < 0) .or. any(sys%mk_body > sys%nb)) return
-    if (any(sys%jt_kind < JOINT_REVOLUTE) .or. any(sys%jt_kind > JOINT_WELD)) return
     if (any(sys%jt_mk < 1) .or. any(sys%jt_mk > sys%nmk)) return
+    do i = 1, sys%nj
+      if (sys%jt_coord(1, i) == CON_POINT .or. .not. con_valid(sys%jt_coord(1, i), sys%jt_coord(2, i))) return
+    end do
+    do i = 1, sys%ncr
+      if (.not. con_valid(sys%cr(2, i), sys%cr(3, i))) return
+      if (sys%cr(1, i) < 1 .or. sys%cr(1, i) > sys%nj) return
+      if (i > 1) then
+        if (sys%cr(1, i) < sys%cr(1, i - 1)) return
+      end if
+    end do
     if (any(sys%dv_joint < 1) .or. any(sys%dv_joint > sys%nj)) return
     do i = 1, sys%nd
       if (sys%dv_tab(2, i) > 0) then
-        if (sys%dv_tab(1, i) < 1 .or. sys%dv_tab(1, i) + sys%dv_tab(2, i) - 1 > ntab .or. sys%dv_tab(2, i) < 2) return
+        if (sys%dv_tab(1, i) < 1 .or. sys%dv_tab(1, i) + sys%dv_tab(2, i) - 1 > sys%ntab .or. sys%dv_tab(2, i) < 2) &
+          return
       end if
     end do
-    allocate (sys%jt_row(sys%nj), sys%dv_row(sys%nd))
-    r = 0
+    valid = .true.
+  end function valid
+
+  !> Row numbers: each joint's first row (jt_row), each kinematic drive's (dv_row), and every row's
+  !> length per unit (rscale: lref for rows in radians).
+  subroutine number_rows(sys)
+    type(mbs_system), intent(inout) :: sys
+    integer :: i, j, r
+    allocate (sys%jt_row(sys%nj + 1), sys%dv_row(sys%nd))
+    r = 1
     do j = 1, sys%nj
-      sys%jt_row(j) = r + 1
-      r = r + merge(3, 2, sys%jt_kind(j) == JOINT_WELD)
+      sys%jt_row(j) = r
+      do while (r <= sys%ncr)
+        if (sys%cr(1, r) /= j) exit
+        r = r + 1
+      end do
     end do
+    sys%jt_row(sys%nj + 1) = r
+    r = sys%ncr
     do i = 1, sys%nd
       sys%dv_row(i) = 0
       if (sys%dv_kind(i) /= LAW_FORCE) then
@@ -123,92 +189,41 @@ contains
     sys%nrow = r
     allocate (sys%rscale(r))
     sys%rscale = 1.0_dp
-    do j = 1, sys%nj
-      if (sys%jt_kind(j) == JOINT_PRISMATIC) sys%rscale(sys%jt_row(j) + 1) = sys%lref
-      if (sys%jt_kind(j) == JOINT_WELD) sys%rscale(sys%jt_row(j) + 2) = sys%lref
+    do r = 1, sys%ncr
+      if (con_in_radians(sys%cr(2, r))) sys%rscale(r) = sys%lref
     end do
     do i = 1, sys%nd
-      if (sys%dv_row(i) > 0 .and. sys%jt_kind(sys%dv_joint(i)) /= JOINT_PRISMATIC) sys%rscale(sys%dv_row(i)) = sys%lref
+      if (sys%dv_row(i) > 0 .and. con_in_radians(sys%jt_coord(1, sys%dv_joint(i)))) sys%rscale(sys%dv_row(i)) = sys%lref
     end do
-    allocate (sys%phi(r), sys%jac(max(r, 1), sys%n), sys%gam(r), sys%nu(r), sys%q(sys%n))
-    allocate (sys%aug(sys%n + r, sys%n + r), sys%sol(sys%n + r), sys%ipiv(sys%n + r))
-    status = STATUS_OK
-  end subroutine mbs_build
+  end subroutine number_rows
 
-  !> Position r, dr/dphi = Omega R s (w), velocity v and velocity part of the acceleration
-  !> (-phi'^2 R s, aq) of marker k; body 0 (ground): r = s, the rest zero.  ib: its body.
-  pure subroutine marker(sys, k, z, zd, r, w, v, aq, ib)
+  !> State of marker k at (z, zd) (flexmech_markers): a point of its body, or of the ground.
+  pure subroutine mbs_marker(sys, k, z, zd, ms)
     type(mbs_system), intent(in) :: sys
     integer, intent(in) :: k
     real(dp), intent(in) :: z(:), zd(:)
-    real(dp), intent(out) :: r(2), w(2), v(2), aq(2)
-    integer, intent(out) :: ib
-    real(dp) :: c, s, rs(2)
-    ib = sys%mk_body(k)
-    if (ib == 0) then
-      r = sys%mk_pos(:, k); w = 0.0_dp; v = 0.0_dp; aq = 0.0_dp
-      return
+    type(marker_state), intent(out) :: ms
+    integer :: b
+    b = sys%mk_body(k)
+    if (b == 0) then
+      call ground_marker(sys%mk_pos(:, k), ms)
+    else
+      call body_marker(z(3*b - 2:3*b), zd(3*b - 2:3*b), [3*b - 2, 3*b - 1, 3*b], sys%mk_pos(:, k), ms)
     end if
-    c = cos(z(3*ib)); s = sin(z(3*ib))
-    rs = [c*sys%mk_pos(1, k) - s*sys%mk_pos(2, k), s*sys%mk_pos(1, k) + c*sys%mk_pos(2, k)]
-    r = z(3*ib - 2:3*ib - 1) + rs
-    w = [-rs(2), rs(1)]
-    v = zd(3*ib - 2:3*ib - 1) + zd(3*ib)*w
-    aq = -zd(3*ib)**2*rs
-  end subroutine marker
+  end subroutine mbs_marker
 
-  !> Coordinate g of joint j, its gradient (nonzero on the columns cols(1:6) of the two bodies' 3
-  !> coordinates, 0 = ground), its rate and the velocity part gq of its second derivative
-  !> (g'' = grad . z'' + gq).  kind_dir: the guide direction of a prismatic joint (axis) or its normal
-  !> (Omega axis); angle for revolute and weld joints.
-  pure subroutine joint_coordinate(sys, j, z, zd, normal, g, cols, grad, gd, gq)
+  !> Coordinate g of joint j (its coordinate row), its rate gd, the velocity part acc0 of its second
+  !> derivative (g'' = grad . z'' + acc0) and its gradient grad over the coordinates cols(1:nc).
+  pure subroutine joint_coordinate(sys, j, z, zd, g, gd, acc0, nc, cols, grad)
     type(mbs_system), intent(in) :: sys
     integer, intent(in) :: j
     real(dp), intent(in) :: z(:), zd(:)
-    logical, intent(in) :: normal           !< prismatic: the normal component instead of the coordinate
-    real(dp), intent(out) :: g, grad(6), gd, gq
-    integer, intent(out) :: cols(6)
-    integer :: ia, ib, kp, kq
-    real(dp) :: rp(2), wp(2), vp(2), ap(2), rq(2), wq(2), vq(2), aq(2), u(2), ou(2), d(2), dd(2), ca, sa, om
-    kp = sys%jt_mk(1, j); kq = sys%jt_mk(2, j)
-    ia = sys%mk_body(kp); ib = sys%mk_body(kq)
-    cols = 0; grad = 0.0_dp
-    if (ia > 0) cols(1:3) = [3*ia - 2, 3*ia - 1, 3*ia]
-    if (ib > 0) cols(4:6) = [3*ib - 2, 3*ib - 1, 3*ib]
-    if (sys%jt_kind(j) /= JOINT_PRISMATIC) then     ! relative angle phi_b - phi_a
-      g = 0.0_dp; gd = 0.0_dp
-      if (ib > 0) then
-        g = z(3*ib); gd = zd(3*ib); grad(6) = 1.0_dp
-      end if
-      if (ia > 0) then
-        g = g - z(3*ia); gd = gd - zd(3*ia); grad(3) = -1.0_dp
-      end if
-      gq = 0.0_dp
-      return
-    end if
-    call marker(sys, kp, z, zd, rp, wp, vp, ap, ia)
-    call marker(sys, kq, z, zd, rq, wq, vq, aq, ib)
-    u = sys%jt_axis(:, j)
-    if (normal) u = [-u(2), u(1)]
-    om = 0.0_dp
-    if (ia > 0) then
-      ca = cos(z(3*ia)); sa = sin(z(3*ia))
-      u = [ca*u(1) - sa*u(2), sa*u(1) + ca*u(2)]
-      om = zd(3*ia)
-    end if
-    ou = [-u(2), u(1)]
-    d = rq - rp; dd = vq - vp
-    g = dot_product(u, d)
-    gd = om*dot_product(ou, d) + dot_product(u, dd)
-    gq = -om*om*dot_product(u, d) + 2.0_dp*om*dot_product(ou, dd) + dot_product(u, aq - ap)
-    if (ia > 0) then
-      grad(1:2) = -u
-      grad(3) = dot_product(ou, rq - z(3*ia - 2:3*ia - 1))
-    end if
-    if (ib > 0) then
-      grad(4:5) = u
-      grad(6) = dot_product(u, wq)
-    end if
+    real(dp), intent(out) :: g, gd, acc0, grad(2*MAXCOL)
+    integer, intent(out) :: nc, cols(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    call mbs_marker(sys, sys%jt_mk(1, j), z, zd, ma)
+    call mbs_marker(sys, sys%jt_mk(2, j), z, zd, mb)
+    call constraint_row(sys%jt_coord(1, j), sys%jt_coord(2, j), sys%jt_dir(:, j), ma, mb, g, gd, acc0, nc, cols, grad)
   end subroutine joint_coordinate
 
   !> Constraint values phi, Jacobian jac (nrow x n, dense), acceleration right-hand side gam and velocity
@@ -216,105 +231,78 @@ contains
   subroutine mbs_constraints(sys, z, zd, t)
     type(mbs_system), intent(inout) :: sys
     real(dp), intent(in) :: z(:), zd(:), t
-    integer :: j, r, i, ia, ib, cols(6)
-    real(dp) :: rp(2), wp(2), vp(2), ap(2), rq(2), wq(2), vq(2), aq(2), g, grad(6), gd, gq, f(3)
+    integer :: j, r, i, nc, cols(2*MAXCOL)
+    real(dp) :: g, gd, acc0, grad(2*MAXCOL), f(3)
+    type(marker_state) :: ma, mb
     sys%jac = 0.0_dp; sys%nu = 0.0_dp
     do j = 1, sys%nj
-      r = sys%jt_row(j)
-      if (sys%jt_kind(j) /= JOINT_PRISMATIC) then          ! point rows r_P - r_Q
-        call marker(sys, sys%jt_mk(1, j), z, zd, rp, wp, vp, ap, ia)
-        call marker(sys, sys%jt_mk(2, j), z, zd, rq, wq, vq, aq, ib)
-        sys%phi(r:r + 1) = rp - rq
-        sys%gam(r:r + 1) = aq - ap
-        if (ia > 0) then
-          sys%jac(r, 3*ia - 2) = 1.0_dp; sys%jac(r + 1, 3*ia - 1) = 1.0_dp
-          sys%jac(r:r + 1, 3*ia) = wp
-        end if
-        if (ib > 0) then
-          sys%jac(r, 3*ib - 2) = sys%jac(r, 3*ib - 2) - 1.0_dp
-          sys%jac(r + 1, 3*ib - 1) = sys%jac(r + 1, 3*ib - 1) - 1.0_dp
-          sys%jac(r:r + 1, 3*ib) = sys%jac(r:r + 1, 3*ib) - wq
-        end if
-        if (sys%jt_kind(j) == JOINT_REVOLUTE) cycle
-        r = r + 2                                            ! weld: the angle row
-        call joint_coordinate(sys, j, z, zd, .false., g, cols, grad, gd, gq)
-      else
-        call joint_coordinate(sys, j, z, zd, .true., g, cols, grad, gd, gq)   ! normal row
-        call put_row(r, g, -gq)
-        r = r + 1
-        call angle_of(j, g, cols, grad)                      ! the angle row
-        gq = 0.0_dp
-      end if
-      call put_row(r, g - sys%jt_ref(j), -gq)
+      if (sys%jt_row(j + 1) == sys%jt_row(j)) cycle
+      call mbs_marker(sys, sys%jt_mk(1, j), z, zd, ma)
+      call mbs_marker(sys, sys%jt_mk(2, j), z, zd, mb)
+      do r = sys%jt_row(j), sys%jt_row(j + 1) - 1
+        call constraint_row(sys%cr(2, r), sys%cr(3, r), sys%cr_dir(:, r), ma, mb, g, gd, acc0, nc, cols, grad)
+        call put_row(sys, r, g - sys%cr_ref(r), -acc0, nc, cols, grad)
+      end do
     end do
     do i = 1, sys%nd
       r = sys%dv_row(i)
       if (r == 0) cycle
-      j = sys%dv_joint(i)
-      call joint_coordinate(sys, j, z, zd, .false., g, cols, grad, gd, gq)
+      call joint_coordinate(sys, sys%dv_joint(i), z, zd, g, gd, acc0, nc, cols, grad)
       f = drive_law(sys, i, t)
-      call put_row(r, g - f(1), f(3) - gq)
+      call put_row(sys, r, g - f(1), f(3) - acc0, nc, cols, grad)
       sys%nu(r) = f(2)
     end do
-
-  contains
-
-    subroutine put_row(row, val, gamma)
-      integer, intent(in) :: row
-      real(dp), intent(in) :: val, gamma
-      integer :: c
-      sys%phi(row) = val
-      sys%gam(row) = gamma
-      do c = 1, 6
-        if (cols(c) > 0) sys%jac(row, cols(c)) = sys%jac(row, cols(c)) + grad(c)
-      end do
-    end subroutine put_row
-
-    !> phi_b - phi_a of joint jj as a coordinate row (whatever the joint's kind).
-    subroutine angle_of(jj, gval, c6, g6)
-      integer, intent(in) :: jj
-      real(dp), intent(out) :: gval, g6(6)
-      integer, intent(out) :: c6(6)
-      integer :: a, b
-      a = sys%mk_body(sys%jt_mk(1, jj)); b = sys%mk_body(sys%jt_mk(2, jj))
-      c6 = 0; g6 = 0.0_dp; gval = 0.0_dp
-      if (a > 0) then
-        c6(3) = 3*a; g6(3) = -1.0_dp; gval = -z(3*a)
-      end if
-      if (b > 0) then
-        c6(6) = 3*b; g6(6) = 1.0_dp; gval = gval + z(3*b)
-      end if
-    end subroutine angle_of
-
   end subroutine mbs_constraints
+
+  !> Row r of the workspace: value, acceleration right-hand side and gradient (added over cols(1:nc)).
+  pure subroutine put_row(sys, r, val, gamma, nc, cols, grad)
+    type(mbs_system), intent(inout) :: sys
+    integer, intent(in) :: r, nc, cols(:)
+    real(dp), intent(in) :: val, gamma, grad(:)
+    integer :: c
+    sys%phi(r) = val
+    sys%gam(r) = gamma
+    do c = 1, nc
+      sys%jac(r, cols(c)) = sys%jac(r, cols(c)) + grad(c)
+    end do
+  end subroutine put_row
 
   !> Generalized applied forces q (n) at (z, zd, t): gravity and the force drives.
   pure subroutine mbs_forces(sys, z, zd, t, q)
     type(mbs_system), intent(in) :: sys
     real(dp), intent(in) :: z(:), zd(:), t
     real(dp), intent(out) :: q(:)
-    integer :: i, b, k, c, cols(6), nk
-    real(dp) :: g, grad(6), gd, gq, tau
+    integer :: i, b, c, nc, cols(2*MAXCOL)
+    real(dp) :: g, gd, acc0, grad(2*MAXCOL), tau
     q = 0.0_dp
     do b = 1, sys%nb
       q(3*b - 2:3*b - 1) = sys%mass(b)*sys%grav
     end do
     do i = 1, sys%nd
       if (sys%dv_kind(i) /= LAW_FORCE) cycle
-      call joint_coordinate(sys, sys%dv_joint(i), z, zd, .false., g, cols, grad, gd, gq)
-      k = sys%dv_tab(1, i); nk = sys%dv_tab(2, i)
-      if (nk > 0) then
-        tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(k:k + nk - 1), &
-                        sys%tab_c(:, k:k + nk - 1), g, t)
-      else
-        tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(1:0), &
-                        sys%tab_c(:, 1:0), g, t)
-      end if
-      do c = 1, 6
-        if (cols(c) > 0) q(cols(c)) = q(cols(c)) + tau*grad(c)
+      call joint_coordinate(sys, sys%dv_joint(i), z, zd, g, gd, acc0, nc, cols, grad)
+      tau = force_value(sys, i, g, t)
+      do c = 1, nc
+        q(cols(c)) = q(cols(c)) + tau*grad(c)
       end do
     end do
   end subroutine mbs_forces
+
+  !> Generalized force [N m or N] of force drive i's law at its coordinate g and time t [s].
+  pure real(dp) function force_value(sys, i, g, t) result(tau)
+    type(mbs_system), intent(in) :: sys
+    integer, intent(in) :: i
+    real(dp), intent(in) :: g, t
+    integer :: k, nk
+    k = sys%dv_tab(1, i); nk = sys%dv_tab(2, i)
+    if (nk > 0) then
+      tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(k:k + nk - 1), &
+                      sys%tab_c(:, k:k + nk - 1), g, t)
+    else
+      tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(1:0), &
+                      sys%tab_c(:, 1:0), g, t)
+    end if
+  end function force_value
 
   !> Accelerations zdd and multipliers lam at (z, zd, t) from [M Phi_z^T; Phi_z 0][zdd; lam] = [Q; gamma]
   !> (the augmented matrix stays factorized in sys%aug for mbs_project).
@@ -334,6 +322,7 @@ contains
     lam = sys%sol(sys%n + 1:)
   end subroutine mbs_accelerations
 
+  !> LU of the augmented matrix [M Phi_z^T; Phi_z 0] of the last mbs_constraints in sys%aug.
   subroutine factor_augmented(sys, status)
     type(mbs_system), intent(inout) :: sys
     integer, intent(out) :: status
@@ -353,6 +342,7 @@ contains
     status = merge(STATUS_SINGULAR, STATUS_OK, info > 0)
   end subroutine factor_augmented
 
+  !> Solve with factor_augmented's factors: sys%sol (n + nrow) overwritten.
   subroutine solve_augmented(sys, status)
     type(mbs_system), intent(inout) :: sys
     integer, intent(out) :: status
@@ -374,200 +364,21 @@ contains
     end associate
   end subroutine dynamics_rhs
 
-  !> Project (z, zd) onto the position and velocity constraints at t (M-orthogonally, with the
-  !> augmented matrix): Newton on Phi(z) = 0 until max |phi| <= tol (lengths; angle rows times lref),
-  !> then zd onto Phi_z zd = nu.  STATUS_ASSEMBLY when the positions do not converge in maxit.
-  subroutine mbs_project(sys, z, zd, t, tol, maxit, status)
-    type(mbs_system), intent(inout) :: sys
-    real(dp), intent(inout) :: z(:), zd(:)
-    real(dp), intent(in) :: t, tol
-    integer, intent(in) :: maxit
-    integer, intent(out) :: status
-    integer :: it
-    status = STATUS_OK
-    if (sys%nrow == 0) return
-    do it = 1, maxit + 1
-      call mbs_constraints(sys, z, zd, t)
-      if (residual(sys) <= tol) exit
-      if (it > maxit) then
-        status = STATUS_ASSEMBLY
-        return
-      end if
-      call factor_augmented(sys, status)
-      if (status /= STATUS_OK) return
-      sys%sol(1:sys%n) = 0.0_dp
-      sys%sol(sys%n + 1:) = -sys%phi
-      call solve_augmented(sys, status)
-      if (status /= STATUS_OK) return
-      z = z + sys%sol(1:sys%n)
-    end do
-    call factor_augmented(sys, status)
-    if (status /= STATUS_OK) return
-    sys%sol(1:sys%n) = 0.0_dp
-    sys%sol(sys%n + 1:) = sys%nu - matmul(sys%jac(1:sys%nrow, :), zd)
-    call solve_augmented(sys, status)
-    if (status /= STATUS_OK) return
-    zd = zd + sys%sol(1:sys%n)
-  end subroutine mbs_project
-
-  !> Largest constraint violation [m] (angle rows scaled by lref) of the last mbs_constraints.
-  pure real(dp) function residual(sys)
-    type(mbs_system), intent(in) :: sys
-    residual = 0.0_dp
-    if (sys%nrow > 0) residual = maxval(abs(sys%phi)*sys%rscale)
-  end function residual
-
-  !> Kinematic positions: Newton on the square system Phi(z, t) = 0 (joints and kinematic drives,
-  !> nrow = n) from the guess z; then zd, zdd from the Jacobian and lam from Phi_z^T lam = Q - M zdd.
-  !> rcond: the pivot ratio of the scaled Jacobian (rotation columns times lref, angle rows times
-  !> lref); dsign: the sign of its determinant (a change between neighbouring samples means the motion
-  !> crossed a singular position).  STATUS_ASSEMBLY when Newton does not converge,
-  !> STATUS_SINGULAR_POSITION when rcond < rcond_min.
-  subroutine mbs_kinematic_sample(sys, z, t, tol, maxit, rcond_min, zd, zdd, lam, rcond, dsign, status)
-    type(mbs_system), intent(inout) :: sys
-    real(dp), intent(inout) :: z(:)
-    real(dp), intent(in) :: t, tol, rcond_min
-    integer, intent(in) :: maxit
-    real(dp), intent(out) :: zd(:), zdd(:), lam(:), rcond
-    integer, intent(out) :: dsign, status
-    rcond = 0.0_dp
-    dsign = 0
-    call mbs_solve_positions(sys, z, t, tol, maxit, status)     ! leaves the constraints evaluated at z
-    if (status /= STATUS_OK) return
-    call square_factor(sys, rcond, status)
-    if (status /= STATUS_OK .or. rcond < rcond_min) then
-      status = STATUS_SINGULAR_POSITION
-      return
-    end if
-    dsign = det_sign(sys%aug, sys%n, sys%ipiv)
-    zd = sys%nu
-    call square_solve(sys, zd, 'N', status)
-    call mbs_constraints(sys, z, zd, t)                          ! gamma with the velocities (same Jacobian)
-    zdd = sys%gam
-    call square_solve(sys, zdd, 'N', status)
-    call mbs_forces(sys, z, zd, t, sys%q)
-    lam = sys%q
-    lam(1:sys%n:3) = lam(1:sys%n:3) - sys%mass*zdd(1:sys%n:3)
-    lam(2:sys%n:3) = lam(2:sys%n:3) - sys%mass*zdd(2:sys%n:3)
-    lam(3:sys%n:3) = lam(3:sys%n:3) - sys%inertia*zdd(3:sys%n:3)
-    call square_solve(sys, lam, 'T', status)
-  end subroutine mbs_kinematic_sample
-
-  !> Newton on the square position equations (nrow = n) from z; max |phi| <= tol on return, with the
-  !> constraints evaluated at the returned z (zd = 0).
-  subroutine mbs_solve_positions(sys, z, t, tol, maxit, status)
-    type(mbs_system), intent(inout) :: sys
-    real(dp), intent(inout) :: z(:)
-    real(dp), intent(in) :: t, tol
-    integer, intent(in) :: maxit
-    integer, intent(out) :: status
-    real(dp) :: zd0(sys%n), dz(sys%n), rc
-    integer :: it
-    zd0 = 0.0_dp
-    status = STATUS_OK
-    do it = 1, maxit + 1
-      call mbs_constraints(sys, z, zd0, t)
-      if (residual(sys) <= tol) return
-      if (it > maxit .or. .not. ieee_is_finite(sum(abs(sys%phi)))) exit
-      call square_factor(sys, rc, status)
-      if (status /= STATUS_OK) then     ! the Jacobian lost rank on the way: a singular position
-        status = STATUS_SINGULAR_POSITION
-        return
-      end if
-      dz = -sys%phi
-      call square_solve(sys, dz, 'N', status)
-      if (status /= STATUS_OK) exit
-      z = z + dz
-    end do
-    status = STATUS_ASSEMBLY
-  end subroutine mbs_solve_positions
-
-  !> LU of the scaled square Jacobian S J D of the last mbs_constraints in sys%aug(1:n, 1:n) (S: angle
-  !> rows times lref, D: rotation columns times lref, both in length units); rcond: its pivot ratio
-  !> (flexmech_dense), 0 when singular (then STATUS_SINGULAR).
-  subroutine square_factor(sys, rcond, status)
-    type(mbs_system), intent(inout) :: sys
-    real(dp), intent(out) :: rcond
-    integer, intent(out) :: status
-    integer :: info, n, r
-    n = sys%n
-    do r = 1, n
-      sys%aug(r, 1:n) = sys%rscale(r)*sys%jac(r, :)
-    end do
-    sys%aug(1:n, 3:n:3) = sys%aug(1:n, 3:n:3)*sys%lref
-    call lu_factor(sys%aug, n, sys%ipiv, info)
-    rcond = pivot_ratio(sys%aug, n)
-    status = STATUS_OK
-    if (info > 0) then
-      rcond = 0.0_dp
-      status = STATUS_SINGULAR
-    end if
-  end subroutine square_factor
-
-  !> Solve J x = b (trans 'N') or J^T x = b ('T') with square_factor's scaled factors, x overwritten.
-  subroutine square_solve(sys, x, trans, status)
-    type(mbs_system), intent(inout) :: sys
-    real(dp), intent(inout) :: x(:)
-    character, intent(in) :: trans
-    integer, intent(out) :: status
-    integer :: n
-    n = sys%n
-    if (trans == 'N') then
-      x = x*sys%rscale
-      call lu_solve(sys%aug, n, sys%ipiv, x, .false.)
-      x(3:n:3) = x(3:n:3)*sys%lref
-    else
-      x(3:n:3) = x(3:n:3)*sys%lref
-      call lu_solve(sys%aug, n, sys%ipiv, x, .true.)
-      x = x*sys%rscale
-    end if
-    status = STATUS_OK
-    if (.not. ieee_is_finite(sum(abs(x)))) status = STATUS_NONFINITE
-  end subroutine square_solve
-
-  !> Pivot ratio of the scaled Gram matrix G = S Phi_z D^2 Phi_z^T S of the last mbs_constraints (S, D as
-  !> in square_factor): about (sigma_min / sigma_max)^2 of the scaled constraint Jacobian; 0 when G is
-  !> singular.
-  function mbs_gram_rcond(sys) result(rcond)
-    type(mbs_system), intent(inout) :: sys
-    real(dp) :: rcond
-    real(dp) :: a(sys%nrow, sys%n), g(sys%nrow, sys%nrow)
-    integer :: ipiv(sys%nrow), info, r, m
-    m = sys%nrow
-    rcond = 1.0_dp
-    if (m == 0) return
-    do r = 1, m
-      a(r, :) = sys%rscale(r)*sys%jac(r, :)
-    end do
-    a(:, 3:sys%n:3) = a(:, 3:sys%n:3)*sys%lref
-    g = matmul(a, transpose(a))
-    call lu_factor(g, m, ipiv, info)
-    rcond = 0.0_dp
-    if (info == 0) rcond = pivot_ratio(g, m)
-  end function mbs_gram_rcond
-
   !> The generalized force every drive applies on its joint coordinate [N m or N] at (z, zd, t) with
   !> multipliers lam: a force drive's law, a kinematic drive's -lambda (its constraint force).
   pure subroutine mbs_drive_values(sys, z, zd, t, lam, dv)
     type(mbs_system), intent(in) :: sys
     real(dp), intent(in) :: z(:), zd(:), t, lam(:)
     real(dp), intent(out) :: dv(:)
-    integer :: i, k, nk, cols(6)
-    real(dp) :: g, grad(6), gd, gq
+    integer :: i, nc, cols(2*MAXCOL)
+    real(dp) :: g, gd, acc0, grad(2*MAXCOL)
     do i = 1, sys%nd
       if (sys%dv_row(i) > 0) then
         dv(i) = -lam(sys%dv_row(i))
         cycle
       end if
-      call joint_coordinate(sys, sys%dv_joint(i), z, zd, .false., g, cols, grad, gd, gq)
-      k = sys%dv_tab(1, i); nk = sys%dv_tab(2, i)
-      if (nk > 0) then
-        dv(i) = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(k:k + nk - 1), &
-                          sys%tab_c(:, k:k + nk - 1), g, t)
-      else
-        dv(i) = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(1:0), &
-                          sys%tab_c(:, 1:0), g, t)
-      end if
+      call joint_coordinate(sys, sys%dv_joint(i), z, zd, g, gd, acc0, nc, cols, grad)
+      dv(i) = force_value(sys, i, g, t)
     end do
   end subroutine mbs_drive_values
 
@@ -598,13 +409,13 @@ contains
     type(mbs_system), intent(in) :: sys
     real(dp), intent(in) :: z(:), zd(:), zdd(:), t
     real(dp), intent(out) :: jq(:, :)
-    integer :: i, j, c, cols(6)
-    real(dp) :: g, grad(6), gd, gq, acc
+    integer :: i, j, c, nc, cols(2*MAXCOL)
+    real(dp) :: g, gd, acc0, grad(2*MAXCOL), acc
     do j = 1, sys%nj
-      call joint_coordinate(sys, j, z, zd, .false., g, cols, grad, gd, gq)
-      acc = gq
-      do c = 1, 6
-        if (cols(c) > 0) acc = acc + grad(c)*zdd(cols(c))
+      call joint_coordinate(sys, j, z, zd, g, gd, acc0, nc, cols, grad)
+      acc = acc0
+      do c = 1, nc
+        acc = acc + grad(c)*zdd(cols(c))
       end do
       jq(:, j) = [g, gd, acc]
     end do

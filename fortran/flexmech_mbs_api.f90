@@ -9,6 +9,7 @@ module flexmech_mbs_api
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_ASSEMBLY, dgetrf, dgetrs, lapack_status
   use flexmech_mbs, only: mbs_system, mbs_build, mbs_constraints, mbs_forces
+  use flexmech_mbs_solve, only: mbs_residual
   use flexmech_motion, only: kinematic_samples, dynamic_start, dynamic_samples
   use flexmech_ode, only: ode_state_size
   implicit none
@@ -78,7 +79,7 @@ contains
     zd0 = 0.0_dp
     do
       call mbs_constraints(sys, z, zd0, t)
-      resid = maxval(abs(sys%phi)*sys%rscale)
+      resid = mbs_residual(sys)
       if (resid <= tol) return
       if (iters >= maxit .or. .not. resid < huge(1.0_dp)) then
         status = STATUS_ASSEMBLY

@@ -22,8 +22,9 @@
 module flexmech_motion
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_SINGULAR_POSITION, STATUS_NONFINITE
-  use flexmech_mbs, only: mbs_system, mbs_kinematic_sample, mbs_accelerations, mbs_project, mbs_gram_rcond, &
-                          mbs_joint_coordinates, mbs_constraints, mbs_drive_values, mbs_drive_change
+  use flexmech_mbs, only: mbs_system, mbs_accelerations, mbs_joint_coordinates, mbs_constraints, mbs_drive_values, &
+                          mbs_drive_change
+  use flexmech_mbs_solve, only: mbs_kinematic_sample, mbs_project, mbs_gram_rcond
   use flexmech_ode, only: ode_state, ode_start, ode_step, ode_dense, ode_pack, ode_unpack, ODE_OK
   implicit none
   private
@@ -46,7 +47,7 @@ contains
     real(dp), intent(out) :: zf(:, :), zdf(:, :), zddf(:, :), lamf(:, :), jqf(:, :, :), dvf(:, :)
     integer, intent(out) :: nvalid, status
     real(dp), intent(out) :: fail_t, rcond_low
-    real(dp) :: z(sys%n), zd(sys%n), zdd(sys%n), lam(sys%nrow), rc, h, scale(sys%n)
+    real(dp) :: z(sys%n), zd(sys%n), zdd(sys%n), lam(sys%nrow), scale(sys%n)
     integer :: i, n
     n = sys%n
     scale = 1.0_dp/sys%lref
@@ -58,7 +59,7 @@ contains
       return
     end if
     do i = 1, size(ts)
-      call advance(ts(i), status)
+      call advance(sys, ts(i), state, tol, rcond_min, scale, z, zd, zdd, lam, rcond_low, status)
       if (status /= STATUS_OK) then
         fail_t = ts(i)
         return
@@ -69,62 +70,67 @@ contains
       nvalid = i
     end do
 
-  contains
-
-    !> From the state to time tn in substeps, each short enough that neither the second-order
-    !> extrapolation of any coordinate from the last solution nor the kinematic drives' prescribed
-    !> coordinates move more than MAX_SUBSTEP_CHANGE (rad, or lref for positions), so Newton follows
-    !> the assembly branch however far apart the samples are (a start from rest, whose rates predict no
-    !> motion, is stepped by the drive laws); a substep that crosses a singular position stops the
-    !> motion (see the module's header).
-    subroutine advance(tn, stat)
-      real(dp), intent(in) :: tn
-      integer, intent(out) :: stat
-      real(dp) :: tk, guess(n), corr, moved, predicted
-      integer :: k, dsign
-      stat = STATUS_OK
-      do k = 1, MAX_SUBSTEPS
-        h = substep(tn - state(1))
-        tk = state(1) + h
-        if (tn - tk <= 1e-12_dp*max(1.0_dp, abs(tn))) tk = tn
-        h = tk - state(1)
-        guess = state(3:2 + n) + h*state(3 + n:2 + 2*n) + (0.5_dp*h*h)*state(3 + 2*n:2 + 3*n)
-        z = guess
-        call mbs_kinematic_sample(sys, z, tk, tol, POSITION_MAXIT, rcond_min, zd, zdd, lam, rc, dsign, stat)
-        rcond_low = min(rcond_low, rc)
-        if (stat /= STATUS_OK) return
-        if (nint(state(2)) /= 0) then
-          corr = maxval(abs(z - guess)*scale)
-          moved = maxval(abs(z - state(3:2 + n))*scale)
-          predicted = maxval(abs(guess - state(3:2 + n))*scale)
-          if (dsign /= nint(state(2)) .or. &
-              (corr > 1e-3_dp .and. corr > 0.5_dp*moved .and. predicted > 0.1_dp*moved)) then
-            stat = STATUS_SINGULAR_POSITION
-            return
-          end if
-        end if
-        state = [tk, real(dsign, dp), z, zd, zdd]
-        if (tk == tn) return
-      end do
-      stat = STATUS_SINGULAR_POSITION      ! the substeps shrank without reaching tn
-    end subroutine advance
-
-    !> The longest substep from the state, at most hmax_k, that keeps the extrapolated and the
-    !> prescribed motion within MAX_SUBSTEP_CHANGE (halving from hmax_k).
-    real(dp) function substep(hmax_k) result(hs)
-      real(dp), intent(in) :: hmax_k
-      real(dp) :: change
-      integer :: k
-      hs = hmax_k
-      do k = 1, 60
-        change = maxval((abs(state(3 + n:2 + 2*n))*abs(hs) + 0.5_dp*abs(state(3 + 2*n:2 + 3*n))*hs*hs)*scale)
-        change = max(change, mbs_drive_change(sys, state(1), state(1) + hs))
-        if (change <= MAX_SUBSTEP_CHANGE) return
-        hs = 0.5_dp*hs
-      end do
-    end function substep
-
   end subroutine kinematic_samples
+
+  !> From the state to time tn in substeps, each short enough that neither the second-order
+  !> extrapolation of any coordinate from the last solution nor the kinematic drives' prescribed
+  !> coordinates move more than MAX_SUBSTEP_CHANGE (rad, or lref for positions), so Newton follows
+  !> the assembly branch however far apart the samples are (a start from rest, whose rates predict no
+  !> motion, is stepped by the drive laws); a substep that crosses a singular position stops the
+  !> motion (see the module's header).  scale: 1/lref for positions, 1 for angles; (z, zd, zdd, lam)
+  !> the solution at tn; rcond_low: the smallest rcond met so far.
+  subroutine advance(sys, tn, state, tol, rcond_min, scale, z, zd, zdd, lam, rcond_low, stat)
+    type(mbs_system), intent(inout) :: sys
+    real(dp), intent(in) :: tn, tol, rcond_min, scale(:)
+    real(dp), intent(inout) :: state(:), rcond_low
+    real(dp), intent(out) :: z(:), zd(:), zdd(:), lam(:)
+    integer, intent(out) :: stat
+    real(dp) :: tk, h, guess(sys%n), corr, moved, predicted, rc
+    integer :: k, dsign, n
+    n = sys%n
+    stat = STATUS_OK
+    do k = 1, MAX_SUBSTEPS
+      h = substep(sys, state, scale, tn - state(1))
+      tk = state(1) + h
+      if (tn - tk <= 1e-12_dp*max(1.0_dp, abs(tn))) tk = tn
+      h = tk - state(1)
+      guess = state(3:2 + n) + h*state(3 + n:2 + 2*n) + (0.5_dp*h*h)*state(3 + 2*n:2 + 3*n)
+      z = guess
+      call mbs_kinematic_sample(sys, z, tk, tol, POSITION_MAXIT, rcond_min, zd, zdd, lam, rc, dsign, stat)
+      rcond_low = min(rcond_low, rc)
+      if (stat /= STATUS_OK) return
+      if (nint(state(2)) /= 0) then
+        corr = maxval(abs(z - guess)*scale)
+        moved = maxval(abs(z - state(3:2 + n))*scale)
+        predicted = maxval(abs(guess - state(3:2 + n))*scale)
+        if (dsign /= nint(state(2)) .or. &
+            (corr > 1e-3_dp .and. corr > 0.5_dp*moved .and. predicted > 0.1_dp*moved)) then
+          stat = STATUS_SINGULAR_POSITION
+          return
+        end if
+      end if
+      state = [tk, real(dsign, dp), z, zd, zdd]
+      if (tk == tn) return
+    end do
+    stat = STATUS_SINGULAR_POSITION      ! the substeps shrank without reaching tn
+  end subroutine advance
+
+  !> The longest substep from the state, at most hmax_k, that keeps the extrapolated and the
+  !> prescribed motion within MAX_SUBSTEP_CHANGE (halving from hmax_k).
+  real(dp) function substep(sys, state, scale, hmax_k) result(hs)
+    type(mbs_system), intent(in) :: sys
+    real(dp), intent(in) :: state(:), scale(:), hmax_k
+    real(dp) :: change
+    integer :: k, n
+    n = sys%n
+    hs = hmax_k
+    do k = 1, 60
+      change = maxval((abs(state(3 + n:2 + 2*n))*abs(hs) + 0.5_dp*abs(state(3 + 2*n:2 + 3*n))*hs*hs)*scale)
+      change = max(change, mbs_drive_change(sys, state(1), state(1) + hs))
+      if (change <= MAX_SUBSTEP_CHANGE) return
+      hs = 0.5_dp*hs
+    end do
+  end function substep
 
   !> Start the dynamic mode at (t0, z0, zd0) (projected onto the constraints first): the packed
   !> integrator state in state (length ode_state_size(2n)).

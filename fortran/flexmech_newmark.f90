@@ -96,16 +96,12 @@ contains
     real(dp), allocatable :: ab(:, :), up(:), vp(:), nnew(:), us(:), z(:), w(:)
     logical, allocatable :: locked(:)
     integer, allocatable :: ipiv(:)
-    integer :: n, i, nsteps, frame, it
-    logical :: done
+    integer :: n, nsteps
     real(dp) :: c1, betap, gammap
-    status = STATUS_OK
-    fail_step = 0
-    nvalid = 0
+    status = STATUS_OK; fail_step = 0; nvalid = 0
     nsteps = size(rig, 3) - 1
-    if (out_every < 1 .or. dt <= 0.0_dp .or. beta <= 0.0_dp .or. gamma < 0.5_dp .or. alpha_m >= 1.0_dp &
-        .or. alpha_f >= 1.0_dp .or. .not. div_limit > 0.0_dp .or. size(trans) /= sys%nfree &
-        .or. size(uf, 2) /= nsteps/out_every + 1) then
+    if (.not. integrator_valid(dt, alpha_m, alpha_f, beta, gamma, out_every, nsteps, size(uf, 2)) .or. &
+        .not. div_limit > 0.0_dp .or. size(trans) /= sys%nfree) then
       status = STATUS_BAD_INPUT
       return
     end if
@@ -124,53 +120,17 @@ contains
       return
     end if
     uf(:, 1) = u; vf(:, 1) = v; af(:, 1) = a; nf(:, 1) = sys%nax
-    frame = 1
     nvalid = 1
     do n = 1, nsteps
       w = alpha_f*a - alpha_m*p            ! zero for Newmark
       up = u + dt*v + (dt*dt*(0.5_dp - beta))*p + (dt*dt*beta*c1)*w
       vp = v + (dt*(1.0_dp - gamma))*p + (dt*gamma*c1)*w
       if (sys%nsl > 0) sys%tv = sl_val(:, :, n + 1)
-      if (geo_mode == GEO_QUASI_STATIC) then   ! N from K u = -F_rigid at this configuration
+      if (geo_mode == GEO_QUASI_STATIC) &   ! N from K u = -F_rigid at this configuration
         call quasi_static_axial(sys, rig(:, :, n + 1), q_free, q_val(:, n + 1), locked, ab, ipiv, us, z, status)
-        if (status /= STATUS_OK) then
-          fail_step = n
-          return
-        end if
-      end if
-      done = .false.
-      do it = 1, merge(geo_maxit, 1, geo_mode == GEO_CURRENT)
-        call sys%assemble(rig(:, :, n + 1), gammap*dt, betap*dt*dt, up, vp, ab, a)
-        do i = 1, size(q_free)
-          a(q_free(i)) = a(q_free(i)) + q_val(i, n + 1)
-        end do
-        call band_solve(sys, ab, ipiv, a, status)
-        if (status /= STATUS_OK) then
-          fail_step = n
-          return
-        end if
-        if (geo_mode /= GEO_CURRENT) then
-          done = .true.
-          exit
-        end if
-        ! GEO_CURRENT: axial forces of the new state; iterate until they stop changing
-        geo_iters = geo_iters + 1
-        call sys%axial_forces(rig(:, :, n + 1), up + (betap*dt*dt)*a, nnew)
-        if (maxval(abs(nnew - sys%nax)) <= geo_tol*max(maxval(abs(nnew)), tiny(1.0_dp))) then
-          sys%nax = nnew
-          done = .true.
-          exit
-        end if
-        ! plain substitution first; if it has not settled after 5 iterations, relax it (the axial
-        ! forces near the Euler load make the plain iteration oscillate)
-        if (it <= 5) then
-          sys%nax = nnew
-        else
-          sys%nax = 0.5_dp*(sys%nax + nnew)
-        end if
-      end do
-      if (.not. done) then
-        status = STATUS_GEO
+      if (status == STATUS_OK) call solve_step(sys, rig(:, :, n + 1), q_free, q_val(:, n + 1), gammap*dt, betap*dt*dt, &
+                                               up, vp, ab, ipiv, a, nnew, geo_mode, geo_tol, geo_maxit, geo_iters, status)
+      if (status /= STATUS_OK) then
         fail_step = n
         return
       end if
@@ -184,12 +144,62 @@ contains
         return
       end if
       if (mod(n, out_every) == 0) then
-        frame = frame + 1
-        uf(:, frame) = u; vf(:, frame) = v; af(:, frame) = a; nf(:, frame) = sys%nax
-        nvalid = frame
+        nvalid = nvalid + 1
+        uf(:, nvalid) = u; vf(:, nvalid) = v; af(:, nvalid) = a; nf(:, nvalid) = sys%nax
       end if
     end do
   end subroutine newmark_run
+
+  !> The generalized-alpha parameters and the output frames of a run of nsteps steps are valid.
+  pure logical function integrator_valid(dt, alpha_m, alpha_f, beta, gamma, out_every, nsteps, nframes)
+    real(dp), intent(in) :: dt, alpha_m, alpha_f, beta, gamma
+    integer, intent(in) :: out_every, nsteps, nframes
+    integrator_valid = .false.
+    if (out_every < 1) return
+    integrator_valid = dt > 0.0_dp .and. beta > 0.0_dp .and. gamma >= 0.5_dp .and. alpha_m < 1.0_dp .and. &
+                       alpha_f < 1.0_dp .and. nframes == nsteps/out_every + 1
+  end function integrator_valid
+
+  !> The acceleration a of one step at the rigid sample rig1 from the predictor (up, vp): the banded
+  !> solve of (M + hg C + hb K) a = Q - F - C vp - K up (hg = gamma' dt, hb = beta' dt^2), with
+  !> GEO_CURRENT's fixed-point iteration on the axial forces of the geometric stiffness (sys%nax;
+  !> geo_iters counts its iterations; STATUS_GEO when they do not settle within geo_maxit).
+  subroutine solve_step(sys, rig1, q_free, qv, hg, hb, up, vp, ab, ipiv, a, nnew, geo_mode, geo_tol, geo_maxit, &
+                        geo_iters, status)
+    type(ked_system), intent(inout) :: sys
+    real(dp), intent(in) :: rig1(:, :)     !< (5, nlinks) the rigid sample at the step's end
+    integer, intent(in) :: q_free(:)       !< (nq)
+    real(dp), intent(in) :: qv(:)          !< (nq) applied generalized forces there
+    real(dp), intent(in) :: hg, hb, up(:), vp(:), geo_tol
+    real(dp), intent(inout) :: ab(:, :), a(:), nnew(:)
+    integer, intent(inout) :: ipiv(:), geo_iters
+    integer, intent(in) :: geo_mode, geo_maxit
+    integer, intent(out) :: status
+    integer :: it, i
+    do it = 1, merge(geo_maxit, 1, geo_mode == GEO_CURRENT)
+      call sys%assemble(rig1, hg, hb, up, vp, ab, a)
+      do i = 1, size(q_free)
+        a(q_free(i)) = a(q_free(i)) + qv(i)
+      end do
+      call band_solve(sys, ab, ipiv, a, status)
+      if (status /= STATUS_OK .or. geo_mode /= GEO_CURRENT) return
+      ! GEO_CURRENT: axial forces of the new state; iterate until they stop changing
+      geo_iters = geo_iters + 1
+      call sys%axial_forces(rig1, up + hb*a, nnew)
+      if (maxval(abs(nnew - sys%nax)) <= geo_tol*max(maxval(abs(nnew)), tiny(1.0_dp))) then
+        sys%nax = nnew
+        return
+      end if
+      ! plain substitution first; if it has not settled after 5 iterations, relax it (the axial
+      ! forces near the Euler load make the plain iteration oscillate)
+      if (it <= 5) then
+        sys%nax = nnew
+      else
+        sys%nax = 0.5_dp*(sys%nax + nnew)
+      end if
+    end do
+    status = STATUS_GEO
+  end subroutine solve_step
 
   !> Axial forces of the geometric stiffness at the first sample (sys%geo, sys%nax), so that the
   !> consistent initial acceleration and the first step see the same stiffness as every later step:

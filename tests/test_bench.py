@@ -66,6 +66,12 @@ def test_bench_quick_writes_wellformed_csv_and_png(tmp_path, cases_dir, capsys):
         for r in rows:
             assert float(r["speedup"]) == pytest.approx(float(r["exudyn_cpu_s"]) / float(r["flexmech_cpu_s"]), rel=1e-3)
             assert math.isfinite(float(r["strain_coupler_diff"])) and float(r["newton_per_step"]) >= 1
+        # the multi-loop side by side: in its file and in the summary, both node-angle forms
+        multi = _rows(tmp_path / "bench_exudyn_mechanism.csv")
+        assert {r["node_angles"] for r in multi} == {"relative", "shared"}
+        for r in multi:
+            key = f"exudyn.{r['case']}.{r['node_angles']}.{r['elements_per_link']}_per_link.speedup"
+            assert float(summary[key]["value"]) == pytest.approx(float(r["speedup"]), rel=1e-4)
     else:                                       # one line says why, no file
         assert not side.exists() and "Exudyn is not installed (pip install exudyn" in out
     png = tmp_path / "bench.png"

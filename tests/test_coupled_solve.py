@@ -7,6 +7,7 @@ import pytest
 
 import flexmech_py as fm
 from flexmech_py import kernels
+from flexmech_py.mechanism.rows import ROW_KINDS
 
 BAND, CONDENSED, AUTO = 0, 1, -1
 
@@ -58,8 +59,9 @@ SADDLE_CASES = [("fourbar_hac", 8, []), ("fourbar_constant_speed", 4, []), ("man
                 ("sixbar_plate", 3, [])]
 
 
-def _run_multipliers(cases_dir, name, epl, model, mode):
-    assert kernels.cpl.cpl_set_multipliers(mode) == 0
+def _run_multipliers(cases_dir, name, epl, model, mode, solver=BAND):
+    """The run with the given solver (the whole band unless said) and multiplier modes."""
+    assert kernels.cpl.cpl_set_multipliers(mode) == 0 and kernels.cpl.cpl_set_solver(solver) == 0
     try:
         case = fm.load_case(cases_dir / f"{name}.toml",
                             overrides=["solver.t_end=0.004", "solver.dt=1e-5", "solver.output_every=10",
@@ -67,18 +69,27 @@ def _run_multipliers(cases_dir, name, epl, model, mode):
         return fm.simulate(case, model=model)
     finally:
         kernels.cpl.cpl_set_multipliers(AUTO)
+        kernels.cpl.cpl_set_solver(AUTO)
 
 
+BORDERED = 2
+
+
+@pytest.mark.parametrize("solver", ["saddle", "bordered"])
 @pytest.mark.parametrize("name, epl, extra", SADDLE_CASES, ids=[c[0] for c in SADDLE_CASES])
-def test_saddle_band_equals_schur_complement(cases_dir, name, epl, extra):
-    """The multipliers by the band LU of the whole saddle-point system (flexmech_saddle_band) against
-    their dense Schur complement, nonlinear model, 400 steps: the motion (angles, displacements,
-    strains) and the energies agree to 1e-7 of each column's largest value, with the same Newton
-    iterations; constraint forces to 1e-4 (observed 2e-5 on the seed four-bar's joint loads at the
-    default Newton tolerance, shrinking with it: the iteration accepts on the accelerations, and the
-    multipliers carry the iteration's error amplified)."""
+def test_saddle_band_equals_schur_complement(cases_dir, name, epl, extra, solver):
+    """The multipliers by the band LU of the whole saddle-point system (flexmech_saddle_band: over
+    the whole free-DOF band, or the nonlinear model's bordered saddle band, theory.md 12.6) against
+    their dense Schur complement over the whole band, nonlinear model, 400 steps: the motion
+    (angles, displacements, strains) and the energies agree to 1e-7 of each column's largest value,
+    with the same Newton iterations; constraint forces to 1e-4 (observed 2e-5 on the seed four-bar's
+    joint loads at the default Newton tolerance, shrinking with it: the iteration accepts on the
+    accelerations, and the multipliers carry the iteration's error amplified)."""
     ref = _run_multipliers(cases_dir, name, epl, "nonlinear", SCHUR)
-    new = _run_multipliers(cases_dir, name, epl, "nonlinear", SADDLE)
+    new = (_run_multipliers(cases_dir, name, epl, "nonlinear", SADDLE) if solver == "saddle" else
+           _run_multipliers(cases_dir, name, epl, "nonlinear", AUTO, BORDERED))
+    assert ref.extra["coupled"]["solver"]["path"].startswith("band, multipliers by their Schur")
+    assert new.extra["coupled"]["solver"]["path"] == ("saddle band" if solver == "saddle" else "bordered saddle band")
     assert np.array_equal(ref.columns["newton_iterations"], new.columns["newton_iterations"])
     forces = {k for k in ref.columns if k.startswith(("load_", "drive_")) or "force" in k or "torque" in k}
     for key, col in ref.columns.items():
@@ -95,6 +106,7 @@ def test_set_multipliers_rejects_unknown_mode():
 
 def test_set_solver_rejects_unknown_mode():
     assert kernels.cpl.cpl_set_solver(7) == 4
+    assert kernels.cpl.cpl_set_solver(3) == 4
     assert kernels.cpl.cpl_set_solver(AUTO) == 0
 
 
@@ -126,7 +138,10 @@ def test_kernel_rejects_a_corrupted_flat_description(cases_dir):
     bad = {"ispec one short": (ispec[:-1], rspec), "rspec one long": (ispec, np.append(rspec, 0.0)),
            "no elements in a segment": (np.where(np.arange(ispec.size) == header, 0, ispec), rspec),
            "DOF index past ndof": (np.where(np.arange(ispec.size) == ld0, ndof + 1, ispec), rspec),
-           "marker index past nmk": (np.where(np.arange(ispec.size) == con0 + 1, ispec[6] + 1, ispec), rspec)}
+           "marker index past nmk": (np.where(np.arange(ispec.size) == con0 + 1, ispec[6] + 1, ispec), rspec),
+           "row kind past the table (flexmech_markers NCON)":
+               (np.where(np.arange(ispec.size) == con0, max(ROW_KINDS) + 1, ispec), rspec),
+           "row kind 0": (np.where(np.arange(ispec.size) == con0, 0, ispec), rspec)}
     assert ispec[7] > 0                            # the slider-crank has constraint rows
     for what, (isp, rsp) in bad.items():
         code, res = status(isp, rsp)

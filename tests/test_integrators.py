@@ -86,8 +86,8 @@ KED_SDOF = (np.array([0, 0, 0, 1, 0, 0], np.int32), np.array([1], np.int32),
 KED_OMEGA = 1.0                                                                # sqrt(k / m)
 
 # coupled loop: one segment, one element, fixed chord (ends and th_1 fixed): only th_0 free,
-# m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L (flat description: flexmech_coupled_system, coupled_build); absang = arch = 0
-CPL_SDOF = (np.array([1, 0, 6, 1] + [0] * 8 + [1] + list(range(1, 7)) + [0, 0, 0, 0, 1, 0] + [0, 0], np.int32),
+# m th'' + k th = 0 with m = rho A L^3 / 105, k = 4 EI / L (flat description: flexmech_coupled_system, coupled_build); absang = arch = 0, nbd = -1 (no bordered band)
+CPL_SDOF = (np.array([1, 0, 6, 1] + [0] * 8 + [1] + list(range(1, 7)) + [0, 0, 0, 0, 1, 0] + [0, 0] + [-1], np.int32),
             np.array([1.0, 105.0, 1e3, 0.25, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]))   # L, rho A, EA, EI; node fractions
 CPL_OMEGA = 1.0
 CPL_Q0 = np.array([0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
@@ -99,7 +99,7 @@ def ked_steps(h, coef, u, v, p, nsteps=1):
     u0, v0, p0 = np.array([u], float), np.array([v], float), np.array([p], float)
     a0 = -KED_OMEGA**2 * u0
     uf, vf, af, _, status, _, _, nvalid = api.ked_run(
-        nsteps + 1, *KED_SDOF, 1, np.zeros(2), rig, np.zeros((3, 1, nsteps + 1), order="F"), np.ones(1, np.int32),
+        *KED_SDOF, 1, np.zeros(2), rig, np.zeros((3, 1, nsteps + 1), order="F"), np.ones(1, np.int32),
         np.zeros((1, nsteps + 1), order="F"),
         h, *coef, 1, 0, 0, 1e-8, 50, 1e300, u0, v0, a0, p0)
     check_status(status, "ked_run")
@@ -113,7 +113,7 @@ def cpl_steps(h, coef, u, v, p, nsteps=1):
     q[4], vv[4], pp[4] = u, v, p
     zeros3 = np.zeros((3, 1, nsteps + 1), order="F")
     qf, vf, af, lf, _, ef, status, _, _, nvalid, _ = kernels.cpl.cpl_run(
-        nsteps + 1, *CPL_SDOF, zeros3, 0.0, h, *coef, 1, 1e-14, 25, 0, 1e300, np.array([1], np.int32), q, vv, a, pp,
+        *CPL_SDOF, zeros3, 0.0, h, *coef, 1, 1e-14, 25, 0, 1e300, np.array([1], np.int32), q, vv, a, pp,
         np.zeros(3))
     check_status(status, "cpl_run")
     assert nvalid == nsteps + 1

@@ -12,7 +12,10 @@ from closed_forms import fourbar_angles, fourbar_rates, slider_crank
 import flexmech_py as fm
 from flexmech_py.case import read_case_file
 from flexmech_py.mechanism import MotionSource, prepare_motion
+from flexmech_py import kernels
 from flexmech_py.mechanism.analysis import constraint_matrices
+from flexmech_py.mechanism.packing import marker_position
+from flexmech_py.mechanism.rows import CON_POINT, ROW_KINDS
 from flexmech_py.simulate import motion_source
 
 TM = (0.10795, 0.2794, 0.27051, 0.254)        # Turcic-Midha crank-rocker [m]
@@ -337,3 +340,37 @@ def test_free_degree_of_freedom_without_load_is_a_warning():
     assert len(setup.warnings) == 1 and "joint_2" in setup.warnings[0]
     raw["loads"] = {"gravity": [0.0, -9.81]}
     assert prepare_motion(fm.validate_case(raw).mechanism, (0.0, -9.81)).warnings == []
+
+
+@pytest.mark.parametrize("name", ["quick_return", "sixbar_welded"])
+def test_rigid_rows_are_the_one_vocabulary_and_an_unknown_kind_is_refused(cases_dir, name):
+    """flexmech_mbs evaluates every joint as rows of flexmech_markers' kinds (mirror: mechanism/rows.py):
+    each joint's packed rows are its kind's own, a revolute's point rows give r_P - r_Q, and a row kind
+    outside the table is bad input (status 4) from mbs_eval, never another kind's rows."""
+    case = fm.load_case(cases_dir / f"{name}.toml")
+    setup = prepare_motion(case.mechanism)
+    packed, z = setup.packed, setup.z0
+    kinds = {j.kind for j in case.mechanism.joints}
+    assert kinds >= ({"revolute", "prismatic"} if name == "quick_return" else {"revolute", "weld"})
+    assert set(packed.row_kinds) <= set(ROW_KINDS)
+    phi, *_ = constraint_matrices(packed, z + 1e-3 * np.arange(z.size))   # off the assembled position
+    zz = z + 1e-3 * np.arange(z.size)
+    for i, (j, (r0, nr)) in enumerate(zip(case.mechanism.joints, packed.joint_rows)):
+        assert packed.row_kinds[r0:r0 + nr] == [r[0] for r in j.rigid_rows((1.0, 0.0), 0.0)]
+        if j.kind == "revolute":
+            gap = marker_position(zz, packed.markers[2 * i]) - marker_position(zz, packed.markers[2 * i + 1])
+            assert packed.row_kinds[r0:r0 + 2] == [CON_POINT, CON_POINT]
+            assert np.allclose(phi[r0:r0 + 2], gap, rtol=0, atol=1e-15)
+    header = 8                                     # mbs_nspec_header
+    nmk, nj, ncr = packed.ispec[1], packed.ispec[2], packed.ispec[7]
+    cr0 = header + nmk + 4 * nj                    # the first row's [joint, kind, aux]
+    assert ncr == sum(nr for _, nr in packed.joint_rows)
+    for bad_kind in (max(ROW_KINDS) + 1, 0, -1):
+        ispec = packed.ispec.copy()
+        ispec[cr0 + 3 * (ncr - 1) + 1] = bad_kind  # the last joint row
+        *_, status = kernels.mbs.mbs_eval(packed.nrow, ispec, packed.rspec, z, np.zeros_like(z), 0.0)
+        assert status == kernels.STATUS_BAD_INPUT, bad_kind
+        coord = packed.ispec.copy()
+        coord[header + nmk + 2 * nj] = bad_kind    # the first joint's coordinate row
+        *_, status = kernels.mbs.mbs_eval(packed.nrow, coord, packed.rspec, z, np.zeros_like(z), 0.0)
+        assert status == kernels.STATUS_BAD_INPUT, bad_kind

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .drives import Drive
+from .rows import in_radians
 from .system import Mechanism
 
 __all__ = ["Packed", "pack", "drawn_coordinates", "joint_coordinates", "marker_position", "row_scales",
@@ -33,6 +34,7 @@ class Packed:
     drive_rows: dict            # joint name -> row of its kinematic drive
     drives: list = field(default_factory=list)   # the drives packed (Drive objects), in order
     markers: list = field(default_factory=list)  # (body index or None, local position) per marker
+    row_kinds: list = field(default_factory=list)  # the row kind (mechanism.rows) of every row
 
 
 def drawn_coordinates(mech: Mechanism) -> np.ndarray:
@@ -94,20 +96,26 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
     starts = joint_coordinates(mech, z0) if starts is None else starts
     bodies = mech.bodies
     nb = len(bodies)
-    markers, jt_kind, jt_mk, jt_axis, jt_ref, joint_rows = [], [], [], [], [], []
-    row = 0
-    for j in mech.joints:
+    markers, jt_mk, jt_coord, jt_dir, joint_rows, cr, cr_dir, cr_ref = [], [], [], [], [], [], [], []
+    for ij, j in enumerate(mech.joints):
         a, b = mech.joint_points(j)
         ma, mb = _marker(mech, a), _marker(mech, b)
         markers += [ma, mb]
-        jt_kind.append(j.code)
         jt_mk.append([len(markers) - 1, len(markers)])
         ang_a = 0.0 if ma[0] is None else z0[3 * ma[0] + 2]
         ang_b = 0.0 if mb[0] is None else z0[3 * mb[0] + 2]
-        jt_axis.append(_rotate(j.unit_axis(), -ang_a) if j.kind == "prismatic" else np.zeros(2))
-        jt_ref.append(ang_b - ang_a)
-        joint_rows.append((row, j.rows))
-        row += j.rows
+        axis = _rotate(j.unit_axis(), -ang_a) if hasattr(j, "unit_axis") else np.zeros(2)
+        kind, aux, d = j.coordinate_row(axis)
+        jt_coord.append([kind, aux])
+        jt_dir.append(d)
+        rows = j.rigid_rows(axis, ang_b - ang_a)
+        joint_rows.append((len(cr), len(rows)))
+        for kind, aux, d, value in rows:
+            cr.append([ij + 1, kind, aux])
+            cr_dir.append(d)
+            cr_ref.append(value)
+    row_kinds = [r[1] for r in cr]
+    row = len(cr)
     drives = [d for d in mech.drives if not (kinematic_only and not d.kinematic)] + list(extra_drives)
     names = [j.name for j in mech.joints]
     packed_laws = [d.packed(starts[d.joint]) for d in drives]
@@ -117,6 +125,7 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
     for d, k in zip(drives, packed_laws):
         if d.kinematic:
             drive_rows[d.joint] = row
+            row_kinds.append(jt_coord[names.index(d.joint)][0])
             row += 1
         if k["table"] is None:
             dv_tab.append([0, 0])
@@ -126,14 +135,14 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
             tab_c += list(k["table"][1].T)
     lref = mech.characteristic_length()
     mass = [b.mass_properties() for b in bodies]
-    ispec = [nb, len(markers), len(mech.joints), len(drives), len(tab_t), nh, nth]
+    ispec = [nb, len(markers), len(mech.joints), len(drives), len(tab_t), nh, nth, len(cr)]
     ispec += [0 if m[0] is None else m[0] + 1 for m in markers]
-    ispec += jt_kind + [i for pair in jt_mk for i in pair]
+    ispec += [i for pair in jt_mk for i in pair] + [i for pair in jt_coord for i in pair] + [i for r in cr for i in r]
     ispec += [names.index(d.joint) + 1 for d in drives] + [d.code for d in drives]
     ispec += [i for pair in dv_tab for i in pair]
     rspec = [m for m, _, _ in mass] + [j for _, _, j in mass] + [float(gravity[0]), float(gravity[1]), lref]
     rspec += [x for m in markers for x in m[1]]
-    rspec += [x for a in jt_axis for x in a] + jt_ref
+    rspec += [float(x) for d in jt_dir for x in d] + [float(x) for d in cr_dir for x in d] + [float(v) for v in cr_ref]
     for k in packed_laws:
         rspec += list(k["par"])
     for k in packed_laws:
@@ -144,7 +153,7 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
     rspec += tab_t + [x for c in tab_c for x in c]
     return Packed(ispec=np.array(ispec, np.int32), rspec=np.array(rspec, float), n=3 * nb, nrow=row,
                   nj=len(mech.joints), lref=lref, joint_rows=joint_rows, drive_rows=drive_rows, drives=drives,
-                  markers=markers)
+                  markers=markers, row_kinds=row_kinds)
 
 
 def force_constant_positions(packed: Packed) -> dict:
@@ -158,14 +167,7 @@ def force_constant_positions(packed: Packed) -> dict:
 
 def row_scales(mech: Mechanism, packed: Packed) -> np.ndarray:
     """(nrow,) length per unit of each constraint row: 1 for rows in metres, lref for rows in radians."""
-    sc = np.ones(packed.nrow)
-    for j, (r0, nr) in zip(mech.joints, packed.joint_rows):
-        if j.kind in ("prismatic", "weld"):
-            sc[r0 + nr - 1] = packed.lref         # the angle row
-    for d in packed.drives:
-        if d.kinematic and mech.joint(d.joint).angular:
-            sc[packed.drive_rows[d.joint]] = packed.lref
-    return sc
+    return np.array([packed.lref if in_radians(k) else 1.0 for k in packed.row_kinds])
 
 
 def coordinate_drive(joint: str, value: float) -> Drive:

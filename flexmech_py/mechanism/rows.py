@@ -1,0 +1,35 @@
+"""The constraint-row vocabulary shared with the Fortran kernels (its one Python mirror).
+
+A row is a scalar function g of two markers a and b (points of bodies, segment nodes or the ground,
+each with a frame angle psi).  Fortran evaluates every row by the index of its kind, in one routine
+per kind (the table in ``fortran/flexmech_markers.f90``), for every model: the rigid-body solver
+(flexmech_mbs) and the coupled and nonlinear models (flexmech_coupled_rows).  A joint kind names its
+rows and its coordinate by these indices (:meth:`flexmech_py.mechanism.joints.Joint.rigid_rows`,
+``coordinate_row``); the kernels reject an index outside the table.
+
+=====  ===============  ==============  =====  ==================================================
+index  name             routine         unit   g; parameters (aux integer, d 2 reals in a's frame)
+=====  ===============  ==============  =====  ==================================================
+1      CON_POINT        row_point       m      (r_a - r_b)_i, i = aux (1: x, 2: y)
+2      CON_ANGLE        row_angle       rad    psi_b - psi_a
+3      CON_PROJECTION   row_projection  m      e . (r_b - r_a), e = R(psi_a) d
+=====  ===============  ==============  =====  ==================================================
+"""
+
+from __future__ import annotations
+
+__all__ = ["CON_POINT", "CON_ANGLE", "CON_PROJECTION", "ROW_KINDS", "in_radians"]
+
+CON_POINT, CON_ANGLE, CON_PROJECTION = 1, 2, 3
+
+#: index -> (name, unit of the row's value, Fortran routine in flexmech_markers)
+ROW_KINDS = {
+    CON_POINT: ("point", "m", "row_point"),
+    CON_ANGLE: ("angle", "rad", "row_angle"),
+    CON_PROJECTION: ("projection", "m", "row_projection"),
+}
+
+
+def in_radians(kind: int) -> bool:
+    """The row's value is an angle [rad] (scaled by the mechanism's length where rows are compared)."""
+    return ROW_KINDS[kind][1] == "rad"
