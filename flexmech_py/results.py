@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .budget_text import budget_lines, choice_lines
+
 __all__ = ["Result", "TimeseriesWriter", "read_timeseries", "versions"]
 
 
@@ -150,7 +152,15 @@ class Result:
         if self.failure:
             lines.insert(1, f"PARTIAL: the run stopped at t = {self.failure['time_s']:.6g} s; frames up to "
                             f"t = {self.all_stats().t_last:.6g} s")
-        return "\n".join(lines + self._assembly_lines() + self._validity_lines() + self._estimate_lines())
+        return "\n".join(lines + self._assembly_lines() + self._validity_lines() + self._estimate_lines()
+                         + self._budget_lines())
+
+    def _budget_lines(self) -> list[str]:
+        out = choice_lines(self.extra["model_choice"]) if self.extra.get("model_choice") else []
+        b = self.extra.get("error_budget")
+        if b and ("mesh" in b["parts"] or "model" in b["parts"]):
+            out += budget_lines(b)
+        return out
 
     def _assembly_lines(self) -> list[str]:
         mech = self.extra.get("mechanism")
