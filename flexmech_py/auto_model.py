@@ -39,9 +39,9 @@ def _worst(diff: dict, ref: Probe, prep, model: str) -> tuple[float, str | None]
     """(largest relative difference, its column) over the comparable, non-negligible columns."""
     tiny = scales.negligible(prep.case, ref.units, ref.peaks)
     worst, col = 0.0, None
+    free = prep.setup.mode == "dynamic"
     for name, d in diff.items():
-        spec = prep.case["outputs"].get(name)
-        if name in tiny or name not in ref.peaks or model_error.comparable(spec, prep.case, model):
+        if name in tiny or name not in ref.peaks or model_error.comparable(name, prep.case, model, free):
             continue
         rel = d / ref.peaks[name] if ref.peaks[name] > 0 else 0.0
         if not rel <= worst:

@@ -298,7 +298,7 @@ class ErrorBudget:
             return 0.0, ""
         if "R" not in self.probes:
             return None, self.why_no_probe
-        why = model_error.comparable(spec, self.prep.case, self.model)
+        why = model_error.comparable(name, self.prep.case, self.model, self.prep.setup.mode == "dynamic")
         if why:
             return None, why
         d = self.diff["model"].get(name)

@@ -12,6 +12,7 @@ and which outputs can be compared between the model families at all.
 from __future__ import annotations
 
 from .case import SUPERPOSITION_MODELS
+from .definitions import definition_notes
 
 __all__ = ["EXACT", "GEOMETRIC", "LADDER", "label", "comparable", "is_reference"]
 
@@ -36,22 +37,16 @@ def is_reference(model: str) -> bool:
     return model == EXACT[0]
 
 
-def comparable(spec: dict | None, case: dict, model: str) -> str:
-    """'' when an output of ``model`` can be compared with the exact model's, else why not: a rigid-
-    inertia load is a model's definition, a kinematically driven joint's coordinate is prescribed, and
-    a superposition model's ``displacement`` is the elastic deflection where the coupled models give
-    the deviation from the rigid-body solution.  ``spec`` None: an extra column of the coupled models
-    (energies, drive torques), comparable between them."""
+def comparable(name: str, case, model: str, free_motion: bool) -> str:
+    """'' when output ``name`` of ``model`` and of the exact model are the same quantity, else why not:
+    :func:`flexmech_py.definitions.definition_notes` (a displacement that holds the coupled models' drift
+    on a mechanism with a free degree of freedom, an undriven joint's coordinate: frames against chords),
+    and a rigid-inertia load (a model's own definition, with no mesh limit: the probes leave it out).
+    ``free_motion``: the mechanism has a degree of freedom no kinematic drive fixes.  An extra column
+    of the coupled models (energies, drive torques) compares between them."""
+    spec = case["outputs"].get(name)
     if spec is None:
         return ""
-    kind = spec["kind"]
-    if kind == "inertia_load":
+    if spec["kind"] == "inertia_load":
         return "a rigid-inertia load is a model's own definition"
-    if kind.startswith("joint_"):
-        drive = case.mechanism.drive_of(spec["joint"])
-        if drive is not None and drive.kinematic:
-            return "the coordinate of a kinematically driven joint is prescribed"
-    if kind == "displacement" and model in SUPERPOSITION_MODELS:
-        return ("a superposition model's displacement is the elastic deflection, the exact model's the deviation "
-                "from the rigid-body solution")
-    return ""
+    return definition_notes(case, model, EXACT[0], free_motion).get(name, "")
