@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 from . import mesh_error, model_error
+from .definitions import rigid_in_superposition
 
 __all__ = ["budget_warning", "budget_lines", "choice_lines", "pct", "significant_digits", "quote"]
 
@@ -52,7 +53,7 @@ def _parts_text(c: dict) -> str:
     return ", ".join(f"{PART_NAMES[k]} {pct(c[k])}" for k in ("model", "mesh", "time") if c.get(k) is not None)
 
 
-def _remedy(part: str, c: dict, out: dict, est: dict, prep, model: str, geometric) -> str | None:
+def _remedy(part: str, name: str, c: dict, out: dict, est: dict, prep, model: str, geometric) -> str | None:
     tol = out["tolerance"]
     if part == "mesh":
         n = max(ln["elements"] for ln in prep.case["links"] if not ln.get("rigid"))
@@ -61,6 +62,9 @@ def _remedy(part: str, c: dict, out: dict, est: dict, prep, model: str, geometri
                 f"or mesh.elements_per_link = {m} instead of {n}")
     if part == "model":
         better = "--model nonlinear (the exact model)"
+        if model not in ("coupled", "nonlinear") and rigid_in_superposition(prep.case, name):
+            return (f"{name} is the rigid-body solution's drive force in {model_error.label(model, geometric)} (docs/theory.md section 18.5), "
+                    f"which no geometric stiffness changes; {better} includes the links' elasticity in it")
         if model not in ("coupled", "nonlinear") and geometric in (None, "none"):
             better = ("the geometric stiffness of the axial forces (--set solver.geometric_stiffness=lagged) or "
                       + better)
@@ -81,7 +85,7 @@ def budget_warning(out: dict, est: dict, prep, model: str, geometric) -> dict | 
     if w is None or not out["worst_total"] > out["tolerance"]:
         return None
     c = out["columns"][w]
-    remedy = _remedy(c["dominant"], c, out, est, prep, model, geometric)
+    remedy = _remedy(c["dominant"], w, c, out, est, prep, model, geometric)
     if remedy is None:
         return None
     over = sum(1 for n, x in out["columns"].items()

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from .case import SUPERPOSITION_MODELS
 
-__all__ = ["definition_notes", "JOINT_OUTPUT_KINDS"]
+__all__ = ["definition_notes", "rigid_in_superposition", "JOINT_OUTPUT_KINDS"]
 
 #: the output kinds of a joint's coordinate
 JOINT_OUTPUT_KINDS = ("joint_angle", "joint_speed", "joint_acceleration")
@@ -44,6 +44,17 @@ def definition_notes(case: dict, model: str, reference_model: str, free_motion: 
                          f"{load[reference_model]}); name one load model in the output (e.g. model = \"classic\") "
                          "to compare like with like")
     return out
+
+
+def rigid_in_superposition(case, name: str) -> bool:
+    """Is output ``name`` the rigid-body solution's value in the superposition models: a kinematic drive's
+    ``drive_force`` (docs/theory.md section 18.5)?  No superposition model, with or without geometric
+    stiffness, has an elastic part in it; the coupled and nonlinear models do (their multipliers)."""
+    sp = case["outputs"].get(name)
+    if sp is None or sp["kind"] != "drive_force":
+        return False
+    drive = case.mechanism.drive_of(sp["joint"])
+    return drive is not None and drive.kinematic
 
 
 def _frames_differ(mech, joint: str) -> bool:

@@ -203,7 +203,8 @@ def test_documented_csv_and_summary_format(tmp_path):
     doc = (DOCS / "cli.md").read_text(encoding="utf-8")
     section = doc.split("**summary.json**", 1)[1].split("**stdout**", 1)[0]
     documented = set(re.findall(r"^\| `(\w+)` \|", section, re.M))
-    optional = {"coupled", "geometric_stiffness", "failed_at_s", "failure", "reactions"}   # some models, options, failed runs
+    optional = {"coupled", "geometric_stiffness", "failed_at_s", "failure", "reactions",   # some models, options, failed runs
+                "model_choice"}                                                           # model = "auto"
     assert set(summary) <= documented and documented - set(summary) <= optional
     assert set(summary["dofs"]) == {"all", "free", "half_bandwidth", "elements"}
     assert set(summary["wall_time_s"]) == {"rigid_s", "kernel_s", "total_s"}

@@ -119,7 +119,7 @@ def test_first_run_as_the_readme_describes_it(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, warned", [
     (["run", "cases/fourbar_hac.toml", "--set", "solver.t_end=0.05"], "budget"),       # "only the error budget warns"
-    (["run", "cases/manipulator_bricout.toml", "--set", "solver.t_end=0.25"], ""),     # "stays inside the range"
+    (["run", "cases/manipulator_bricout.toml", "--set", "solver.t_end=0.25"], "coupling"),   # "yet its error budget warns"
     (["run", "cases/fourbar_hac.toml", "--set", "links.coupler.yield_strain=0.004"], "yield")])
 def test_readme_first_run_commands(tmp_path, capsys, argv, warned):
     assert " ".join(argv[:2]) in README.replace("flexmech run", "run")
@@ -128,6 +128,11 @@ def test_readme_first_run_commands(tmp_path, capsys, argv, warned):
     assert bool(w) == bool(warned)
     if warned == "yield":
         assert any("coupler: strain exceeds its yield strain 0.004" in x for x in w)
+    if warned == "coupling":      # inside the validity range, but hac misses the elastic-rigid coupling
+        assert len(w) == 1 and "error budget: tip_dy_deflection may be off by about 120 %" in w[0]
+        assert "the model error dominates" in w[0] and "--model nonlinear" in w[0]
+        v = json.loads((tmp_path / "r" / "summary.json").read_text())["validity_overall"]
+        assert v["valid_until_s"] is None
     if warned == "budget":
         assert len(w) == 1 and "error budget: strain_follower_mid" in w[0] and "the model error dominates" in w[0]
         b = json.loads((tmp_path / "r" / "summary.json").read_text())["error_budget"]["columns"]
