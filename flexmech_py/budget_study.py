@@ -198,8 +198,8 @@ def main(argv=None) -> int:
                 c = cost(case, model, args.repeat)
                 costs.append({"case": label, "model": model, **c})
                 print(f"{label}, {model}: budget +{100 * c['budget_ratio']:.0f} %", flush=True)
-    _write_csv(out / "budget_validation.csv", rows)
-    _write_csv(out / "budget_cost.csv", costs)
+            _write_csv(out / "budget_validation.csv", rows)      # after every run: a stopped study keeps its rows
+            _write_csv(out / "budget_cost.csv", costs)
     if rows:
         (out / "budget_validation.md").write_text("\n".join(summary_table(rows)) + "\n", encoding="utf-8")
         print("\n".join(summary_table(rows)))

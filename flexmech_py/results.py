@@ -142,7 +142,7 @@ class Result:
         """A short human-readable table of the outputs."""
         s = self.summary()
         w = max(len(n) for n in self.columns) if self.columns else 4
-        lines = [f"{s['title']}  [model {self.model}]",
+        lines = [f"{s['title']}  [model {self._model_words()}]",
                  f"{s['steps']} steps of {self.dt:.4g} s, {s['dofs']['free']} free DOFs "
                  f"(half bandwidth {s['dofs']['half_bandwidth']}); kernel {self.timing.get('kernel_s', 0):.3f} s, "
                  f"total {self.timing.get('total_s', 0):.3f} s",
@@ -154,6 +154,13 @@ class Result:
                             f"t = {self.all_stats().t_last:.6g} s")
         return "\n".join(lines + self._assembly_lines() + self._validity_lines() + self._estimate_lines()
                          + self._budget_lines())
+
+    def _model_words(self) -> str:
+        """What ran: the model, its geometric stiffness, and model = "auto"'s choice ("auto → classic +
+        geometric stiffness (lagged)")."""
+        geo = self.extra.get("geometric_stiffness", {}).get("source", "none")
+        ran = self.model + (f" + geometric stiffness ({geo})" if geo not in (None, "none") else "")
+        return f"auto → {ran}" if self.extra.get("model_choice") else ran
 
     def _budget_lines(self) -> list[str]:
         out = choice_lines(self.extra["model_choice"]) if self.extra.get("model_choice") else []
