@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .case import MODELS, apply_overrides, read_case_file, validate_case
+from .case import MODELS, apply_overrides, read_case_file, study_model, validate_case
 from .errors import CaseError
 from .notices import silenced
 from .outdir import ResultFolder
@@ -350,7 +350,7 @@ def _study(case_path, *, overrides, models, integrators, dt_levels, elements, gr
     raw = apply_overrides(raw0, list(overrides))
     case = validate_case(raw, source=source)
     sol = case["solver"]
-    models = list(models) if models else [sol["model"]]
+    models = list(models) if models else [study_model(None, case)]
     bad = [m for m in models if m not in MODELS]
     if bad:
         raise CaseError("--models", f"unknown model(s) {', '.join(bad)}; choose from {', '.join(MODELS)}")

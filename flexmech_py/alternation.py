@@ -17,8 +17,9 @@ and show a smooth curve.  It reads
   not read there.
 
 A quantity alternates when its step-to-step change flips sign at ALT_FLIPS consecutive steps; its
-alternating part is |y_n - 2 y_{n-1} + y_{n-2}| / 4.  Past ALT_WARN of the quantity's peak the run
-warns, naming the quantity, the cause and the setting that removes it.
+alternating part is |y_n - 2 y_{n-1} + y_{n-2}| / 4.  Past ALT_WARN of the quantity's peak, and past
+its round-off floor (:func:`roundoff_floors`), the run warns, naming the quantity, the cause and the
+setting that removes it.
 """
 
 from __future__ import annotations
@@ -26,15 +27,38 @@ from __future__ import annotations
 import numpy as np
 
 from . import notices
-from .case import integrator_of
+from .case import integrator_coefficients, integrator_of
 
-__all__ = ["AlternationCheck", "ALT_WARN", "ALT_FLIPS", "dissipation", "alternation_cause"]
+__all__ = ["AlternationCheck", "ALT_WARN", "ALT_FLIPS", "ROUNDOFF_ULPS", "dissipation", "roundoff_floors",
+           "alternation_cause"]
 
 #: alternating part, as a fraction of the quantity's peak, above which a run warns
 ALT_WARN = 0.005
 #: consecutive sign flips of a quantity's change that make an alternation (as fortran/flexmech_alternation.f90)
 ALT_FLIPS = 20
 SKIP_COLUMNS = ("newton_iterations",)
+#: the round-off of a position in the time loops, in machine epsilons of the mechanism's size: the
+#: Watt six-bar from rest (all forces ~1e-5 N) alternates at about 10 of them, the same at dt and dt/4
+ROUNDOFF_ULPS = 100.0
+
+
+def roundoff_floors(case, model: str, dt: float) -> dict:
+    """{unit: the alternating part that round-off alone makes}, below which an alternation is not
+    reported, whatever its share of the peak.  A step's positions carry a round-off
+    delta = ROUNDOFF_ULPS eps L (L the mechanism's size); the time loop turns it into an acceleration
+    delta c / dt^2 (c = (1 - alpha_m) / ((1 - alpha_f) beta), the integrator's coefficient of the new
+    positions, theory.md section 15), and the multipliers balance it against the mechanism's mass m:
+    a force m delta c / dt^2 [N], a moment that times L [N m], a length delta [m], an angle delta / L
+    [rad].  It grows as 1/dt^2 like that round-off does, and stays far below a real oscillation (the
+    trammel's drive force under average acceleration: 9e4 times it at dt = 1e-5 s, 2e4 at 5e-6 s)."""
+    integ = integrator_of(case["solver"], model)
+    am, af, beta, _ = integrator_coefficients(integ["integrator"], integ)
+    mech = case.mechanism
+    size = mech.characteristic_length()
+    mass = sum(b.mass_properties()[0] for b in mech.bodies)
+    delta = ROUNDOFF_ULPS * np.finfo(float).eps * size
+    force = mass * delta * (1.0 - am) / ((1.0 - af) * beta * dt * dt)
+    return {"N": force, "N m": force * size, "m": delta, "rad": delta / size}
 
 
 def dissipation(sol: dict, model: str) -> float:
@@ -102,6 +126,7 @@ class AlternationCheck:
         self.sol = prep.case["solver"]
         self.out_every = int(prep.out_every)
         self.dt = float(prep.dt)
+        self.floors = roundoff_floors(prep.case, model, self.dt)
         self.rows: dict = {}
         self.columns: dict = {}
         self.frames = _ColumnWatch() if self.out_every == 1 else None
@@ -131,12 +156,12 @@ class AlternationCheck:
         on_rows = {c for f in rows for c in f["columns"]}        # a column seen through its multipliers
         seen = rows + [f for f in self._columns_seen(res) if f["columns"][0] not in on_rows]
         seen.sort(key=lambda f: -f["relative"])
-        found = [f for f in seen if f["relative"] > ALT_WARN]
+        found = [f for f in seen if f["relative"] > ALT_WARN and f["amplitude"] > self.floors.get(f["unit"], 0.0)]
         rho = dissipation(self.sol, self.model)
         checked = [what for what, on in (("the multipliers at every step", bool(self.rows)),
                                          ("every output at every step", self.frames is not None)) if on]
         out = {"checked": " and ".join(checked) or "nothing (no multipliers, and frames every > 1 step)",
-               "threshold": ALT_WARN, "rho_inf": rho, "found": found,
+               "threshold": ALT_WARN, "roundoff_floor": self.floors, "rho_inf": rho, "found": found,
                "largest": ({k: seen[0][k] for k in ("quantity", "relative", "t_s")} if seen else None)}
         if found:
             out["warning"] = _warning(found, rho, self.model, self.dt)

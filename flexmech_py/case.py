@@ -30,12 +30,26 @@ try:  # Python >= 3.11
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["Case", "load_case", "validate_case", "apply_overrides", "MODELS", "SUPERPOSITION_MODELS", "OUTPUT_KINDS",
-           "INTEGRATORS", "integrator_coefficients", "integrator_of", "DEFAULT_INTEGRATORS",
-           "DIVERGENCE_FACTOR"]
+__all__ = ["Case", "load_case", "validate_case", "apply_overrides", "MODELS", "MODEL_CHOICES", "SUPERPOSITION_MODELS",
+           "STUDY_MODEL", "study_model", "OUTPUT_KINDS", "INTEGRATORS", "integrator_coefficients", "integrator_of",
+           "DEFAULT_INTEGRATORS", "DIVERGENCE_FACTOR"]
 
 SUPERPOSITION_MODELS = ("hac", "classic", "classic-translational")
 MODELS = SUPERPOSITION_MODELS + ("coupled", "nonlinear")
+#: what solver.model and --model accept: a model, or "auto" (the cheapest model whose estimated model error
+#: is within solver.tolerance: flexmech_py.auto_model), the default of a case that names none
+MODEL_CHOICES = MODELS + ("auto",)
+#: the model of the studies of one model (accuracy, modes, steady, stability) when the case says "auto"
+STUDY_MODEL = "hac"
+
+
+def study_model(model: str | None, case: dict) -> str:
+    """The model a study of one model uses: ``model``, else the case's, with "auto" taken as STUDY_MODEL
+    (auto chooses per run; a study of one model's discretization or frozen dynamics names it)."""
+    model = case["solver"]["model"] if model is None else model
+    return STUDY_MODEL if model == "auto" else model
+
+
 INTEGRATORS = ("newmark", "hht", "generalized-alpha")
 # the parameter key of each integrator (solver.<key>), its default and its range
 #: the nonlinear model's node angles (docs/theory.md 12.1): each element's end rotations from its
@@ -81,7 +95,11 @@ UNITS = {
     "position": "m", "axial_force": "N",
 }
 REACTION_SOURCES = ("model", "rigid")   # reaction outputs: the run model's, or the rigid-body solution's
-ERROR_ESTIMATES = ("time", "none")   # step doubling (one more run at 2 dt), or nothing (step_doubling.py)
+#: solver.error_estimate: the parts of the error budget (budget.py), "all" of them, "none", or parts joined
+#: by "+" (e.g. "time+mesh")
+ERROR_PARTS = ("time", "mesh", "model")
+TOLERANCE_DEFAULT = 0.05       # solver.tolerance: a fraction of each output's peak (budget.TOLERANCE)
+ELEMENTS_DEFAULT = 8           # mesh.elements_per_link of a case that gives none
 TOP_KEYS = {"case", "mechanism", "links", "bodies", "mesh", "joints", "drive", "drives", "initial", "point_masses",
             "rotary_inertias", "loads", "solver", "outputs"}
 
@@ -241,7 +259,7 @@ def validate_case(raw: dict, source: str = "<case>") -> Case:
     mech = mechanism_from_spec(general)
     mesh = general.get("mesh", {})
     v.keys(mesh, {"elements_per_link"}, "mesh")
-    r["mesh"] = {"elements_per_link": v.whole(mesh, "elements_per_link", "mesh", default=2)}
+    r["mesh"] = {"elements_per_link": v.whole(mesh, "elements_per_link", "mesh", default=ELEMENTS_DEFAULT)}
     spec = mechanism_spec(mech)
     r["mechanism"] = spec.get("mechanism", {"ground": {}})
     if mech.template is not None:
@@ -275,7 +293,8 @@ def validate_case(raw: dict, source: str = "<case>") -> Case:
 def _solver(sol: dict, mech) -> dict:
     v.keys(sol, {"t_end", "dt", "output_every", "integrator", "beta", "gamma", "hht_alpha", "rho_inf", "divergence_limit",
                  "rayleigh", "model", "rigid_rtol", "rigid_atol", "newton_tol", "newton_maxit",
-                 "geometric_stiffness", "geometric_tol", "geometric_maxit", "error_estimate", "node_angles"}, "solver")
+                 "geometric_stiffness", "geometric_tol", "geometric_maxit", "error_estimate", "tolerance", "node_angles"},
+           "solver")
     t_end = v.num(sol, "t_end", "solver", positive=True, required=True)
     dt = v.num(sol, "dt", "solver", positive=True, required=True)
     if dt > t_end:
@@ -287,7 +306,7 @@ def _solver(sol: dict, mech) -> dict:
             "divergence_limit": v.num(sol, "divergence_limit", "solver", positive=True,
                                       default=DIVERGENCE_FACTOR * longest),
             "rayleigh": v.vector(sol, "rayleigh", "solver", 2, default=[0.0, 0.0], nonneg=True),
-            "model": v.text(sol, "model", "solver", default="hac", choices=MODELS),
+            "model": v.text(sol, "model", "solver", default="auto", choices=MODEL_CHOICES),
             "rigid_rtol": v.num(sol, "rigid_rtol", "solver", default=1e-10, positive=True),
             "rigid_atol": v.num(sol, "rigid_atol", "solver", default=1e-12, positive=True),
             "newton_tol": v.num(sol, "newton_tol", "solver", default=1e-8, positive=True),
@@ -296,8 +315,30 @@ def _solver(sol: dict, mech) -> dict:
                                           choices=("none", "current", "lagged", "quasi_static")),
             "geometric_tol": v.num(sol, "geometric_tol", "solver", default=1e-8, positive=True),
             "geometric_maxit": v.whole(sol, "geometric_maxit", "solver", default=50),
-            "error_estimate": v.text(sol, "error_estimate", "solver", default="time", choices=ERROR_ESTIMATES),
+            "error_estimate": _error_estimate(sol),
+            "tolerance": _tolerance(sol),
             "node_angles": v.text(sol, "node_angles", "solver", default="relative", choices=NODE_ANGLES)}
+
+
+def _error_estimate(sol: dict) -> str:
+    """solver.error_estimate: "all" (default), "none", or parts of ERROR_PARTS joined by "+"."""
+    text = v.text(sol, "error_estimate", "solver", default="all")
+    if text in ("all", "none"):
+        return text
+    parts = [p.strip() for p in text.split("+")]
+    bad = [p for p in parts if p not in ERROR_PARTS]
+    if bad or not parts:
+        raise CaseError("solver.error_estimate", f"must be 'all', 'none' or parts of {', '.join(ERROR_PARTS)} joined by "
+                                                 f"'+' (e.g. 'time+mesh'), got {text!r}")
+    return "+".join(p for p in ERROR_PARTS if p in parts)
+
+
+def _tolerance(sol: dict) -> float:
+    tol = v.num(sol, "tolerance", "solver", default=TOLERANCE_DEFAULT, positive=True)
+    if tol >= 1.0:
+        raise CaseError("solver.tolerance", f"is a fraction of each output's peak and must be below 1, got {tol}; "
+                                            "e.g. 0.05 for 5 %")
+    return tol
 
 
 def _check_tables_cover_run(mech, t_end: float) -> None:

@@ -72,7 +72,7 @@ _positive_int = _whole(1)
 
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
-    from .case import MODELS
+    from .case import MODEL_CHOICES, MODELS
 
     from .case import INTEGRATORS
 
@@ -82,7 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="run a case file and write timeseries.csv, summary.json and plots")
     r.add_argument("case", help="TOML case file (see docs/cases.md)")
-    r.add_argument("--model", choices=MODELS, help="rigid-inertia load model (default: the case's solver.model)")
+    r.add_argument("--model", choices=MODEL_CHOICES,
+                   help="model: a superposition load model, coupled, nonlinear, or auto (the cheapest one within "
+                        "solver.tolerance; default: the case's solver.model, auto when it names none)")
     r.add_argument("--dt", type=_positive_float, help="time step [s] (default: the case's solver.dt)")
     r.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (default: the case's mesh)")
     r.add_argument("--integrator", choices=INTEGRATORS,
@@ -268,14 +270,14 @@ def _out(args, suffix: str):
 
 
 def _cmd_stability(args) -> int:
-    from .case import load_case
+    from .case import load_case, study_model
     from .floquet import REFINE_ROUNDS, parse_range, stability_chart
     from .outdir import ResultFolder
 
     case = load_case(args.case, overrides=args.set)
     speeds = parse_range(args.speed, "--speed")
     out = _out(args, "stability")
-    model = args.model or case["solver"]["model"]
+    model = study_model(args.model, case)
     geometric = args.geometric or case["solver"]["geometric_stiffness"]
     with ResultFolder(out, "stability") as rf:
         rows, runs = stability_chart(case, speeds, model=model, geometric=geometric, nmodes=args.modes, jobs=args.jobs,

@@ -43,7 +43,7 @@ def integrator_overrides(args) -> list[str]:
     return out
 
 
-def _shapes(args, prep, model):
+def _shapes(args, prep):
     """The ShapeCollector of ``--draw N`` and ``--view`` (None without either); its frames' memory
     checked first.  ``--view`` keeps as many frames as the page holds (flexmech_py.view.decimate)."""
     from .shapes import ShapeCollector, body_points
@@ -61,7 +61,7 @@ def _shapes(args, prep, model):
     points = sum(int(ln.get("elements", 0)) + 1 for ln in prep.case["links"]) + 4 * len(prep.case["links"]) + 8
     check_count(kept, SHAPE_POINT_BYTES * points, "--draw", "drawn frames",
                 lambda n: f"draw at most {format_count(n)} frames (e.g. --draw {max(2, min(n, 1000))})")
-    return ShapeCollector(prep.case.mechanism, prep.frames, model, count, prep.coupled)
+    return ShapeCollector(prep.case.mechanism, prep.frames, count, prep.coupled)
 
 
 def cmd_run(args) -> int:
@@ -74,7 +74,7 @@ def cmd_run(args) -> int:
     prep = Prepared(case, dt=args.dt, elements_per_link=args.elements_per_link)
     model = args.model or prep.case["solver"]["model"]
     out = args.out if args.out is not None else Path("results") / f"{safe_name(Path(args.case).stem)}-{model}"
-    shapes = _shapes(args, prep, model)
+    shapes = _shapes(args, prep)
     design = design_analysis(args, prep.case, prep.coupled[model].mesh if model in prep.coupled else prep.fe)
     stopped, paths = None, []
     with ResultFolder(out, "run", claim=lambda: claim(out, prep.case, args.overwrite), overwrite=args.overwrite) as rf:

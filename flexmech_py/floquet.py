@@ -28,7 +28,7 @@ import numpy as np
 import scipy.linalg
 
 from . import notices
-from .case import SUPERPOSITION_MODELS, Case
+from .case import SUPERPOSITION_MODELS, Case, study_model
 from .errors import CaseError
 from .regions import default_resolution, multiplier_type, refinement_speeds
 from .sizes import check_points
@@ -70,7 +70,7 @@ class PeriodicCase:
     def __init__(self, case: dict, model: str | None = None, *, speed: float | None = None,
                  geometric: str | None = None, dt: float | None = None, elements_per_link: int | None = None):
         case = case if isinstance(case, Case) else Case(case)   # a resolved case that travelled as a plain dict
-        model = case["solver"]["model"] if model is None else model
+        model = study_model(model, case)
         geometric = case["solver"]["geometric_stiffness"] if geometric is None else geometric
         i = self.check(case, model, geometric)
         speed = case["drives"][i]["speed"] if speed is None else float(speed)
@@ -329,7 +329,7 @@ def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: 
     ``worker`` where it ran), and a :class:`ChartRuns`."""
     from .parallel import run_tasks
 
-    model = case["solver"]["model"] if model is None else model
+    model = study_model(model, case)
     geometric = case["solver"]["geometric_stiffness"] if geometric is None else geometric
     PeriodicCase.check(case, model, geometric)
     speeds = sorted({float(s) for s in speeds})

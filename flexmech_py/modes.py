@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import modal, shapes
-from .case import MODELS, SUPERPOSITION_MODELS, Case
+from .case import MODELS, SUPERPOSITION_MODELS, Case, study_model
 from .errors import CaseError
 from .sizes import check_count, format_count
 
@@ -220,7 +220,7 @@ class _Frozen:
 
 
 def _model_and_geometric(case, model, geometric):
-    model = case["solver"]["model"] if model is None else model
+    model = study_model(model, case)
     geometric = case["solver"]["geometric_stiffness"] if geometric is None else geometric
     return model, geometric
 

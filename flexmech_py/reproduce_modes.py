@@ -66,7 +66,7 @@ def _drawing(out: Path, res, name: str, say) -> list[str]:
 
     t0 = time.perf_counter()
     case = res.case
-    shapes = ShapeCollector(case.mechanism, res.t.size, res.model, PANELS)
+    shapes = ShapeCollector(case.mechanism, res.t.size, PANELS)
     shapes.add(res)
     sf = shapes.result()
     png, scale = draw_frames(out / f"{name}_drawing.png", sf, case.mechanism, np.arange(sf.key.size),

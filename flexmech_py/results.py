@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .budget_text import budget_lines, choice_lines
+
 __all__ = ["Result", "TimeseriesWriter", "read_timeseries", "versions"]
 
 
@@ -140,7 +142,7 @@ class Result:
         """A short human-readable table of the outputs."""
         s = self.summary()
         w = max(len(n) for n in self.columns) if self.columns else 4
-        lines = [f"{s['title']}  [model {self.model}]",
+        lines = [f"{s['title']}  [model {self._model_words()}]",
                  f"{s['steps']} steps of {self.dt:.4g} s, {s['dofs']['free']} free DOFs "
                  f"(half bandwidth {s['dofs']['half_bandwidth']}); kernel {self.timing.get('kernel_s', 0):.3f} s, "
                  f"total {self.timing.get('total_s', 0):.3f} s",
@@ -150,7 +152,22 @@ class Result:
         if self.failure:
             lines.insert(1, f"PARTIAL: the run stopped at t = {self.failure['time_s']:.6g} s; frames up to "
                             f"t = {self.all_stats().t_last:.6g} s")
-        return "\n".join(lines + self._assembly_lines() + self._validity_lines() + self._estimate_lines())
+        return "\n".join(lines + self._assembly_lines() + self._validity_lines() + self._estimate_lines()
+                         + self._budget_lines())
+
+    def _model_words(self) -> str:
+        """What ran: the model, its geometric stiffness, and model = "auto"'s choice ("auto → classic +
+        geometric stiffness (lagged)")."""
+        geo = self.extra.get("geometric_stiffness", {}).get("source", "none")
+        ran = self.model + (f" + geometric stiffness ({geo})" if geo not in (None, "none") else "")
+        return f"auto → {ran}" if self.extra.get("model_choice") else ran
+
+    def _budget_lines(self) -> list[str]:
+        out = choice_lines(self.extra["model_choice"]) if self.extra.get("model_choice") else []
+        b = self.extra.get("error_budget")
+        if b and ("mesh" in b["parts"] or "model" in b["parts"]):
+            out += budget_lines(b)
+        return out
 
     def _assembly_lines(self) -> list[str]:
         mech = self.extra.get("mechanism")

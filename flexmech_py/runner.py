@@ -2,8 +2,9 @@
 through the guards into a sink, and how the run ended (docs/theory.md section 19).
 
 :func:`execute` feeds every block to the validity tracker, to the check for a period-2 dt
-oscillation (:class:`flexmech_py.alternation.AlternationCheck`), to the step-doubling estimate (its
-run at 2 dt advances block by block beside the run) and to a sink: :class:`MemorySink` keeps every
+oscillation (:class:`flexmech_py.alternation.AlternationCheck`), to the error budget
+(:class:`flexmech_py.budget.ErrorBudget`: the step-doubling run at 2 dt and the mesh and model probes
+advance block by block beside the run) and to a sink: :class:`MemorySink` keeps every
 frame (``Prepared.run``), :class:`FileSink` writes them to timeseries.csv as they come and keeps only
 the last block, the column statistics and a bounded envelope for the plots (``Prepared.stream``, the
 ``flexmech run`` command).  A run that stops keeps its frames, marked: a failed step (SolverError,
@@ -18,8 +19,9 @@ import shutil
 import time
 from pathlib import Path
 
-from . import alternation, guards, step_doubling
-from .case import MODELS
+from . import alternation, auto_model, guards
+from .budget import TOLERANCE, ErrorBudget, parts_of
+from .case import MODEL_CHOICES
 from .errors import CaseError, Interrupted, MechanismError, OutputError, SolverError, signal_words
 from .frames import ColumnStats, Envelope, join
 from .outdir import PARTIAL_DIR, ResultFolder, claim, release_reserve
@@ -153,36 +155,51 @@ class FileSink:
         return 0 if self.writer is None else self.writer.bytes
 
 
-def _take(block, sink, validity, doubling, observers=()) -> None:
+def _take(block, sink, validity, budget, observers=()) -> None:
     sink.add(block)
     validity.add(block)
-    if doubling is not None:
-        doubling.add(block)
+    if budget is not None:
+        budget.add(block)
     for obs in observers:
         obs.add(block)
 
 
-def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | None = None, diagnose: bool = True,
+def estimate_parts(prep, estimate) -> tuple:
+    """The error-budget parts of a run: the case's ``solver.error_estimate`` (``estimate`` None or
+    True), none (False), or a setting such as "time+mesh"."""
+    if estimate is None or estimate is True:
+        return parts_of(prep.case["solver"].get("error_estimate", "all"))
+    if estimate is False:
+        return ()
+    return parts_of(estimate)
+
+
+def execute(prep, model: str | None, sink, *, geometric=None, estimate=None, diagnose: bool = True,
             u0=None, v0=None, progress=None, observers=()):
     """Run one model of ``prep`` into ``sink``; returns the Result (see the module's docstring).
-    ``progress(done, total)``: called after every block with the work done and to do (steps of the
-    run and of its estimate); ``observers``: objects whose ``add(block)`` sees every block (e.g.
-    :class:`flexmech_py.shapes.ShapeCollector`)."""
+    ``model`` "auto" runs the model :func:`flexmech_py.auto_model.choose` picks; ``estimate``: the parts
+    of the error budget (:func:`estimate_parts`).  ``progress(done, total)``: called after every block
+    with the work done and to do (steps of the run and of its step-doubling run); ``observers``:
+    objects whose ``add(block)`` sees every block (e.g. :class:`flexmech_py.shapes.ShapeCollector`)."""
     t_start = time.perf_counter()
     model = prep.case["solver"]["model"] if model is None else model
-    if model not in MODELS:
-        raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
-    if estimate is None:
-        estimate = prep.case["solver"].get("error_estimate", "time") != "none"
+    if model not in MODEL_CHOICES:
+        raise CaseError("model", f"must be one of {', '.join(MODEL_CHOICES)}, got {model!r}")
+    parts = estimate_parts(prep, estimate)
+    tolerance = prep.case["solver"].get("tolerance", TOLERANCE)
+    choice = auto_model.choose(prep, tolerance) if model == "auto" else None
+    if choice is not None:
+        model, geometric = choice.model, choice.geometric
     validity = guards.ValidityTracker()
     alternating = alternation.AlternationCheck(prep, model)
     observers = (*observers, alternating)
-    doubling = step_doubling.StepDoubling(prep, model, geometric) if estimate else None
+    budget = ErrorBudget(prep, model, geometric, parts, tolerance, choice.probes if choice else None) if parts else None
+    doubling = budget.sd if budget is not None else None
     total = prep.nsteps + (doubling.coarse_steps if doubling else 0)
     stop = None
     try:
         for block in prep.blocks(model, geometric, u0=u0, v0=v0):
-            _take(block, sink, validity, doubling, observers)
+            _take(block, sink, validity, budget, observers)
             if progress is not None:
                 progress(_work_done(block, doubling), total)
     except SolverError as exc:
@@ -196,6 +213,7 @@ def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | N
         stop = exc
     except OSError as exc:             # writing the frames failed (a full disk)
         stop = exc
+    prep.end_shared_motion()
     res = sink.result()
     if res is None:               # nothing to keep: the stop happened before the first frame
         sink.close(None)
@@ -204,7 +222,9 @@ def execute(prep, model: str | None, sink, *, geometric=None, estimate: bool | N
         if isinstance(stop, (SolverError, MechanismError)):
             stop.partial = None
         raise stop if stop is not None else Interrupted("stopped before the first frame")
-    return _finish(prep, model, geometric, res, sink, stop, (validity, alternating), doubling, diagnose, t_start)
+    if choice is not None:
+        res.extra["model_choice"] = choice.record
+    return _finish(prep, model, geometric, res, sink, stop, (validity, alternating), budget, diagnose, t_start)
 
 
 def _work_done(block, doubling) -> int:
@@ -214,7 +234,7 @@ def _work_done(block, doubling) -> int:
     return done
 
 
-def _finish(prep, model, geometric, res, sink, stop, checks, doubling, diagnose, t_start):
+def _finish(prep, model, geometric, res, sink, stop, checks, budget, diagnose, t_start):
     """Guards, estimate and files of a run that ended (or stopped: raise after the files are written)."""
     res.timing["total_s"] = prep.t_prepare + time.perf_counter() - t_start
     for check in checks:      # validity, then the period-2 dt alternation
@@ -230,7 +250,10 @@ def _finish(prep, model, geometric, res, sink, stop, checks, doubling, diagnose,
     if isinstance(stop, OSError):
         raise _write_failed(res, sink, stop)
     try:
-        res.extra["error_estimate"] = doubling.finish(res) if doubling else {"method": "none"}
+        if budget is None:
+            res.extra["error_estimate"] = {"method": "none"}
+        else:
+            res.extra["error_estimate"], res.extra["error_budget"] = budget.finish(res)
     except KeyboardInterrupt as exc:
         res.extra["error_estimate"] = {"method": "none", "reason": signal_words(exc)}
         raise _interrupted(res, sink, "during the error estimate (the run itself completed)", exc) from None

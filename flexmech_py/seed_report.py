@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .budget_text import quote
 from .guards import link_strains
 from .reproduce import ALLOYS, SEED_CASES, load_vector_difference, model_differences
 
-__all__ = ["report_text", "first_time", "when", "torque_work"]
+__all__ = ["report_text", "first_time", "when", "torque_work", "discretization_error"]
 
 #: tensile strength of 7075-T6 [Pa] (ASM Handbook Vol. 2), the strongest common structural aluminium alloy
 ULTIMATE_7075 = 572e6
@@ -21,6 +22,22 @@ YIELD_ALLOY = "6061-T6"   # the alloy whose yield strain the four-bar's strains 
 
 def _pct(x: float) -> str:
     return f"{100 * x:.3g} %"
+
+
+def discretization_error(res, kinds=("strain",)) -> float | None:
+    """The largest time-step + mesh error of the run's outputs of ``kinds``, as a fraction of their peaks
+    (the run's error budget), or None when the run has no budget: how many digits its values carry."""
+    b = res.extra.get("error_budget")
+    if not b:
+        return None
+    errs = [(c["time"] or 0.0) + (c["mesh"] or 0.0) for n, c in b["columns"].items()
+            if res.case["outputs"].get(n, {}).get("kind") in kinds and "negligible" not in c]
+    return max(errs) if errs else None
+
+
+def _pct_err(x: float, rel: float | None) -> str:
+    """A fraction as a percentage with the digits its relative error allows (budget_text.quote)."""
+    return f"{quote(100 * x, rel, most=3)} %"
 
 
 def first_time(t, mask) -> float | None:
@@ -89,7 +106,7 @@ def _validity_facts(res) -> dict:
     eps_y = _yield_strain()
     strains = link_strains(res)
     yields = {ln["name"]: first_time(t, strains[li] > eps_y) for li, ln in enumerate(res.case["links"])}
-    return {"v": v, "yield_at": yields, "eps_y": eps_y, "t_end": float(t[-1]),
+    return {"v": v, "yield_at": yields, "eps_y": eps_y, "t_end": float(t[-1]), "err": discretization_error(res),
             "valid_until": res.extra["validity_overall"].get("valid_until_s"), "overall": res.extra["validity_overall"]}
 
 
@@ -124,10 +141,13 @@ def _summary(runs: dict, dvec: dict) -> list[str]:
 
 def _validity_bullet(vf: dict) -> str:
     o = vf["overall"]
-    peaks = (f"a deflection of {_pct(o['max_deflection_over_length'])} of the {o['max_deflection_link']}'s length, a "
-             f"strain of {_pct(o['max_strain'])} ({o['max_strain'] / vf['eps_y']:.2g} times the {_eps(vf['eps_y'])} "
-             f"yield strain of {YIELD_ALLOY} aluminium) and compressive forces up to "
-             f"{o['max_compression_over_euler']:.2g} times the Euler load")
+    err = vf["err"]
+    peaks = (f"a deflection of {_pct_err(o['max_deflection_over_length'], err)} of the {o['max_deflection_link']}'s "
+             f"length, a strain of {_pct_err(o['max_strain'], err)} ({o['max_strain'] / vf['eps_y']:.2g} times the "
+             f"{_eps(vf['eps_y'])} yield strain of {YIELD_ALLOY} aluminium) and compressive forces up to "
+             f"{o['max_compression_over_euler']:.2g} times the Euler load"
+             + (f" (digits as the run's error budget allows: time-step and mesh error up to {_pct(err)} of the peak "
+                "strains)" if err is not None else ""))
     if vf["valid_until"] is None:
         return (f"- **The four-bar stays within the small-deformation range over this run ({vf['t_end']:.3g} s):** "
                 f"{peaks}.")
@@ -173,9 +193,10 @@ def _fourbar_validity(res) -> list[str]:
          f"| link | Euler load [N] | max deflection / L | deflection > 2 % L | max compression / Euler load | "
          f"compression > Euler load | max strain | strain > {_eps(f['eps_y'])} |", "|---|---|---|---|---|---|---|---|"]
     for name, x in v.items():
-        L.append(f"| {name} | {x['euler_load_N']:.4g} | {_pct(x['max_deflection_over_length'])} | "
-                 f"{when(x['deflection_exceeds_at_s'], te)} | {x['max_compression_over_euler']:.3g} | "
-                 f"{when(x['compression_exceeds_at_s'], te)} | {x['max_strain']:.3g} | {when(f['yield_at'][name], te)} |")
+        L.append(f"| {name} | {x['euler_load_N']:.4g} | {_pct_err(x['max_deflection_over_length'], f['err'])} | "
+                 f"{when(x['deflection_exceeds_at_s'], te)} | {quote(x['max_compression_over_euler'], f['err'], 3)} | "
+                 f"{when(x['compression_exceeds_at_s'], te)} | {quote(x['max_strain'], f['err'], 3)} | "
+                 f"{when(f['yield_at'][name], te)} |")
     o = f["overall"]
     if f["valid_until"] is None:
         return L + ["", f"No limit is passed within the run ({te:.3g} s): the linear models are within their range.", ""]
@@ -186,9 +207,11 @@ def _fourbar_validity(res) -> list[str]:
     yield_t = min((x for x in f["yield_at"].values() if x is not None), default=None)
     L += ["", f"**Reading.**  The small-deflection range of the superposition models ends {when(first['time_s'], te)} "
               f"(crank speed {speed:.3g} rad/s), when the {first['link']}'s {first['kind']} passes its limit.  "
-              f"By the end of the run the {o['max_deflection_link']} is bent by {_pct(o['max_deflection_over_length'])} "
+              f"By the end of the run the {o['max_deflection_link']} is bent by "
+              f"{_pct_err(o['max_deflection_over_length'], f['err'])} "
               "of its length from its chord: a shape no small-rotation beam theory describes.  The largest strain, "
-              f"{_pct(o['max_strain'])} in the {o['max_strain_link']}, is {o['max_strain'] / f['eps_y']:.2g} times the "
+              f"{_pct_err(o['max_strain'], f['err'])} in the {o['max_strain_link']}, is "
+              f"{o['max_strain'] / f['eps_y']:.2g} times the "
               f"yield strain of {YIELD_ALLOY} and {o['max_strain'] / (ALLOYS['7075-T6'][0] / ALLOYS['7075-T6'][1]):.2g} "
               "times that of 7075-T6; read elastically it is a stress E ε = "
               f"{_link(res, o['max_strain_link'])['youngs_modulus'] * worst['max_strain'] / 1e6:.0f} MPa, "

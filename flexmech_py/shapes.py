@@ -284,8 +284,8 @@ class ShapeCollector:
     ``flexmech run --draw`` writes to shape.csv.  ``frames``: the run's output frames; ``coupled``:
     {model: its CoupledModel} as the run fills it (``Prepared.coupled``; superposition runs need none)."""
 
-    def __init__(self, mech, frames: int, model: str, count: int, coupled=None):
-        self.mech, self.model, self.coupled = mech, model, {} if coupled is None else coupled
+    def __init__(self, mech, frames: int, count: int, coupled=None):
+        self.mech, self.coupled = mech, {} if coupled is None else coupled
         self.want = spread(frames, max(2, int(count)))
         self.seen = 0
         self.parts: list[ShapeFrames] = []
@@ -299,8 +299,8 @@ class ShapeCollector:
 
     def _points(self, block, idx: np.ndarray) -> ShapeFrames:
         rm = block.rigid.select(idx)
-        if self.model in ("coupled", "nonlinear"):
-            cm = self.coupled[self.model]
+        if block.model in ("coupled", "nonlinear"):      # the block's own: "auto" chooses the model in the run
+            cm = self.coupled[block.model]
             bodies = body_points(self.mech, cm.mesh.node_frac)
             d, rot = coupled_displacements(cm, bodies, block.u[:, idx], block.state[:, idx], rm)
         else:

@@ -17,6 +17,7 @@ from .coupled import CoupledModel
 from .mechanism import MotionSource, prepare_motion
 from .mechanism.motion import RigidMotion
 from .model import FEModel
+from .motion_tap import MotionTap
 from .outputs import DeflectionReference, evaluate_outputs, joint_at_joint, link_curvature, link_node_curvatures, \
     output_unit
 from .reactions import ModelReactions
@@ -132,6 +133,8 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray, dof: int | None = None)
 FRAME_BUDGET = 4_000_000
 #: steps of a run's first chunk; every next chunk has twice the steps of the last, up to chunk_steps
 FIRST_CHUNK_STEPS = 256
+#: chunks of rigid motion and kernel samples a Prepared remembers (shared by runs advanced in step)
+MEMO_CHUNKS = 2
 
 
 class Prepared:
@@ -171,6 +174,9 @@ class Prepared:
         self._rm_frames = None
         self.coupled = {}
         self.last_cpu = {}
+        self._memo = {}
+        self.taps: list = []          # MotionTaps fed with this run's rigid motion (share_motion)
+        self.tap = None               # the MotionTap this run takes its rigid motion from
         self.t_prepare = time.perf_counter() - t_start
 
     @property
@@ -264,8 +270,50 @@ class Prepared:
         pc.chunk_steps = oc * max(1, math.ceil(self.chunk_steps / 2 / oc))
         pc._t, pc._full, pc._rm, pc._rm_frames = None, None, None, None
         pc.source = self.source.fork()
-        pc.coupled = {}
+        pc.coupled, pc._memo, pc.taps, pc.tap = {}, {}, [], None
         return pc
+
+    def thinned(self, k: int):
+        """This case with an output frame at every k-th of this grid's frames (the grid ends at the last of
+        them), for a run that is compared at fewer frames (the error budget's probes)."""
+        oe = self.out_every * int(k)
+        n = oe * (self.nsteps // oe)
+        if k <= 1 or n < oe:
+            return self
+        pt = copy.copy(self)
+        if n != self.nsteps:
+            pt.case = Case(self.case, solver=dict(self.case["solver"], t_end=float(self.times(n, n)[0])))
+        pt.nsteps, pt.out_every = n, oe
+        pt.chunk_steps = oe * max(1, math.ceil(self.chunk_steps / oe))
+        pt._t, pt._full, pt._rm, pt._rm_frames = None, None, None, None
+        pt.source = self.source.fork()
+        pt.coupled, pt._memo, pt.taps, pt.tap = {}, {}, [], None
+        return pt
+
+    def remeshed(self, case):
+        """This prepared run (the same time grid, its own rigid-motion source) on the mesh of ``case``,
+        a copy of this run's case with other element counts (the error budget's probe mesh); the
+        mechanism's elastic problem was checked on this run's mesh."""
+        pm = copy.copy(self)
+        pm.case = case
+        pm._fe, pm._full, pm._rm, pm._rm_frames = None, None, None, None
+        pm.source = self.source.fork()
+        pm.coupled, pm._memo, pm.taps, pm.tap = {}, {}, [], None
+        pm._checked = True
+        return pm
+
+    def share_motion(self, other, ratio: int) -> None:
+        """Let ``other`` (this case on every ``ratio``-th step of this grid, not started: a step-doubling
+        or probe run) take its rigid motion from the chunks this run samples instead of computing it
+        again (:mod:`flexmech_py.motion_tap`): its blocks then yield None while it waits for this run."""
+        other.tap = MotionTap(ratio)
+        self.taps.append(other.tap)
+
+    def end_shared_motion(self) -> None:
+        """This run samples no more: the runs that take their motion from it stop where it stopped."""
+        for tap in self.taps:
+            tap.closed = True
+        self.taps = []
 
     # ------------------------------------------------------------------ runs
     def run(self, model: str | None = None, geometric: str | None = None, *, estimate: bool | None = None,
@@ -313,6 +361,9 @@ class Prepared:
         (maybe none) and ``data`` the state; a rigid motion that stops raises MechanismError after the
         block that ends at the last output frame before the singular position."""
         model = self.case["solver"]["model"] if model is None else model
+        if model == "auto":
+            raise CaseError("model", "'auto' is chosen by a run (Prepared.run, Prepared.stream: flexmech_py.auto_model); "
+                                     "name one of " + ", ".join(MODELS) + " for the blocks of a run")
         if model not in MODELS:
             raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
         if model in ("coupled", "nonlinear"):
@@ -332,6 +383,13 @@ class Prepared:
         i0 = 0
         while i0 < self.nsteps:
             i1 = min(i0 + size, self.nsteps)
+            if self.tap is not None and self.tap.available() < i1:   # the run it follows is not there yet
+                if not self.tap.closed:
+                    yield None             # wait: a whole chunk later (per-chunk costs stay those of a run)
+                    continue
+                i1 = oe * (self.tap.available() // oe)
+                if i1 <= i0:
+                    raise MechanismError("the run this one follows stopped", time=i0 * self.dt)
             t0, c0 = time.perf_counter(), time.thread_time()
             rm, stop = self._rigid_chunk(i0, i1)
             clock["rigid_s"] += time.perf_counter() - t0
@@ -348,15 +406,36 @@ class Prepared:
             i0, size = i1, min(2 * size, cap)
 
     def _rigid_chunk(self, i0: int, i1: int):
-        """(rm, None) the rigid motion of steps i0..i1, or (rm up to the stop, MechanismError)."""
-        if self._full is not None:
-            return self._full[0].select(slice(i0, i1 + 1)), None
-        try:
-            return self.source(self.times(i0, i1)), None
-        except MechanismError as exc:
-            if exc.partial is None or exc.partial.t.size == 0:
-                raise
-            return exc.partial, exc
+        """(rm, None) the rigid motion of steps i0..i1, or (rm up to the stop, MechanismError).  The last
+        chunks sampled are remembered: several runs of this Prepared advanced in step (the error
+        budget's probes) share them instead of sampling the motion again (or restarting its source)."""
+        stop, rm = None, self._memo.get(("rigid", i0, i1))
+        if rm is not None:
+            pass
+        elif self._full is not None:
+            rm = self._full[0].select(slice(i0, i1 + 1))
+        elif self.tap is not None:
+            rm = self.tap.take(i0, i1)
+        else:
+            try:
+                rm = self.source(self.times(i0, i1))
+            except MechanismError as exc:
+                if exc.partial is None or exc.partial.t.size == 0:
+                    self.end_shared_motion()
+                    raise
+                rm, stop = exc.partial, exc
+        for tap in self.taps:
+            tap.offer(i0, rm)
+        if stop is None and ("rigid", i0, i1) not in self._memo:
+            self._remember(("rigid", i0, i1), rm)
+        return rm, stop
+
+    def _remember(self, key, value) -> None:
+        """Keep the last MEMO_CHUNKS chunks of each kind (rigid motion, kernel samples)."""
+        same = [k for k in self._memo if k[0] == key[0]]
+        for k in same[:max(0, len(same) - MEMO_CHUNKS + 1)]:
+            del self._memo[k]
+        self._memo[key] = value
 
     def _loads(self, i0: int, i1: int, rm: RigidMotion):
         """(rig, q_free, q_val) of steps i0..i1: kernel samples and the force drives' elastic loads."""
@@ -365,8 +444,12 @@ class Prepared:
             if qv is not None:
                 qv = np.asfortranarray(qv[:, i0:i1 + 1])
             return np.asfortranarray(rig[:, :, i0:i1 + 1]), qf, qv
+        if ("loads", i0, i1) in self._memo:
+            return self._memo[("loads", i0, i1)]
         rig = self.fe.rig_samples(rm, self.gravity)
-        return (rig,) + elastic_torque_loads(self.case, self.fe, rm, rig)
+        out = (rig,) + elastic_torque_loads(self.case, self.fe, rm, rig)
+        self._remember(("loads", i0, i1), out)
+        return out
 
     def _superposition_blocks(self, model: str, geometric: str | None, u0, v0):
         fe, oe = self.fe, self.out_every
@@ -378,7 +461,11 @@ class Prepared:
         acc = Accumulated()
         state, prev = {"u0": u0, "v0": v0}, None
         acc.deflection = DeflectionReference(self.case, self.setup)
-        for i0, i1, rm in self._chunks(3 * fe.nfree + 4 * fe.ndof + fe.nel, acc.clock):
+        for chunk in self._chunks(3 * fe.nfree + 4 * fe.ndof + fe.nel, acc.clock):
+            if chunk is None:                  # waiting for the run whose rigid motion this one takes
+                yield None
+                continue
+            i0, i1, rm = chunk
             ts, cs = time.perf_counter(), time.thread_time()
             rig, q_free, q_val = self._loads(i0, i1, rm)
             if not self._checked:
@@ -460,7 +547,11 @@ class Prepared:
         acc, diag = Accumulated(), cpl_out.Diagnostics(cm)
         state, prev, first = None, None, None
         acc.deflection = DeflectionReference(case, self.setup)
-        for i0, i1, rm in self._chunks(6 * cm.ndof + 3 * len(cm.markers), acc.clock):
+        for chunk in self._chunks(6 * cm.ndof + 3 * len(cm.markers), acc.clock):
+            if chunk is None:                  # waiting for the run whose rigid motion this one takes
+                yield None
+                continue
+            i0, i1, rm = chunk
             first = rm.select(slice(0, 1)) if first is None else first
             cval = cm.constraint_values(rm, first)
             q0, v0 = cm.initial_state(rm.select(slice(0, 1))) if state is None else (None, None)

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from . import notices
+from . import notices, scales
 from .alternation import alternation_cause
 from .errors import MechanismError, SolverError
 from .guards import fmt_time
@@ -61,6 +61,8 @@ class _Frames:
 #: most frames of the run at 2 dt that StepDoubling keeps for the observed order (beyond them the
 #: run at 2 dt is made again beside the one at 4 dt)
 KEEP_FRAMES_MAX = 200_000
+#: a run at 2 dt with more frames than this is compared at every second of them
+FRAMES_FULL = 400
 
 
 class StepComparison:
@@ -79,10 +81,13 @@ class StepComparison:
         self.frames = 0
         self.failed = None                   # the coarse run's SolverError, if it stopped
         self.done = False
+        self.waiting = False                 # the coarse run waits for the run's rigid motion (a MotionTap)
         self.kernel_s, self.wall_s = 0.0, 0.0
         self._fine, self._coarse = _Frames(), _Frames()
         self.kept = _Frames() if keep else None
         self.spectrum = DifferenceFrequency()     # the differences' frequency (ringing, flexmech_py/ringing.py)
+        #: callables f(steps on the fine grid, t, columns) that see every frame of the coarse run
+        self.observers: list = []
 
     def kept_block(self):
         """The coarse run's kept frames as one block (steps on its own grid), or None when not kept."""
@@ -100,7 +105,8 @@ class StepComparison:
         if block.t.size == 0:
             return
         self._fine.add(block.steps, block.t, block.columns)
-        while not self.done and self._coarse.last < self._fine.last:
+        self.waiting = False
+        while not self.done and not self.waiting and self._coarse.last < self._fine.last:
             self._advance()
         self._match()
 
@@ -119,10 +125,15 @@ class StepComparison:
             return
         finally:
             self.wall_s += time.perf_counter() - t0
-        if cb is None or cb.t.size == 0:
+        if cb is None:
+            self.waiting = cb is None and not self.done
+            return
+        if cb.t.size == 0:
             return
         self.kernel_s = cb.timing.get("kernel_s", self.kernel_s)
         self._coarse.add(2 * cb.steps, cb.t, cb.columns)
+        for obs in self.observers:
+            obs(2 * cb.steps, cb.t, cb.columns)
         self._keep(cb)
 
     def _keep(self, cb) -> None:
@@ -177,13 +188,19 @@ class StepDoubling:
 
     def __init__(self, prep, model: str, geometric=None):
         self.prep, self.model, self.geometric = prep, model, geometric
-        self.pc = prep.coarsened()
+        self.pc = self._coarse_prep()
         self.cmp = None
         if self.pc is not None:
             ncc, occ = coarse_grid(self.pc.nsteps, self.pc.out_every)
             four = ncc >= occ >= 1          # a run at 4 dt has frames: compare with it, keep 2 dt on its grid
             self.cmp = StepComparison(self.pc, model, geometric, sub=(4 * occ, 4 * ncc) if four else None,
                                       keep=(2 * occ, 2 * ncc) if four else None)
+
+    def _coarse_prep(self):
+        """The run at 2 dt (``prep.coarsened()``), with a frame at every second of its frames when it has
+        more than FRAMES_FULL (its outputs cost per frame; the differences are compared at its frames)."""
+        pc = self.prep.coarsened()
+        return pc.thinned(2) if pc is not None and pc.frames > FRAMES_FULL else pc
 
     @property
     def coarse_steps(self) -> int:
@@ -211,15 +228,19 @@ class StepDoubling:
         out.update(kernel_s=cmp.kernel_s, wall_s=cmp.wall_s, frames_compared=cmp.frames)
         fac = 1.0 / (2 ** ORDER - 1)
         stats = res.all_stats().columns
+        tiny = scales.negligible(res.case, res.units, {n: stats[n]["peak_abs"] for n in cmp.diff if n in stats})
         cols, worst = {}, (None, -1.0)
         for name, d in cmp.diff.items():
             emax, peak = fac * d, stats[name]["peak_abs"]
             rel = emax / peak if peak > 0 else (0.0 if emax == 0 else float("inf"))
             cols[name] = {"max_abs": emax, "relative": rel, "t_max_s": cmp.t_at[name]}
-            if rel > worst[1]:
+            if name in tiny:              # round-off over round-off: never the worst column
+                cols[name]["negligible"] = tiny[name]
+            elif rel > worst[1]:
                 worst = (name, rel)
         out.update(columns=cols, worst_column=worst[0], worst_relative=worst[1] if worst[0] else None)
-        over = {n: c["relative"] for n, c in cols.items() if np.isfinite(c["relative"]) and c["relative"] > ERROR_WARN}
+        over = {n: c["relative"] for n, c in cols.items()
+                if np.isfinite(c["relative"]) and c["relative"] > ERROR_WARN and n not in tiny}
         if over:
             name = max(over, key=over.get)
             order = self._observed_order(name)
@@ -236,7 +257,7 @@ class StepDoubling:
         there were more than KEEP_FRAMES_MAX).  None when there is no run at 4 dt (too few steps, or it
         failed)."""
         d12 = self.cmp.diff_sub.get(name)
-        pc = self.prep.coarsened()
+        pc = self._coarse_prep()
         if d12 is None or pc is None or pc.coarsened() is None:
             return None
         second = StepComparison(pc.coarsened(), self.model, self.geometric)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py.alternation import ALT_WARN, _ColumnWatch
+from flexmech_py.alternation import ALT_WARN, ROUNDOFF_ULPS, _ColumnWatch, roundoff_floors
 from flexmech_py.simulate import Prepared
 
 CRANE = {
@@ -99,6 +99,29 @@ def test_the_check_sees_the_steps_not_the_frames(cases_dir):
     frames.add(res.t, {"drive_force": res["drive_force"]})
     assert frames.amp.get("drive_force", 0.0) == 0.0                 # no alternation at the frames
     assert res.extra["alternation"]["found"][0]["relative"] > 0.05
+
+
+def test_roundoff_floor_quiet_from_rest_and_fires_on_ringing(cases_dir):
+    """The Watt six-bar's first 60 steps from rest (all forces ~1e-5 N): its multipliers alternate at
+    round-off (past ALT_WARN of their tiny peaks, growing as 1/dt^2: round-off over beta dt^2, not
+    physics), below the round-off floor, so the run is quiet; the trammel's undamped ringing under
+    average acceleration stays thousands of times above the floor and fires."""
+    amps = []                                   # the alternating part over the peak, at dt and dt/4
+    for dt in (1e-5, 2.5e-6):
+        case = fm.load_case(cases_dir / "watt_sixbar.toml", overrides=[
+            f"solver.dt={dt!r}", f"solver.t_end={60 * dt!r}", "solver.output_every=10"])
+        al = Prepared(case, elements_per_link=2).run("coupled", estimate=False).extra["alternation"]
+        assert al["found"] == [] and al["largest"]["relative"] > ALT_WARN      # the floor keeps it quiet
+        assert al["roundoff_floor"] == roundoff_floors(case, "coupled", dt)
+        amps.append(al["largest"]["relative"])
+    assert amps[1] > amps[0]                    # it grows as the step shrinks: round-off, not a step error
+    for dt in (1e-5, 5e-6):
+        res = Prepared(_trammel(cases_dir, f"solver.dt={dt}", "solver.integrator='newmark'")).run("coupled")
+        al = res.extra["alternation"]
+        assert al["found"] and al["found"][0]["amplitude"] > 1e3 * al["roundoff_floor"]["N"]
+    case = fm.load_case(cases_dir / "watt_sixbar.toml")
+    f1, f4 = (roundoff_floors(case, "coupled", dt)["N"] for dt in (1e-5, 2.5e-6))
+    assert f4 == pytest.approx(16 * f1) and ROUNDOFF_ULPS * np.finfo(float).eps < 1e-13
 
 
 @pytest.mark.parametrize("model", ["coupled", "nonlinear"])

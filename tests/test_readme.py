@@ -102,9 +102,13 @@ def test_first_run_as_the_readme_describes_it(tmp_path, capsys):
     """'prints six warnings'; 'from t = 0.055 s the coupler bends by more than 2 % of its length (by the
     end 51 %), the strains reach 1.7 % ... compressed up to 8 and 9 times their Euler loads (78 and 83 N)'."""
     section = README.split("### Your first run", 1)[1].split("### From Python", 1)[0]
-    assert "six `flexmech: warning:` lines" in section
+    assert "seven `flexmech: warning:` lines" in section
     assert main(["run", "cases/fourbar_hac.toml", "--no-plots", "--out", str(tmp_path / "a")]) == 0
-    assert len(_warnings(capsys)) == 6
+    w = _warnings(capsys)
+    assert len(w) == 7 and w[-1].startswith("flexmech: warning: error budget: strain_follower_mid")
+    b = json.loads((tmp_path / "a" / "summary.json").read_text())["error_budget"]["columns"]["strain_follower_mid"]
+    assert round(b["model"], 1) == 1.6 and "about 160 %" in section
+    assert round(b["mesh"], 1) == 0.3 and "add about 30 %" in section
     v = json.loads((tmp_path / "a" / "summary.json").read_text())["validity"]
     assert round(v["coupler"]["deflection_exceeds_at_s"], 3) == 0.055 and "t = 0.055 s" in section
     assert round(100 * v["coupler"]["max_deflection_over_length"]) == 51 and "(by the end 51 %)" in section
@@ -114,13 +118,22 @@ def test_first_run_as_the_readme_describes_it(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv, warned", [
-    (["run", "cases/fourbar_hac.toml", "--set", "solver.t_end=0.05"], False),          # "inside the range: no warnings"
-    (["run", "cases/manipulator_bricout.toml", "--set", "solver.t_end=0.25"], False),  # "stays inside the range"
-    (["run", "cases/fourbar_hac.toml", "--set", "links.coupler.yield_strain=0.004"], True)])
+    (["run", "cases/fourbar_hac.toml", "--set", "solver.t_end=0.05"], "budget"),       # "only the error budget warns"
+    (["run", "cases/manipulator_bricout.toml", "--set", "solver.t_end=0.25"], "coupling"),   # "yet its error budget warns"
+    (["run", "cases/fourbar_hac.toml", "--set", "links.coupler.yield_strain=0.004"], "yield")])
 def test_readme_first_run_commands(tmp_path, capsys, argv, warned):
     assert " ".join(argv[:2]) in README.replace("flexmech run", "run")
     assert main(argv + ["--no-plots", "--out", str(tmp_path / "r")]) == 0
     w = _warnings(capsys)
-    assert bool(w) == warned
-    if warned:
+    assert bool(w) == bool(warned)
+    if warned == "yield":
         assert any("coupler: strain exceeds its yield strain 0.004" in x for x in w)
+    if warned == "coupling":      # inside the validity range, but hac misses the elastic-rigid coupling
+        assert len(w) == 1 and "error budget: tip_dy_deflection may be off by about 120 %" in w[0]
+        assert "the model error dominates" in w[0] and "--model nonlinear" in w[0]
+        v = json.loads((tmp_path / "r" / "summary.json").read_text())["validity_overall"]
+        assert v["valid_until_s"] is None
+    if warned == "budget":
+        assert len(w) == 1 and "error budget: strain_follower_mid" in w[0] and "the model error dominates" in w[0]
+        b = json.loads((tmp_path / "r" / "summary.json").read_text())["error_budget"]["columns"]
+        assert [round(100 * b[c]["model"]) for c in ("strain_coupler_mid", "strain_follower_mid")] == [24, 95]

@@ -141,11 +141,18 @@ def test_gap_closing_sentence_matches_the_validity_time():
 def test_validity_bullet_both_ways():
     o = {"max_deflection_over_length": 0.51, "max_deflection_link": "coupler", "max_strain": 0.0168,
          "max_compression_over_euler": 9.14}
-    past = seed_report._validity_bullet({"overall": o, "eps_y": 0.004, "valid_until": 0.0549, "t_end": 0.25})
+    past = seed_report._validity_bullet({"overall": o, "eps_y": 0.004, "valid_until": 0.0549, "t_end": 0.25,
+                                         "err": None})
     assert past.startswith("- **The four-bar as specified leaves the small-deformation range at t = 0.0549 s.**")
     assert "4.2 times the 0.40 % yield strain of 6061-T6" in past and "would yield and buckle" in past
-    inside = seed_report._validity_bullet({"overall": o, "eps_y": 0.004, "valid_until": None, "t_end": 0.02})
+    assert "a strain of 1.68 %" in past
+    inside = seed_report._validity_bullet({"overall": o, "eps_y": 0.004, "valid_until": None, "t_end": 0.02,
+                                           "err": None})
     assert "stays within" in inside and "yield and buckle" not in inside
+    # the digits follow the run's error budget: 30 % time-step + mesh error leaves two digits
+    rough = seed_report._validity_bullet({"overall": o, "eps_y": 0.004, "valid_until": 0.0549, "t_end": 0.25,
+                                          "err": 0.3})
+    assert "a strain of 1.7 %" in rough and "deflection of 50 %" in rough and "up to 30 % of the peak strains" in rough
 
 
 def test_when_and_torque_work():

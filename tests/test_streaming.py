@@ -178,6 +178,14 @@ def test_progress_estimate_and_bar_on_a_fake_clock():
     assert "\r[" in drive(Tty(False), 60.0, bar=True)                     # unless asked
     assert drive(Tty(True), 1.5) == ""                                   # short: nothing at all
     assert drive(Tty(True), 60.0, quiet=True) == ""
+    # a start-up of 5 s before the first block (1 % of the steps), then 10 s for the rest: the forecast
+    # projects the rate since the first block (about 15 s), not 5 s / 1 % (8 min)
+    clock, stream = Clock(), Tty(False)
+    pr = RunProgress(lambda: "N steps", stream=stream, clock=clock)
+    for now, done in ((5.0, 10), (6.0, 109), (7.0, 208), (15.0, 1000)):
+        clock.now = now
+        pr(done, 1000)
+    assert "this run takes about 15" in stream.text, stream.text
 
 
 def _run(argv, capsys):

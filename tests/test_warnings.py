@@ -55,7 +55,11 @@ def test_each_kind_has_its_class(tmp_path):
                                          "solver.t_end=0.001", "solver.error_estimate=none"])
     _, got = _issued(lambda: fm.simulate(free))
     assert [w.category for w in got] == [fm.MechanismWarning] and "no drive and no gravity" in str(got[0].message)
-    _, got = _issued(lambda: fm.simulate(fm.load_case("fourbar_hac", overrides=["solver.t_end=0.02"])))
+    # the seed four-bar warns even over 0.02 s (its error budget: hac's follower strain ~83 % off the
+    # nonlinear model); the six-bar spun up slowly is within the tolerance under model = "auto"
+    slow = fm.load_case("watt_sixbar", overrides=["drives.0.final_speed=20", "solver.t_end=0.02"])
+    res, got = _issued(lambda: fm.simulate(slow))
+    assert res.extra["error_budget"]["worst_total"] < res.extra["error_budget"]["tolerance"]
     assert not got
 
 

@@ -60,10 +60,10 @@ class RigidMotion:
     acceleration], the drives' generalized forces dv (N, ndrives); q, qd, qdd (N, ndof) the
     coordinates of the primary joints; ``motion`` the links' LinkMotion."""
 
-    def __init__(self, setup: MotionSetup, t, z, zd, zdd, lam, jq, dv):
+    def __init__(self, setup: MotionSetup, t, z, zd, zdd, lam, jq, dv, motion: LinkMotion | None = None):
         self.setup = setup
         self.t, self.z, self.zd, self.zdd, self.lam, self.jq, self.dv = t, z, zd, zdd, lam, jq, dv
-        self._motion = None
+        self._motion = motion          # None: computed on first use
 
     def _primary(self, k: int) -> np.ndarray:
         names = [j.name for j in self.setup.mech.joints]
@@ -90,13 +90,15 @@ class RigidMotion:
 
     def select(self, idx) -> "RigidMotion":
         return RigidMotion(self.setup, self.t[idx], self.z[idx], self.zd[idx], self.zdd[idx], self.lam[idx],
-                           self.jq[idx], self.dv[idx])
+                           self.jq[idx], self.dv[idx], None if self._motion is None else self._motion.select(idx))
 
     @staticmethod
     def concat(parts) -> "RigidMotion":
         """The samples of consecutive parts (one mechanism), in order."""
         return RigidMotion(parts[0].setup, *(np.concatenate([getattr(p, k) for p in parts])
-                                             for k in ("t", "z", "zd", "zdd", "lam", "jq", "dv")))
+                                             for k in ("t", "z", "zd", "zdd", "lam", "jq", "dv")),
+                           None if any(p._motion is None for p in parts)
+                           else LinkMotion.concat([p._motion for p in parts]))
 
     def joint(self, name: str) -> np.ndarray:
         """(N, 3) [coordinate, rate, acceleration] of a joint (rad or m)."""
