@@ -160,8 +160,9 @@ def force_constant_positions(packed: Packed) -> dict:
     """{joint: index in packed.rspec} of the ``constant`` of every force drive (the first of its law's
     four parameters, which flexmech_drivelaw adds to the effort at every evaluation): a caller that
     changes it there changes the effort from the next evaluation on (flexmech_py.stepping)."""
-    nb, nmk, nj = (int(x) for x in packed.ispec[:3])
-    first = 2 * nb + 3 + 2 * nmk + 3 * nj          # masses, inertias, gravity, lref, markers, axes, refs
+    nb, nmk, nj, ncr = (int(packed.ispec[i]) for i in (0, 1, 2, 7))
+    # masses, inertias, gravity, lref, markers, joint-coordinate directions, row directions, row values
+    first = 2 * nb + 3 + 2 * nmk + 2 * nj + 3 * ncr
     return {d.joint: first + 4 * k for k, d in enumerate(packed.drives) if not d.kinematic}
 
 
