@@ -523,3 +523,23 @@ def report(res: dict) -> str:
            table(res["solves"], ["elements_per_link", "dofs", "bandwidth", "banded_us", "dense_us"]),
            "", "long runs (output every 1000th step)",
            table(res["memory"], ["steps", "frames", "tracemalloc_peak_MB", "maxrss_MB", "wall_s"]),
+           "", "stepping from Python, one step per call, against the batch run (seed four-bar; CPU)",
+           table(res["stepping"], ["model", "steps", "batch_us_per_step", "ratio", "overhead_us_per_call",
+                                   "max_rel_difference"]) if res.get("stepping") else "  (not run)",
+           "", "scaling on every bundled mechanism (kernel CPU per step [us] against elements per link; "
+               "generalized-alpha, dt = 1e-5 s)",
+           table(scaling_pivot(res["scaling"]), list(scaling_pivot(res["scaling"])[0])),
+           "", "scaling fits (exponent of time per step against elements; cost per element relative to the seed four-bar's)",
+           table(scaling_summary(res["scaling"]), ["case", "model", "ladder", "exponent_time", "exponent_flops",
+                                                   "us_per_element_step_finest", "relative_to_seed_fourbar",
+                                                   "newton_per_step_finest"]),
+           *exudyn_report(res),
+           "", "summary", table(res["summary"], ["metric", "value", "unit", "note"])]
+    return "\n".join(out)
+
+
+if __name__ == "__main__":   # python -m flexmech_py.bench --memory-probe CASE NSTEPS OUT_EVERY (used by bench_memory)
+    if len(sys.argv) == 5 and sys.argv[1] == "--memory-probe":
+        print(json.dumps(memory_probe(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))))
+    else:
+        raise SystemExit("usage: python -m flexmech_py.bench --memory-probe CASE NSTEPS OUT_EVERY (or: flexmech bench)")
