@@ -35,6 +35,7 @@ class Packed:
     drives: list = field(default_factory=list)   # the drives packed (Drive objects), in order
     markers: list = field(default_factory=list)  # (body index or None, local position) per marker
     row_kinds: list = field(default_factory=list)  # the row kind (mechanism.rows) of every row
+    laws_at: int = 0            # index in rspec of the first drive law's parameters
 
 
 def drawn_coordinates(mech: Mechanism) -> np.ndarray:
@@ -143,6 +144,7 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
     rspec = [m for m, _, _ in mass] + [j for _, _, j in mass] + [float(gravity[0]), float(gravity[1]), lref]
     rspec += [x for m in markers for x in m[1]]
     rspec += [float(x) for d in jt_dir for x in d] + [float(x) for d in cr_dir for x in d] + [float(v) for v in cr_ref]
+    laws_at = len(rspec)
     for k in packed_laws:
         rspec += list(k["par"])
     for k in packed_laws:
@@ -153,17 +155,14 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
     rspec += tab_t + [x for c in tab_c for x in c]
     return Packed(ispec=np.array(ispec, np.int32), rspec=np.array(rspec, float), n=3 * nb, nrow=row,
                   nj=len(mech.joints), lref=lref, joint_rows=joint_rows, drive_rows=drive_rows, drives=drives,
-                  markers=markers, row_kinds=row_kinds)
+                  markers=markers, row_kinds=row_kinds, laws_at=laws_at)
 
 
 def force_constant_positions(packed: Packed) -> dict:
     """{joint: index in packed.rspec} of the ``constant`` of every force drive (the first of its law's
     four parameters, which flexmech_drivelaw adds to the effort at every evaluation): a caller that
     changes it there changes the effort from the next evaluation on (flexmech_py.stepping)."""
-    nb, nmk, nj, ncr = (int(packed.ispec[i]) for i in (0, 1, 2, 7))
-    # masses, inertias, gravity, lref, markers, joint-coordinate directions, row directions, row values
-    first = 2 * nb + 3 + 2 * nmk + 2 * nj + 3 * ncr
-    return {d.joint: first + 4 * k for k, d in enumerate(packed.drives) if not d.kinematic}
+    return {d.joint: packed.laws_at + 4 * k for k, d in enumerate(packed.drives) if not d.kinematic}
 
 
 def row_scales(mech: Mechanism, packed: Packed) -> np.ndarray:
