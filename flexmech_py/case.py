@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from pathlib import Path
 
 from . import validate as v
@@ -299,9 +300,14 @@ def _solver(sol: dict, mech) -> dict:
     dt = v.num(sol, "dt", "solver", positive=True, required=True)
     if dt > t_end:
         raise CaseError("solver.dt", f"({dt} s) is longer than the run (t_end = {t_end} s); choose dt <= t_end")
+    out_every = v.whole(sol, "output_every", "solver", default=1)
+    steps = max(1, math.ceil(t_end / dt - 1e-9))
+    if out_every > steps:       # the grid would be refined to out_every steps: dt silently shrunk
+        raise CaseError("solver.output_every", f"({out_every}) is more than the run's {steps} steps "
+                        f"(t_end / dt); choose at most {steps}, or a longer t_end")
     longest = max([ln.length for ln in mech.links] + [mech.characteristic_length() if not mech.links else 0.0])
     return {"t_end": t_end, "dt": dt,
-            "output_every": v.whole(sol, "output_every", "solver", default=1),
+            "output_every": out_every,
             **_integrator(sol),
             "divergence_limit": v.num(sol, "divergence_limit", "solver", positive=True,
                                       default=DIVERGENCE_FACTOR * longest),

@@ -34,6 +34,7 @@ def test_every_case_file_validates(cases_dir):
     (lambda r: r["links"][2].update(youngs_modulus=-1.0), "links[2].youngs_modulus", "> 0"),
     (lambda r: r["solver"].update(dt=0.0), "solver.dt", "> 0"),
     (lambda r: r["solver"].update(dt=1.0), "solver.dt", "longer than the run"),
+    (lambda r: r["solver"].update(output_every=10**9), "solver.output_every", "more than the run's"),
     (lambda r: r["solver"].update(gamma=0.4), "solver.gamma", ">= 0.5"),
     (lambda r: r["joints"].update(crank_pivot="weld"), "joints.crank_pivot", "one of"),
     (lambda r: r.update(solvr={}), "case file.solvr", "unknown key"),
