@@ -157,6 +157,8 @@ def test_steps_that_break_the_rules_are_refused(plant, tmp_path):
         assert math.isfinite(unit.get("alpha")[0]) and unit.get("alpha")[0] > 0.0
     finally:
         unit.close()
+    with pytest.raises(Exception, match="fmi2SetupExperiment"):
+        Unit(plant[0], tmp_path / "late", stop=2 * T_END)   # the master's stop time after solver.t_end
 
 
 def test_a_saved_state_replays_the_same_steps(plant, tmp_path):
