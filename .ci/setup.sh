@@ -35,14 +35,15 @@ if [ ! -x .venv/bin/python ]; then
 fi
 PY=.venv/bin/python
 # distributed: the optional Dask executor (pip install 'flexmech[cluster]'), needed by tests/test_cluster.py;
-# rainflow: the optional fatigue count (pip install 'flexmech[fatigue]'), needed by tests/test_design.py
+# rainflow: the optional fatigue count (pip install 'flexmech[fatigue]'), needed by tests/test_design.py;
+# pythonfmu: the optional FMU export (pip install 'flexmech[fmi]') and fmpy, the FMI master, needed by tests/test_fmu.py
 DEPS=("meson-python>=0.15" "meson>=1.1" ninja "numpy>=1.23" "scipy>=1.9" "matplotlib>=3.5" "pytest>=7" "distributed>=2024.1"
-      "rainflow>=3.2")
+      "rainflow>=3.2" "pythonfmu>=0.7" "fmpy>=0.3.20")
 DEPS_STAMP=.venv/.flexmech-deps          # the dependency list last installed into .venv
 BUILD_STAMP=.venv/.flexmech-build        # hash of the sources the installed package was built from
 LOG=build/flexmech-build.log             # the last build's log (build/ is git-ignored)
 if [ "$(cat "$DEPS_STAMP" 2>/dev/null)" = "${DEPS[*]}" ] \
-   && $PY -c 'import mesonpy, numpy, scipy, matplotlib, pytest, distributed, rainflow' >/dev/null 2>&1; then
+   && $PY -c 'import mesonpy, numpy, scipy, matplotlib, pytest, distributed, rainflow, pythonfmu, fmpy' >/dev/null 2>&1; then
   say "build tools and dependencies: already installed"
 else
   $PY -m pip install -q --upgrade pip >/dev/null

@@ -15,6 +15,7 @@
     flexmech sweep CASE.toml --sample KEY.PATH=normal:MEAN:SD [--sample ...] --samples N [--seed S] [--method lhs]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
     flexmech bench [--quick] [--out DIR] [--cases DIR]
+    flexmech fmu CASE.toml --out FILE.fmu [--model M] [--inputs JOINT,...] [--outputs NAME,...] [--set ...]
     flexmech optimize CASE.toml --vary KEY.PATH=LO:HI [...] --objective Q [--constraint "Q <= V" ...] [--method M]
 (run and steady take --stress and --fatigue CORRECTION, run also --window T0:T1: docs/cli.md "Design")
 
@@ -37,6 +38,7 @@ from pathlib import Path
 
 from . import notices
 from .case import MODELS as MODELS_ALL
+from .cli_fmu import add_fmu_parser, cmd_fmu
 from .cli_design import add_design_options, add_optimize_parser, design_analysis, print_design, write_design
 from .cli_run import add_view_parser, cmd_draw, cmd_run, cmd_view
 from .errors import FlexmechError
@@ -223,6 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default="bench", help="output folder for the CSV files and bench.png (default: ./bench)")
     b.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
     _add_accuracy_parser(sub)
+    add_fmu_parser(sub)
     return p
 
 
@@ -573,7 +576,7 @@ def _commands() -> dict:
 
     return {"run": cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
             "steady": _cmd_steady, "modes": _cmd_modes, "draw": cmd_draw, "view": cmd_view, "sweep": _cmd_sweep,
-            "bench": _cmd_bench, "accuracy": _cmd_accuracy,
+            "bench": _cmd_bench, "accuracy": _cmd_accuracy, "fmu": cmd_fmu,
             "optimize": lambda args: cmd_optimize(args, _scheduler(args))}
 
 

@@ -125,6 +125,8 @@ def test_api_md_has_examples():
 
 @pytest.mark.parametrize("name, code", API_EXAMPLES, ids=_ids(API_EXAMPLES))
 def test_api_example_runs(name, code, in_tmp_with_cases):
+    if "fmpy" in code and os.environ.get("CI") != "true":      # CI installs them: never skipped there
+        pytest.importorskip("fmpy", reason="the FMU example needs fmpy and PythonFMU (pip install 'flexmech[fmi]' fmpy)")
     exec(compile(code, f"docs/api.md:{name}", "exec"), {"__name__": "__docs__"})
 
 
@@ -163,6 +165,8 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
     argv = [str(CASES / a[len("cases/"):]) if a.startswith("cases/") else a for a in argv]
     if "--scheduler" in argv and os.environ.get("CI") != "true":   # CI installs distributed: never skipped there
         pytest.importorskip("distributed", reason="--scheduler examples need the optional package distributed")
+    if argv[0] == "fmu" and os.environ.get("CI") != "true":
+        pytest.importorskip("pythonfmu", reason="flexmech fmu needs PythonFMU (pip install 'flexmech[fmi]')")
     if argv[0] == "run":  # keep it short even if a doc example is not
         case = fm.load_case(argv[1], overrides=[argv[i + 1] for i, a in enumerate(argv) if a == "--set"])
         assert case["solver"]["t_end"] <= T_END_MAX, "doc examples must stay short (--set solver.t_end=...)"
@@ -177,6 +181,9 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
         return
     if argv[0] == "optimize":
         assert list(tmp_path.rglob("optimize.json")) and list(tmp_path.rglob("optimum.toml"))
+        return
+    if argv[0] == "fmu":
+        assert list(tmp_path.rglob("*.fmu"))
         return
     if argv[0] in ("stability", "sweep", "accuracy"):   # their tables: stability.csv, sweep.csv, accuracy.csv
         assert list(tmp_path.rglob("samples.csv" if "--sample" in argv else f"{argv[0]}.csv"))
