@@ -87,9 +87,12 @@ def stress_errors(res, links) -> dict:
 
 
 class DesignAnalysis:
-    """Stress, joint loads and (``correction`` not None) fatigue of one run's frames inside ``window``."""
+    """Stress, joint loads (``joint_loads``: the optimizer asks for them only when a quantity is a joint's
+    load, as they cost a reaction solve per frame) and (``correction`` not None) fatigue of one run's frames
+    inside ``window``."""
 
-    def __init__(self, prep_case, fe, *, window=None, correction: str | None = None, steady: bool = False):
+    def __init__(self, prep_case, fe, *, window=None, correction: str | None = None, steady: bool = False,
+                 joint_loads: bool = True):
         self.case, self.window, self.correction = prep_case, window, correction
         if correction is not None:
             fat.require_rainflow()
@@ -99,7 +102,7 @@ class DesignAnalysis:
         else:
             self.period, self.history_s = crank_period(prep_case), None
         self.stress = StressEnvelope(prep_case, fe, window, keep_history=correction is not None)
-        self.loads = JointLoads(prep_case, window)
+        self.loads = JointLoads(prep_case, window) if joint_loads else None
         self.cpu_s = 0.0
         self.cpu_start = time.process_time()   # the run's CPU time is this process's since, less cpu_s
         self.report: dict | None = None
@@ -107,14 +110,15 @@ class DesignAnalysis:
     def add(self, block) -> None:
         t0 = time.process_time()
         self.stress.add(block)
-        self.loads.add(block)
+        if self.loads is not None:
+            self.loads.add(block)
         self.cpu_s += time.process_time() - t0
 
     def finish(self, res) -> dict:
         """The design summary (also ``res.extra["design"]``); warnings join the run's."""
         t0 = time.process_time()
         rep = {"window_s": list(self.window) if self.window else None, "stress": self.stress.summary(),
-               "joint_loads": self.loads.summary(self.case)}
+               "joint_loads": self.loads.summary(self.case) if self.loads is not None else {}}
         if self.correction is not None:
             rep["fatigue"] = self._fatigue(res)
         t1 = time.process_time()

@@ -1,6 +1,6 @@
 """The measurements behind docs/validation.md "Stress and fatigue": what the stress and fatigue
 post-processing costs against the run it reads, and how a batch of designs scales on a Dask
-LocalCluster.  ``python -m flexmech_py.design_study [--quick]`` prints the tables (Markdown).
+LocalCluster.  ``python -m flexmech_py.design_study [--quick] [--cost-only]`` prints the tables (Markdown).
 
 - cost: each case run once with the design analysis watching it (CPU time of this process; the
   analysis's own share is measured inside it): the seed cases at their own mesh, the seed four-bar
@@ -78,7 +78,7 @@ def _designs(n: int) -> list[dict]:
     raw = read_case_file(case_path("fourbar_design"))
     hs = [3.0e-3 + 0.25e-3 * k for k in range(n)]
     return [{"raw": raw, "source": "fourbar_design.toml", "model": None, "analysis": "steady", "window": None,
-             "correction": "goodman", "fatigue": True,
+             "correction": "goodman", "fatigue": True, "joint_loads": True,
              "overrides": [f"links.coupler.section.height={h!r}", f"links.follower.section.height={h!r}"]}
             for h in hs]
 
@@ -98,12 +98,15 @@ def speedup_rows(designs: int = 4, pairs: int = 2) -> list[dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m flexmech_py.design_study")
     ap.add_argument("--quick", action="store_true", help="no 64 el/link run, one pair of batches")
+    ap.add_argument("--cost-only", action="store_true", help="the post-processing cost table only (no LocalCluster)")
     args = ap.parse_args(argv)
     print("| case | model | frames | stations | fatigue | post-processing CPU [s] | run CPU [s] | fraction |")
     print("|---|---|---|---|---|---|---|---|")
     for r in cost_rows(args.quick):
         print(f"| {r['case']} | {r['model']} | {r['frames']} | {r['stations']} | {'yes' if r['fatigue'] else 'no'} | "
               f"{r['post_processing_cpu_s']:.3f} | {r['run_cpu_s']:.2f} | {r['fraction_of_run']:.1%} |")
+    if args.cost_only:
+        return 0
     print()
     print("| pair | LocalCluster workers | designs | wall [s] |")
     print("|---|---|---|---|")

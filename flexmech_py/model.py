@@ -22,6 +22,7 @@ Conventions (docs/theory.md):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -434,8 +435,9 @@ class FEModel:
             self.ri_prop = np.array([c for _, _, c in ri], float)
 
     # ------------------------------------------------------------------ properties
-    @property
+    @cached_property
     def nfree(self) -> int:
+        """The number of free DOFs (a mesh is not changed once built: counted once, not per kernel call)."""
         return int(self.free_of.max())
 
     @property
@@ -473,6 +475,12 @@ class FEModel:
         return np.array([ln["length"] for ln in self.case["links"]])
 
     def _system_args(self):
+        return self._kernel_system
+
+    @cached_property
+    def _kernel_system(self) -> tuple:
+        """The mesh's arrays as every flexmech_ked call takes them, built once (a stepped run calls the
+        kernel once per step)."""
         # f2py cannot pass zero-length arrays: an absent kind of lumped inertia is
         # passed as one entry of zero mass (it adds exactly 0 to one diagonal term).
         lm = (self.lm_link, self.lm_dof, self.lm_prop) if self.lm_link.size else (

@@ -28,10 +28,12 @@ from .simulate import Prepared
 from .sweep import point_overrides
 
 __all__ = ["Variable", "Constraint", "Problem", "parse_vary", "parse_constraint", "quantity_names", "design_point",
-           "case_mass", "task_of", "FATIGUE_QUANTITIES"]
+           "case_mass", "task_of", "FATIGUE_QUANTITIES", "JOINT_LOAD_QUANTITY"]
 
 #: quantities that need the fatigue count (the others do not pay for it)
 FATIGUE_QUANTITIES = ("life", "life_hours")
+#: the per-joint quantity that needs the joint loads (a reaction solve per frame; the others do not pay for it)
+JOINT_LOAD_QUANTITY = "max_load"
 #: a life constraint's margin is its decades over this: about 1 / |Basquin exponent|, the decades of life a
 #: relative stress change of one decade makes, so that its margin weighs like a stress margin
 LIFE_DECADES = 10.0
@@ -105,7 +107,7 @@ def quantity_names(case) -> list[str]:
     for ln in case["links"]:
         if not ln.get("rigid"):
             names += [f"{ln['name']}.{q}" for q in _LINK_QUANTITIES]
-    names += [f"{j['name']}.max_load" for j in case["joints"]]
+    names += [f"{j['name']}.{JOINT_LOAD_QUANTITY}" for j in case["joints"]]
     return names + list(case["outputs"])
 
 
@@ -125,6 +127,11 @@ class Problem:
     def needs_fatigue(self) -> bool:
         names = [self.objective] + [c.quantity for c in self.constraints]
         return any(n.split(".")[-1] in FATIGUE_QUANTITIES for n in names)
+
+    @property
+    def needs_joint_loads(self) -> bool:
+        names = [self.objective] + [c.quantity for c in self.constraints]
+        return any(n.split(".")[-1] == JOINT_LOAD_QUANTITY for n in names)
 
     def check_names(self, case) -> None:
         """CaseError listing what exists when the objective or a constraint names no quantity."""
@@ -147,17 +154,18 @@ def case_mass(case) -> dict:
 def _run(case, task: dict):
     """(Result, DesignAnalysis) of one design: the periodic steady state, or the case's run."""
     correction = task["correction"] if task["fatigue"] else None
+    loads = task["joint_loads"]
     with silenced():
         if task["analysis"] == "steady":
             pc = PeriodicCase(case, task["model"])
-            da = DesignAnalysis(pc.case, pc.fe, correction=correction, steady=True)
+            da = DesignAnalysis(pc.case, pc.fe, correction=correction, steady=True, joint_loads=loads)
             res = steady_state(pc, floquet(pc))
         else:
             prep = Prepared(case)
             model = task["model"] or prep.case["solver"]["model"]
             fe = prep.coupled[model].mesh if model in prep.coupled else prep.fe
             window = parse_window(task["window"], prep.case["solver"]["t_end"]) if task["window"] else None
-            da = DesignAnalysis(prep.case, fe, window=window, correction=correction)
+            da = DesignAnalysis(prep.case, fe, window=window, correction=correction, joint_loads=loads)
             res = execute(prep, model, MemorySink(prep.frames), estimate=False)
         da.add(res)
         da.finish(res)
@@ -188,7 +196,7 @@ def design_point(task: dict) -> dict:
         q["life"] = min(q[f"{n}.life"] for n in lives)
         q["life_hours"] = min(f["life_hours"] for f in lives.values())
     for name, j in rep["joint_loads"].items():
-        q[f"{name}.max_load"] = j["max_N"]
+        q[f"{name}.{JOINT_LOAD_QUANTITY}"] = j["max_N"]
     for name, y in res.columns.items():
         q[name] = float(abs(y).max()) if y.size else 0.0
     return {"quantities": q, "run_s": time.perf_counter() - t0, "warnings": list(res.extra.get("warnings", []))}
@@ -198,4 +206,4 @@ def task_of(raw: dict, source: str, values: dict, problem: Problem, model) -> di
     """The worker task of the design with ``values`` {key: value}."""
     return {"raw": raw, "source": source, "overrides": point_overrides(values), "model": model,
             "analysis": problem.analysis, "window": problem.window, "correction": problem.correction,
-            "fatigue": problem.needs_fatigue}
+            "fatigue": problem.needs_fatigue, "joint_loads": problem.needs_joint_loads}

@@ -21,11 +21,17 @@ elastic reactions tend to the rigid-body ones (tests/test_superposition_general.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from . import kernels
 
-__all__ = ["ModelReactions"]
+__all__ = ["ModelReactions", "JointEquations", "joint_equations", "least_squares"]
+
+#: a frame's joint equations count as rank deficient (solved by pseudo-inverse, minimum norm) when the
+#: smallest diagonal entry of their R factor is below this fraction of the largest
+RANK_TOLERANCE = 1e-10
 
 
 class ModelReactions:
@@ -34,10 +40,10 @@ class ModelReactions:
 
     def __init__(self, fe, model: str, rm, rig, state, sol: dict, axial=None):
         self.fe, self.model, self.rm, self.rig, self.state = fe, model, rm, rig, state
+        self.mech = fe.case.mechanism
         self.rayleigh = sol["rayleigh"]
         self.axial = axial if sol.get("geometric_stiffness", "none") != "none" else None
         self._out = None
-        self._elements = {}
         self.residual = None
 
     @property
@@ -51,7 +57,6 @@ class ModelReactions:
         other.__dict__.update(self.__dict__)
         other.rm, other.rig, other.state = res.rigid, res.rig, (res.u, res.v, res.a)
         other.axial = None if self.axial is None else res.axial
-        other._elements = {}
         other._out = None if (self._out is None or sel is None) else {k: v[sel] for k, v in self._out.items()}
         return other
 
@@ -67,75 +72,61 @@ class ModelReactions:
 
     # ------------------------------------------------------------------ the equations
     def _solve(self) -> dict:
-        mech = self.fe.case.mechanism
+        eq = joint_equations(self.fe)
         nf = self.rm.t.size
-        eqs = {}                 # body key -> row offset; key: ("node", node, link) or ("part", name)
-        unknowns = []            # (joint, component kind, offset)
-        for j in mech.joints:
-            for ref in mech.joint_points(j):
-                key = self._key(ref)
-                if key is not None and key not in eqs:
-                    eqs[key] = 3 * len(eqs)
-            comps = self._components(j)
-            unknowns.append((j, comps, sum(len(c) for _, c, _ in unknowns)))
-        nu = sum(len(c) for _, c, _ in unknowns)
-        a = np.zeros((nf, 3 * len(eqs), nu))
-        b = np.zeros((nf, 3 * len(eqs)))
-        for key, r0 in eqs.items():
-            b[:, r0:r0 + 3] = self._body_residual(key).T
-        self._applied(eqs, b)
-        for j, comps, c0 in unknowns:
-            pa, pb = mech.joint_points(j)
-            for k, comp in enumerate(comps):
-                f, m = self._unit(j, comp)                      # (N, 2), (N,)
-                for sign, ref, at in ((1.0, pb, pb), (-1.0, pa, pb if j.kind == "prismatic" else pa)):
-                    key = self._key(ref)
-                    if key is None:
-                        continue
-                    r0 = eqs[key]
-                    a[:, r0:r0 + 2, c0 + k] += sign * f
-                    a[:, r0 + 2, c0 + k] += sign * (m + self._moment_arm(key, at, ref, j, f))
-        x = np.einsum("nuk,nk->nu", np.linalg.pinv(a), b)
-        res = np.linalg.norm(np.einsum("nku,nu->nk", a, x) - b, axis=1)
+        n = 1 if eq.constant else nf           # the matrix of every frame, or one per frame
+        b = self._right_hand_sides(eq)
+        a = self._matrix(eq, n)
+        x = least_squares(a, b)
+        res = np.linalg.norm((a @ x[:, :, None])[:, :, 0] - b, axis=1)
         self.residual = float(np.max(res / np.maximum(np.linalg.norm(b, axis=1), 1e-300)))
         out = {}
-        for j, comps, c0 in unknowns:
+        for j, comps, c0 in eq.unknowns:
             r = np.zeros((nf, 3))
             for k, comp in enumerate(comps):
-                f, m = self._unit(j, comp)
+                f, m = self._unit(j, comp, n)
                 r[:, :2] += f * x[:, c0 + k, None]
                 r[:, 2] += m * x[:, c0 + k]
             out[j.name] = r
         return out
 
-    def _key(self, ref):
-        if ref.body is None:
-            return None
-        if ref.body.name in self.fe.parts:
-            return ("part", ref.body.name)
-        li = self.fe.link_names.index(ref.body.name)
-        return ("node", self.fe.node_of[li][self.fe.node_index(li, ref.body.fraction(ref.point))], li)
+    def _right_hand_sides(self, eq: "JointEquations") -> np.ndarray:
+        """(N, rows) the bodies' own generalized forces less the drives'."""
+        b = np.zeros((self.rm.t.size, eq.rows))
+        residuals = self._element_residuals(eq)
+        for key, r0 in eq.eqs.items():
+            b[:, r0:r0 + 3] = self._body_residual(eq, key, residuals).T
+        self._applied(eq, b)
+        return b
 
-    def _components(self, j) -> list[str]:
-        cond = self.fe.case.mechanism.condition(j)
-        if j.kind == "weld":
-            return ["x", "y", "m"]
-        if j.kind == "prismatic":
-            return ["n", "m"] + (["t"] if cond == "locked" else [])
-        return ["x", "y"] + (["m"] if cond in ("locked", "clamp") else [])
+    def _matrix(self, eq: "JointEquations", n: int) -> np.ndarray:
+        """(n, rows, nu) the joint equations' matrix: n = 1 when it is the same in every frame."""
+        a = np.zeros((n, eq.rows, eq.nu))
+        for j, comps, c0 in eq.unknowns:
+            pa, pb = eq.points[j.name]
+            ka, kb = eq.keys[j.name]
+            for k, comp in enumerate(comps):
+                f, m = self._unit(j, comp, n)                      # (n, 2), (n,)
+                for sign, key, ref, at in ((1.0, kb, pb, pb), (-1.0, ka, pa, pb if j.kind == "prismatic" else pa)):
+                    if key is None:
+                        continue
+                    r0 = eq.eqs[key]
+                    a[:, r0:r0 + 2, c0 + k] += sign * f
+                    a[:, r0 + 2, c0 + k] += sign * (m + self._moment_arm(key, at, ref, j, f))
+        return a
 
     def _guide(self, j) -> tuple[np.ndarray, np.ndarray]:
         """(t, n) (N, 2) of a prismatic joint's guide in the rigid motion."""
         sl = next(s for s in self.fe.slides if s.joint is j)
-        a, _ = self.fe.case.mechanism.joint_points(j)
+        a, _ = self.mech.joint_points(j)
         if a.body is None:
             return np.tile(sl.t_body, (self.rm.t.size, 1)), np.tile(sl.n_body, (self.rm.t.size, 1))
         phi = self.rig[0, self.fe.parts[a.body.name].col]
         return _rot(phi, sl.t_body), _rot(phi, sl.n_body)
 
-    def _unit(self, j, comp):
-        """(force (N, 2), moment (N,)) of a unit value of a joint's unknown component."""
-        n = self.rm.t.size
+    def _unit(self, j, comp, n: int):
+        """(force (n, 2), moment (n,)) of a unit value of a joint's unknown component over n frames
+        (n = 1: a revolute joint's or weld's, the same in every frame)."""
         if comp in ("x", "y"):
             return np.tile([1.0, 0.0] if comp == "x" else [0.0, 1.0], (n, 1)), np.zeros(n)
         if comp == "m":
@@ -153,7 +144,7 @@ class ModelReactions:
     def _point_offset(self, part_name: str, at, j=None) -> np.ndarray:
         """(N, 2) from a rigid part's centre of mass to a point: a point of the part, or (a prismatic joint's
         guide body) the contact point, where the slider point b is."""
-        mech, part = self.fe.case.mechanism, self.fe.parts[part_name]
+        mech, part = self.mech, self.fe.parts[part_name]
         i = 3 * mech.body_index(part.body)
         z = self.rm.z
         if at.body is not None and at.body.name == part_name:
@@ -161,33 +152,33 @@ class ModelReactions:
         pos = _point_position(mech, z, at)                  # the slider point on the other body
         return pos - z[:, i:i + 2]
 
-    def _applied(self, eqs: dict, b: np.ndarray) -> None:
+    def _applied(self, eq: "JointEquations", b: np.ndarray) -> None:
         """Subtract the drives' generalized forces acting on the bodies from the right-hand sides."""
-        mech = self.fe.case.mechanism
+        mech = self.mech
         for d in mech.drives:
             j = mech.joint(d.joint)
             f = self.rm.drive_force(d.joint)
-            pa, pb = mech.joint_points(j)
+            pa, pb = eq.points[j.name]
+            ka, kb = eq.keys[j.name]
             if j.kind == "prismatic":
                 t, _ = self._guide(j)
-                for sign, ref in ((1.0, pb), (-1.0, pa)):
-                    key = self._key(ref)
+                for sign, ref, key in ((1.0, pb, kb), (-1.0, pa, ka)):
                     if key is None:
                         continue
                     force = sign * f[:, None] * t
-                    r0 = eqs[key]
+                    r0 = eq.eqs[key]
                     b[:, r0:r0 + 2] -= force
                     b[:, r0 + 2] -= self._moment_arm(key, pb, ref, j, force)
                 continue
-            for sign, ref in ((1.0, pb), (-1.0, pa)):
-                key = self._key(ref)
+            for sign, key in ((1.0, kb), (-1.0, ka)):
                 if key is not None:
-                    b[:, eqs[key] + 2] -= sign * f
+                    b[:, eq.eqs[key] + 2] -= sign * f
 
     # ------------------------------------------------------------------ the bodies' own residuals
-    def _body_residual(self, key) -> np.ndarray:
+    def _body_residual(self, eq: "JointEquations", key, residuals: np.ndarray) -> np.ndarray:
         """(3, N) generalized force of a body's own items at a joint node (flexible link) or at its centre
-        of mass (rigid part): inertia, damping, stiffness and rigid-inertia load."""
+        of mass (rigid part): inertia, damping, stiffness and rigid-inertia load; ``residuals`` the
+        (E, 6, N) of the elements at joint nodes (:meth:`_element_residuals`)."""
         fe = self.fe
         u, v, acc = self.state
         ray_m, _ = self.rayleigh
@@ -203,52 +194,159 @@ class ModelReactions:
             return out
         _, node, li = key
         tr, rot = fe.trans_dof[node], fe.rot_dof[(node, li)]
-        for e in fe.link_elements(li):
-            dofs = fe.el_dof[:, e] - 1
-            for half in (0, 3):
-                if dofs[half] == tr[0]:
-                    out += self._element_residual(e)[half:half + 3]
-        for i in range(fe.lm_link.size):
-            if fe.lm_link[i] == li + 1 and fe.lm_dof[0, i] - 1 == tr[0]:
-                m, z = fe.lm_prop[:, i]
-                out[:2] += m * (acc[tr] + ray_m * v[tr] + self.rig[3:5, li] + _accel_along(self.rig[:, li], z))
-        for i in range(fe.ri_link.size):
-            if fe.ri_link[i] == li + 1 and fe.ri_dof[i] - 1 == rot:
-                jr = fe.ri_prop[i]
-                out[2] += jr * (acc[rot] + ray_m * v[rot])
-                if self.model != "classic-translational":
-                    out[2] += jr * self.rig[2, li]
+        elements, masses, inertias = eq.items[key]
+        for row, half in elements:
+            out += residuals[row, half:half + 3]
+        for i in masses:
+            m, z = fe.lm_prop[:, i]
+            out[:2] += m * (acc[tr] + ray_m * v[tr] + self.rig[3:5, li] + _accel_along(self.rig[:, li], z))
+        for i in inertias:
+            jr = fe.ri_prop[i]
+            out[2] += jr * (acc[rot] + ray_m * v[rot])
+            if self.model != "classic-translational":
+                out[2] += jr * self.rig[2, li]
         return out
 
-    def _element_residual(self, e: int) -> np.ndarray:
-        """(6, N) M u'' + C u' + K u + F_rigid of element e, global components (docs/theory.md §3-4)."""
-        if e not in self._elements:
-            self._elements[e] = self._element_residual_new(e)
-        return self._elements[e]
-
-    def _element_residual_new(self, e: int) -> np.ndarray:
-        fe = self.fe
-        L, z1, ra, ea, ei = fe.el_prop[:, e]
-        m, k, g, c, m0, kg = kernels.api.element_matrices(ra, ea, ei, L)
-        li = fe.el_link[e] - 1
-        phi, om, al, ax, ay = self.rig[:, li]
-        dofs = fe.el_dof[:, e] - 1
-        u, v, acc = (_to_local(x[dofs], phi) for x in self.state)
+    def _element_residuals(self, eq: "JointEquations") -> np.ndarray:
+        """(E, 6, N) M u'' + C u' + K u + F_rigid of the elements at joint nodes (``eq.elements``),
+        global components (docs/theory.md §3-4), all elements and frames at once."""
+        fe, el = self.fe, eq.elements
+        if el.size == 0:
+            return np.zeros((0, 6, self.rm.t.size))
+        m, k, g, c, m0, kg = eq.matrices
+        L, z1 = fe.el_prop[0, el][:, None], fe.el_prop[1, el][:, None]
+        phi, om, al, ax, ay = self.rig[:, fe.el_link[el] - 1]           # each (E, N)
+        dofs = fe.el_dof[:, el] - 1                                        # (6, E)
+        u, v, acc = (_to_local(x[dofs], phi).transpose(1, 0, 2) for x in self.state)   # (E, 6, N)
         ray_m, ray_k = self.rayleigh
-        r = m @ acc + 2.0 * om * (g @ v) + ray_m * (m @ v) + ray_k * (k @ v)
-        r += k @ u + al * (g @ u) + om * om * (c @ u)
+        om2 = om * om
+        # M u'' + 2 om G u' + ray_m M u' + ray_k K u' + K u + al G u + om^2 C u (+ N Kg u), by matrix
+        r = m @ (acc + ray_m * v) + g @ (2.0 * om[:, None] * v + al[:, None] * u) + k @ (u + ray_k * v)
+        r += c @ (om2[:, None] * u)
         if self.axial is not None:
-            r += self.axial[e] * (kg @ u)
+            r += kg @ (self.axial[el][:, None] * u)
         cs, sn = np.cos(phi), np.sin(phi)
         ap = (cs * ax + sn * ay, -sn * ax + cs * ay)
         z2 = z1 + L
-        w = [ap[0] - om * om * z1, ap[1] + al * z1, ap[0] - om * om * z2, ap[1] + al * z2]
+        w = [ap[0] - om2 * z1, ap[1] + al * z1, ap[0] - om2 * z2, ap[1] + al * z2]
         if self.model == "hac":
-            r += m0 @ np.array(w)
+            r += m0 @ np.stack(w, axis=1)
         else:
             rot = al if self.model == "classic" else 0.0 * al
-            r += m @ np.array([w[0], w[1], rot, w[2], w[3], rot])
-        return _to_global(r, phi)
+            r += m @ np.stack([w[0], w[1], rot, w[2], w[3], rot], axis=1)
+        return _to_global(r.transpose(1, 0, 2), phi).transpose(1, 0, 2)
+
+
+class JointEquations:
+    """The layout of a mesh's joint equations, the same for every frame of every run on it: a row
+    offset per body equation (``eqs``; key ``("node", node, link)`` or ``("part", name)``), each joint's
+    unknown components and column offset (``unknowns``), and per joint node the items whose generalized
+    forces sum there (element halves, point masses, rotary inertias) with the elements' local matrices.
+    Built once per mesh (:func:`joint_equations`)."""
+
+    def __init__(self, fe):
+        mech = fe.case.mechanism
+        self.points = {j.name: mech.joint_points(j) for j in mech.joints}
+        self.keys = {name: tuple(_body_key(fe, ref) for ref in refs) for name, refs in self.points.items()}
+        self.eqs = {}
+        self.unknowns = []
+        nu = 0
+        for j in mech.joints:
+            for key in self.keys[j.name]:
+                if key is not None and key not in self.eqs:
+                    self.eqs[key] = 3 * len(self.eqs)
+            comps = _components(j, mech.condition(j))
+            self.unknowns.append((j, comps, nu))
+            nu += len(comps)
+        self.rows, self.nu = 3 * len(self.eqs), nu
+        #: the matrix is the same in every frame: no rigid part (its moment arms turn) and no prismatic
+        #: joint (its guide turns)
+        self.constant = not any(k[0] == "part" for k in self.eqs) and all(j.kind != "prismatic" for j in mech.joints)
+        self.items, elements = {}, []
+        for key in self.eqs:
+            if key[0] == "node":
+                self.items[key] = _node_items(fe, key, elements)
+        self.elements = np.array(elements, dtype=int)
+        mats = [kernels.api.element_matrices(ra, ea, ei, length)
+                for length, _, ra, ea, ei in fe.el_prop[:, self.elements].T]
+        #: the local (m, k, g, c, m0, kg) of the elements, each stacked (E, 6, 6) (m0: (E, 6, 4))
+        self.matrices = [np.array([mt[i] for mt in mats]) for i in range(6)]
+
+
+def _body_key(fe, ref):
+    """The body-equation key of a joint point (None: the ground)."""
+    if ref.body is None:
+        return None
+    if ref.body.name in fe.parts:
+        return ("part", ref.body.name)
+    li = fe.link_names.index(ref.body.name)
+    return ("node", fe.node_of[li][fe.node_index(li, ref.body.fraction(ref.point))], li)
+
+
+def _node_items(fe, key, elements: list) -> tuple[list, list, list]:
+    """(element rows and halves, point masses, rotary inertias) at a flexible link's joint node;
+    the node's elements are appended to ``elements`` (their row: the index there)."""
+    _, node, li = key
+    tr, rot = fe.trans_dof[node], fe.rot_dof[(node, li)]
+    halves = []
+    for e in fe.link_elements(li):
+        dofs = fe.el_dof[:, e] - 1
+        for half in (0, 3):
+            if dofs[half] == tr[0]:
+                if e not in elements:
+                    elements.append(int(e))
+                halves.append((elements.index(e), half))
+    masses = [i for i in range(fe.lm_link.size) if fe.lm_link[i] == li + 1 and fe.lm_dof[0, i] - 1 == tr[0]]
+    inertias = [i for i in range(fe.ri_link.size) if fe.ri_link[i] == li + 1 and fe.ri_dof[i] - 1 == rot]
+    return halves, masses, inertias
+
+
+_EQUATIONS: dict[int, tuple] = {}     # id(mesh) -> (weak reference to the mesh, its JointEquations)
+
+
+def joint_equations(fe) -> JointEquations:
+    """The :class:`JointEquations` of a mesh, built on its first run's first block and kept while the mesh
+    lives (a mesh is not changed once built): every block of every run on it shares them."""
+    hit = _EQUATIONS.get(id(fe))
+    if hit is not None and hit[0]() is fe:
+        return hit[1]
+    eq = JointEquations(fe)
+    _EQUATIONS[id(fe)] = (weakref.ref(fe), eq)
+    weakref.finalize(fe, _EQUATIONS.pop, id(fe), None)
+    return eq
+
+
+def _components(j, cond: str) -> list[str]:
+    """A joint's unknown components (docs/theory.md §18.5) given its condition in the elastic problem."""
+    if j.kind == "weld":
+        return ["x", "y", "m"]
+    if j.kind == "prismatic":
+        return ["n", "m"] + (["t"] if cond == "locked" else [])
+    return ["x", "y"] + (["m"] if cond in ("locked", "clamp") else [])
+
+
+def least_squares(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, u) per frame the minimum-norm least-squares solution of ``a[n] x = b[n]`` (a (N, k, u) or, the
+    same matrix in every frame, (1, k, u); b (N, k)).
+
+    One pseudo-inverse serves every frame when the matrix is one (flexible links at revolute joints
+    and welds: unit forces and moments only); else a batched QR factorization per frame (Householder,
+    as stable as the pseudo-inverse and a third of its cost), the pseudo-inverse only for the frames
+    whose matrix has (numerically) dependent columns, where it picks the minimum-norm solution."""
+    if a.shape[0] == 1:
+        return b @ np.linalg.pinv(a[0]).T
+    if a.shape[1] < a.shape[2]:
+        return np.einsum("nuk,nk->nu", np.linalg.pinv(a), b)
+    q, r = np.linalg.qr(a)
+    diag = np.abs(np.diagonal(r, axis1=1, axis2=2))
+    full = diag.min(axis=1) > RANK_TOLERANCE * np.maximum(diag.max(axis=1), 1e-300)
+    x = np.empty((a.shape[0], a.shape[2]))
+    if np.any(full):
+        qb = np.einsum("nku,nk->nu", q[full], b[full])
+        x[full] = np.linalg.solve(r[full], qb[..., None])[..., 0]
+    if not np.all(full):
+        x[~full] = np.einsum("nuk,nk->nu", np.linalg.pinv(a[~full]), b[~full])
+    return x
 
 
 def _accel_along(r: np.ndarray, z: float) -> np.ndarray:

@@ -20,6 +20,7 @@ from .case import MODELS, SUPERPOSITION_MODELS, load_case
 from .errors import CaseError
 from .notices import silenced
 from .inputs import checked_file, checked_folder
+from .materials import MATERIALS
 from .outdir import ResultFolder
 from .plots import line_figure, mechanism_sketch
 from .reproduce_modes import modes_section
@@ -42,9 +43,11 @@ NEEDED = {"fourbar_hac": ("crank_angle", "crank_speed", "strain_coupler_mid", "s
                                   "tip_transverse_deflection", "alpha", "beta"),
           "manipulator_bricout_no_payload": ("tip_dx_deflection", "tip_dy_deflection", "tip_transverse_deflection")}
 SEED_CASES = ("fourbar_hac", "fourbar_constant_speed", "manipulator_bricout", "manipulator_bricout_no_payload")
-#: yield strength and Young's modulus [Pa] of two structural aluminium alloys (ASM Handbook Vol. 2 values:
-#: 6061-T6 276 MPa, 68.9 GPa; 7075-T6 503 MPa, 71.7 GPa): the seed gives E = 71 GPa and no alloy
-ALLOYS = {"6061-T6": (276e6, 68.9e9), "7075-T6": (503e6, 71.7e9)}
+#: (yield strength, Young's modulus) [Pa] of the two structural aluminium alloys the seed's links could be,
+#: from the materials table (flexmech_py.materials; sources in docs/cases.md): the seed gives E = 71 GPa
+#: and no alloy
+ALLOYS = {name: (MATERIALS[name]["yield_strength"], MATERIALS[name]["youngs_modulus"])
+          for name in ("6061-T6", "7075-T6")}
 
 
 def seed_case_path(name: str, cases_dir=None) -> Path:

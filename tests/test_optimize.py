@@ -15,7 +15,7 @@ from scipy.optimize import brentq
 from flexmech_py.case import apply_overrides, read_case_file
 from flexmech_py.materials import MATERIALS
 from flexmech_py.optimize import EXIT_INFEASIBLE, optimize
-from flexmech_py.optimize_problem import Problem, parse_constraint, parse_vary
+from flexmech_py.optimize_problem import Problem, design_point, parse_constraint, parse_vary, task_of
 
 BEAM = Path(__file__).parent / "data" / "rotating_beam.toml"
 FLEXMECH = [sys.executable, "-m", "flexmech_py"]
@@ -79,3 +79,17 @@ def test_bad_objective_or_constraint_lists_what_exists(tmp_path, args, words):
                                    "--out", str(tmp_path / "o")] + args, capture_output=True, text=True)
     assert p.returncode == 2 and words in p.stderr and p.stderr.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_joint_loads_computed_only_when_a_quantity_needs_them():
+    """A design's joint loads (a reaction solve per frame) are computed only when the objective or a constraint
+    is a joint's max_load; the stresses do not depend on whether they are."""
+    var = [parse_vary("links.bar.section.height=2e-3:2e-2")]
+    plain = Problem(var, "mass", [parse_constraint(f"peak_stress <= {LIMIT}")], "run", None, "goodman")
+    joint = Problem(var, "mass", [parse_constraint("base.max_load <= 1e4")], "run", None, "goodman")
+    assert not plain.needs_joint_loads and joint.needs_joint_loads
+    values = {"links.bar.section.height": 5e-3}
+    q = {p is joint: design_point(task_of(_raw(["solver.t_end=0.1"]), "beam", values, p, None))["quantities"]
+         for p in (plain, joint)}
+    assert "base.max_load" not in q[False] and q[True]["base.max_load"] > 0
+    assert q[False]["peak_stress"] == q[True]["peak_stress"]

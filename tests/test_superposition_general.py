@@ -10,6 +10,7 @@ from scipy.optimize import brentq
 
 import flexmech_py as fm
 from flexmech_py import kernels
+from flexmech_py.reactions import joint_equations, least_squares
 from flexmech_py.reference import newmark, slave_transformation
 from flexmech_py.simulate import Prepared, drive_loads
 
@@ -320,6 +321,33 @@ def test_model_reactions_balance_each_rigid_body(cases_dir):
     assert res.extra["reactions"]["equilibrium_residual"] < 1e-10
     rigid = p.rm_frames.reaction("crank_pin")
     assert np.max(np.abs(res.reactions("crank_pin") - rigid)) > 1e-3 * np.max(np.abs(rigid))   # elastic part
+
+
+def test_joint_equations_least_squares_is_the_pseudo_inverse_solution():
+    """Per frame the minimum-norm least-squares solution, as the pseudo-inverse gives it: one matrix for every
+    frame, a matrix per frame (QR), frames with dependent columns and underdetermined frames (pseudo-inverse)."""
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((40, 9, 5))
+    a[7, :, 4] = a[7, :, 0] - 2.0 * a[7, :, 1]           # frame 7: dependent columns
+    b = rng.standard_normal((40, 9))
+    ref = np.einsum("nuk,nk->nu", np.linalg.pinv(a), b)
+    assert np.allclose(least_squares(a, b), ref, rtol=0, atol=1e-12)
+    assert np.allclose(least_squares(a[:1], b), b @ np.linalg.pinv(a[0]).T, rtol=0, atol=1e-12)
+    wide = a[:, :4, :]
+    assert np.allclose(least_squares(wide, b[:, :4]), np.einsum("nuk,nk->nu", np.linalg.pinv(wide), b[:, :4]),
+                       rtol=0, atol=1e-12)
+
+
+def test_joint_equations_one_matrix_only_without_rigid_parts_or_guides(cases_dir):
+    """The seed four-bar (flexible links, revolute joints) has one matrix for every frame; the slider-crank
+    (a rigid slider on a prismatic guide) one per frame; both close their equations to round-off."""
+    for name, constant in (("fourbar_hac", True), ("slider_crank", False)):
+        p = Prepared(_load(cases_dir, name, "solver.t_end=0.005", "solver.model=hac"))
+        assert joint_equations(p.fe).constant is constant
+        assert joint_equations(p.fe) is joint_equations(p.fe)          # built once per mesh
+        res = p.run("hac")
+        assert np.all(np.isfinite(res.reactions(p.case.mechanism.joints[0].name)))
+        assert res.reactions.residual < 1e-10
 
 
 def test_welded_sixbar_against_the_plate_sixbar(cases_dir):
