@@ -37,7 +37,7 @@ def add_design_options(p, window: bool = True) -> None:
                             "that repeats)")
 
 
-def design_analysis(args, case, fe, steady: bool = False):
+def design_analysis(args, case, fe=None, steady: bool = False):
     """The DesignAnalysis a command's options ask for, or None."""
     if not (args.stress or args.fatigue):
         return None

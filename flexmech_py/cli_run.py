@@ -75,7 +75,7 @@ def cmd_run(args) -> int:
     model = args.model or prep.case["solver"]["model"]
     out = args.out if args.out is not None else Path("results") / f"{safe_name(Path(args.case).stem)}-{model}"
     shapes = _shapes(args, prep)
-    design = design_analysis(args, prep.case, prep.coupled[model].mesh if model in prep.coupled else prep.fe)
+    design = design_analysis(args, prep.case)     # its stations: the mesh of the model that runs
     stopped, paths = None, []
     with ResultFolder(out, "run", claim=lambda: claim(out, prep.case, args.overwrite), overwrite=args.overwrite) as rf:
         sink = FileSink(rf.stage, frames_total=prep.frames, force=args.force)

@@ -91,7 +91,7 @@ class DesignAnalysis:
     load, as they cost a reaction solve per frame) and (``correction`` not None) fatigue of one run's frames
     inside ``window``."""
 
-    def __init__(self, prep_case, fe, *, window=None, correction: str | None = None, steady: bool = False,
+    def __init__(self, prep_case, fe=None, *, window=None, correction: str | None = None, steady: bool = False,
                  joint_loads: bool = True):
         self.case, self.window, self.correction = prep_case, window, correction
         if correction is not None:

@@ -119,19 +119,24 @@ class _LinkEnvelope:
 class StressEnvelope:
     """Stress envelopes of every flexible link over a run's frames inside ``window`` = (t0, t1) [s]
     (None: every frame), fed block by block (:meth:`add`), and with ``keep_history`` the stress
-    history of every station there (for the fatigue count).  Frames that two blocks share (a block
+    history of every station there (for the fatigue count).  The stations are the nodes of ``fe`` (a
+    mesh), or of the first block's mesh when ``fe`` is None.  Frames that two blocks share (a block
     starts with the previous block's last frame) count once."""
 
-    def __init__(self, case, fe, window: tuple[float, float] | None = None, keep_history: bool = False):
+    def __init__(self, case, fe=None, window: tuple[float, float] | None = None, keep_history: bool = False):
         self.case = case
         self.window = window
         self.keep_history = keep_history
-        self.links = [_LinkEnvelope.empty(st) for st in link_stations(case, fe)]
+        self.meshed = fe is not None
+        self.links = [_LinkEnvelope.empty(st) for st in link_stations(case, fe)] if fe is not None else []
         self.t_hist: list = []
         self.t_last = -np.inf
         self.config = None          # the rigid configuration at the first frame: (ox, oy, phi) per link
 
     def add(self, block) -> None:
+        if not self.meshed:     # no mesh given: the run's own (model = auto picks the family as it starts)
+            self.links = [_LinkEnvelope.empty(st) for st in link_stations(self.case, block.fe)]
+            self.meshed = True
         keep = in_window(block.t, self.t_last, self.window)
         if not np.any(keep) or block.axial is None:
             return

@@ -192,6 +192,20 @@ def test_every_model_family_gives_stresses_consistent_with_its_strain_output(mod
     assert np.max(np.abs((sig[0, 0] - nst[0] / st.area) / st.youngs_modulus - ref)) <= 1e-10 * np.max(np.abs(ref))
 
 
+@pytest.mark.parametrize("model", ["classic", "nonlinear"])
+def test_without_a_mesh_the_stations_are_those_of_the_model_that_runs(model):
+    """`flexmech run --stress` under model = auto does not know the family before the run starts: the
+    envelope takes the mesh of the first block (the coupled mesh under nonlinear)."""
+    prep = Prepared(load_case(BEAM, ["solver.t_end=0.2", "mesh.elements_per_link=4"]))
+    da = DesignAnalysis(prep.case)
+    res = execute(prep, model, MemorySink(prep.frames), observers=[da])
+    rep = da.finish(res)
+    st = link_stations(res.case, res.fe)[0]
+    assert np.array_equal(da.stress.links[0].st.fractions, st.fractions)
+    _, _, sig = station_values(res, st)
+    assert rep["stress"]["bar"]["peak_abs_stress_Pa"] == pytest.approx(np.max(np.abs(sig)), rel=1e-12)
+
+
 def test_envelope_safety_factor_and_joint_loads_of_a_run():
     prep = Prepared(load_case(BEAM))
     da = DesignAnalysis(prep.case, prep.fe)
