@@ -32,6 +32,7 @@ from .mechanism.motion import RigidMotion
 from .mechanism.packing import force_constant_positions
 from .outputs import DeflectionReference
 from .results import Result
+from .mechanism.control import refuse_superposition
 from .simulate import Accumulated, Prepared, check_elastic_problem, elastic_torque_loads
 from .sizes import check_mesh
 
@@ -301,6 +302,7 @@ class SuperpositionStepper(RecordedFrames):
     """The superposition models' elastic loop (flexmech_ked) continued call by call."""
 
     def __init__(self, prep: Prepared, model: str, rigid: RigidBuffer):
+        refuse_superposition(prep.case, model)
         self.prep, self.model, self.rigid = prep, model, rigid
         self.fe = prep.fe
         sol = self.sol = dict(prep.case["solver"])

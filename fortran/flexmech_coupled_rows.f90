@@ -4,6 +4,7 @@
 module flexmech_coupled_rows
   use flexmech_kinds, only: dp
   use flexmech_drivelaw, only: force_law
+  use flexmech_control, only: ctl_effort
   use flexmech_markers, only: marker_state, segment_marker, body_marker, ground_marker, constraint_row, &
                               CON_POINT, CON_ANGLE, CON_PROJECTION, MAXCOL
   use flexmech_coupled_system, only: coupled_system, MK_GROUND, MK_NODE, MK_BODY, NPAR
@@ -53,7 +54,8 @@ contains
   end subroutine eval_row
 
   !> Coordinate theta of force drive i at (q, v) (its gradient over cols(1:nc), marker states) and the
-  !> law's generalized force tau(theta, t) [N m or N].
+  !> law's generalized force tau(theta, t) [N m or N], plus the output of the controllers acting
+  !> through it (flexmech_control: ctl_effort, at theta and its rate).
   pure subroutine drive_load(sys, i, q, v, t, tau, theta, nc, cols, grad, ma, mb)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: i
@@ -73,6 +75,7 @@ contains
       tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(1:0), sys%tab_c(:, 1:0), &
                       theta, t)
     end if
+    if (sys%ctl%n > 0) tau = tau + ctl_effort(sys%ctl, i, theta, gd, t)
   end subroutine drive_load
 
   !> The free DOFs on which every row's gradient can be nonzero (the columns of its two markers),

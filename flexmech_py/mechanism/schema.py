@@ -298,7 +298,9 @@ def _law_param(d: dict, key: str, w: str, default):
         return [[v.num({"x": x}, "x", f"{w}.{key}") for x in h] for h in val]
     if key == "table":
         return _table(d[key], f"{w}.table")
-    return v.num(d, key, w, positive=key == "spinup_time")
+    if key == "profile":
+        return v.text(d, key, w, choices=("cycloidal", "quintic"))
+    return v.num(d, key, w, positive=key in ("spinup_time", "duration"))
 
 
 def _table(tab, where: str) -> dict:
