@@ -18,6 +18,7 @@ from scipy.integrate import solve_ivp
 
 from .bundled import case_path
 from .case import load_case, validate_case
+from .errors import SolverError
 from .simulate import Prepared
 
 RHO, AREA, LENGTH = 2700.0, 1.0e-4, 1.0
@@ -81,6 +82,36 @@ def saturated_pid(t, kp, ki, kd, limit, clamp=True):
         held = clamp and ur != u and e * (ur - u) > 0
         return [x[1], u / J_HUB, 0.0 if held else e]
     return solve_ivp(rhs, (t[0], t[-1]), [0.0, 0.0, 0.0], t_eval=t, max_step=1e-3, rtol=1e-9, atol=1e-12).y[0]
+
+
+TIP = {"point": "arm.end", "direction": [0.0, 1.0]}     # the tip's height [m] (the link starts along x)
+
+
+def settles(k: float, measure="joint", tau: float = 0.15, t_end: float = 1.5) -> float:
+    """A small move (0.05 rad at the hub, or 0.05 m at the tip) under the PD law k (e + tau e') on the
+    hub angle or on the tip's height: the largest error over the last fifth of the run against the
+    first fifth (< 1: the loop settles; > 1 or inf (the run stopped): it does not)."""
+    ref = {"law": "rest_to_rest", "travel": 0.05, "duration": 0.1}
+    raw = link_case(kp=k, kd=tau * k, t_end=t_end, dt=5e-4, measure=measure, reference=ref)
+    try:
+        y = run(raw).columns["hub_angle"]
+    except SolverError:
+        return float("inf")
+    n = y.size // 5
+    return float(np.abs(y[-n:] - 0.05).max() / np.abs(y[:n] - 0.05).max())
+
+
+def tip_feedback(lo: float = 0.5, hi: float = 50.0, iters: int = 6) -> dict:
+    """Collocated PD (hub angle) against tip-position PD with the same law k (e + 0.15 s e'): the
+    collocated loop settles at every k tried, the tip loop only below a critical k, bracketed by
+    bisection between a k that settles and one that does not."""
+    collocated = {k: settles(k) for k in (0.5, 5.0, 50.0)}
+    if not (settles(lo, TIP) < 1.0 <= settles(hi, TIP)):
+        raise ValueError(f"the tip loop does not change from settling at k = {lo} to not at k = {hi}")
+    for _ in range(iters):
+        mid = (lo * hi) ** 0.5
+        lo, hi = (mid, hi) if settles(mid, TIP) < 1.0 else (lo, mid)
+    return {"collocated_late_over_early": collocated, "tip_critical_k_between": (lo, hi)}
 
 
 def rigid_limit() -> dict:
@@ -149,7 +180,7 @@ def cost(pairs: int = 5) -> dict:
 
 def main() -> None:
     for name, fn in (("rigid limit", rigid_limit), ("flexible link energy", flexible_energy),
-                     ("saturation", saturation), ("bricout", bricout), ("four-bar PI", fourbar), ("cost", cost)):
+                     ("saturation", saturation), ("tip feedback", tip_feedback), ("bricout", bricout), ("four-bar PI", fourbar), ("cost", cost)):
         print(name, fn())
 
 

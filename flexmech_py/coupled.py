@@ -251,7 +251,8 @@ class CoupledModel:
         """The case's feedback controllers packed for a run with step dt (flexmech_control)."""
         mech = self.case.mechanism
         revolute = {j.name for j in mech.joints if j.kind != "prismatic"}
-        return pack_controllers(self.case.get("controllers", []), [d.joint for _, d in self.forces], revolute, dt)
+        return pack_controllers(self.case.get("controllers", []), [d.joint for _, d in self.forces], revolute, dt,
+                                self.layout.control_rows)
 
     def control_outputs(self, nf: int) -> dict:
         """{controller: (nf,) its output [N m or N]} over the first nf frames of the last run."""

@@ -374,7 +374,7 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
     geo = data.get("geometric", "none")
     cause, ctext = _likely_cause(prep, model, res, data, code, t_fail, evidence, geo)
     loop = loop_suspect(prep.case, res.columns)
-    if loop is not None:            # (docs/theory.md 22: an unstable loop stops through this diagnosis)
+    if loop is not None:            # (docs/theory.md 23: an unstable loop stops through this diagnosis)
         cause, ctext = "unstable_control_loop", f"{loop} (the diagnosis without it: {ctext})"
     msg = (f"{model} run stopped at t = {fmt_time(t_fail)} s: {what}; {qtext}. Likely cause: {ctext}. "
            f"Partial results up to t = {fmt_time(res.t[-1])} s are kept.")

@@ -1,4 +1,4 @@
-!> Feedback controllers evaluated inside the time loops (docs/theory.md section 22): a PID law on the
+!> Feedback controllers evaluated inside the time loops (docs/theory.md section 23): a PID law on the
 !> error between a reference trajectory r(t) (any kinematic law of flexmech_drivelaw) and a measured
 !> joint coordinate y and its rate y' (collocated: the coordinate of the force drive the controller
 !> acts through), with a feedforward spline ff(t), output limits [umin, umax] and anti-windup by
@@ -17,11 +17,13 @@
 !> Flat description (plain arrays across f2py; padding controllers have drive index 0 and are skipped):
 !>   cint(NCI, nctl) = [drive (force drive it adds to, 1-based), reference law kind, reference table
 !>                      first knot, knots (0: none), feedforward table first knot, knots, s, m,
-!>                      1: an angle (the error wrapped to (-pi, pi]: a joint that turns whole revolutions)]
+!>                      1: an angle (the error wrapped to (-pi, pi]: a joint that turns whole revolutions),
+!>                      measured row: kind (0: the drive's own coordinate, collocated; else a row kind of
+!>                      flexmech_markers, non-collocated), its markers a, b]
 !>   cpar(NCP, nctl) = [kp, ki, kd, umin, umax, reference par(4) (flexmech_drivelaw layout),
 !>                      shaper amplitudes A(3), times t(3) [s]]: the reference is sum_i A_i r0(t - t_i)
 !>                      (r0 the law; before its start, t - t_i < 0, its value at 0 at rest); no shaper:
-!>                      A = [1, 0, 0], t = [0, 0, 0]
+!>                      A = [1, 0, 0], t = [0, 0, 0]; the measured row's direction d(2) (a's frame)]
 !>   ctab_t(nt), ctab_c(4, nt): the splines of the reference and feedforward tables
 !>   cst(NST, nctl) = [I, u (the output now), steps since the start, ring head, the reference's start,
 !>                     measurement ring (2, 0:MAXDELAY)]
@@ -33,10 +35,10 @@ module flexmech_control
   use flexmech_drivelaw, only: kinematic_law, spline_eval, LAW_HARMONIC
   implicit none
   private
-  public :: control_bank, ctl_setup, ctl_effort, ctl_start, ctl_commit, ctl_save, ctl_active
+  public :: control_bank, ctl_setup, ctl_output, ctl_start, ctl_commit, ctl_save, ctl_active
   public :: CTL_NCI, CTL_NCP, CTL_NST, CTL_MAXDELAY
 
-  integer, parameter :: CTL_NCI = 9, CTL_NCP = 15, CTL_MAXDELAY = 2000
+  integer, parameter :: CTL_NCI = 12, CTL_NCP = 17, CTL_MAXDELAY = 2000
   integer, parameter :: HEAD = 4, START = 5, RING = 6
   integer, parameter :: CTL_NST = RING - 1 + 2*(CTL_MAXDELAY + 1)
 
@@ -76,7 +78,7 @@ contains
         ok = ok .and. c(1) <= nd .and. c(7) >= 0 .and. c(8) >= 0 .and. c(8) <= CTL_MAXDELAY .and. &
              (c(8) == 0 .or. c(7) >= 1) .and. all(c(3:6) >= 0) .and. c(3) + c(4) - 1 <= nt .and. &
              c(5) + c(6) - 1 <= nt .and. (c(4) == 0 .or. c(4) >= 2) .and. (c(6) == 0 .or. c(6) >= 2)
-        ok = ok .and. all(ieee_is_finite(cb%cp([1, 2, 3, 7, 8, 9, 10, 11, 12, 13, 14, 15], j))) .and. &
+        ok = ok .and. all(ieee_is_finite(cb%cp([1, 2, 3, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17], j))) .and. &
              cb%cp(4, j) <= cb%cp(5, j)
       end associate
     end do
@@ -171,26 +173,20 @@ contains
                        (ur < cb%cp(4, j) .and. e*cb%cp(2, j) < 0.0_dp))
   end subroutine saturate
 
-  !> Sum of the outputs [N m or N] of the controllers acting through force drive `drive`, with its
-  !> coordinate y and rate yd at time t (the continuous law at this state; the others their held output).
-  pure real(dp) function ctl_effort(cb, drive, y, yd, t) result(u)
+  !> Output [N m or N] of controller j with its measured signal y and rate yd at time t: the continuous
+  !> law at this state, or the output held since the last sample.
+  pure real(dp) function ctl_output(cb, j, y, yd, t) result(u)
     type(control_bank), intent(in) :: cb
-    integer, intent(in) :: drive
+    integer, intent(in) :: j
     real(dp), intent(in) :: y, yd, t
-    integer :: j
-    real(dp) :: uj, dummy
+    real(dp) :: e
     logical :: integ
-    u = 0.0_dp
-    do j = 1, cb%n
-      if (cb%ci(1, j) /= drive) cycle
-      if (cb%ci(7, j) == 0) then
-        call continuous_law(cb, j, y, yd, t, uj, dummy, integ)
-      else
-        uj = cb%st(2, j)
-      end if
-      u = u + uj
-    end do
-  end function ctl_effort
+    if (cb%ci(7, j) == 0) then
+      call continuous_law(cb, j, y, yd, t, u, e, integ)
+    else
+      u = cb%st(2, j)
+    end if
+  end function ctl_output
 
   !> The continuous law of controller j at (y, yd, t): output u, error e, whether I may grow.
   pure subroutine continuous_law(cb, j, y, yd, t, u, e, integrate)

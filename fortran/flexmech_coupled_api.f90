@@ -46,7 +46,7 @@ contains
   !> since the last frame (flexmech_alternation), ef (4, nframes) [kinetic, potential, work of the inputs, max
   !> Newton iterations since the last frame]; nvalid: number of valid frames; newton(4): the last
   !> iteration's residual, correction and acceleration norms, factorizations (coupled_run).
-  !> Feedback controllers (flexmech_control: the layout of cint (9, ncl), cpar (15, ncl), the tables'
+  !> Feedback controllers (flexmech_control: the layout of cint (12, ncl), cpar (17, ncl), the tables'
   !> splines ctab_t (nct), ctab_c (4, nct) and their state cst (NST, ncl), read on a continued run and
   !> written back); padding controllers have cint(1, :) = 0.  uf (ncl, nframes): their outputs.
   subroutine cpl_run(ni, nr, ndof, nc1, nsteps, nframes, nseg, ncl, nct, nst, ispec, rspec, cval, t0, dt, &
@@ -64,8 +64,8 @@ contains
     integer, intent(in) :: out_every, maxit, start
     integer, intent(in) :: seg_link(nseg)
     real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof), pa(ndof), carry(nc1 + 2)
-    integer, intent(in) :: cint(9, ncl)
-    real(dp), intent(in) :: cpar(15, ncl), ctab_t(nct), ctab_c(4, nct)
+    integer, intent(in) :: cint(12, ncl)
+    real(dp), intent(in) :: cpar(17, ncl), ctab_t(nct), ctab_c(4, nct)
     real(dp), intent(inout) :: cst(nst, ncl)
     real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
     real(dp), intent(out) :: lf(nc1, nframes), la(nc1, nframes), uf(ncl, nframes)
@@ -79,7 +79,9 @@ contains
     call build_checked(ispec, rspec, ndof, nc1, sys, status)
     if (status /= STATUS_OK) return
     call ctl_setup(sys%ctl, cint, cpar, ctab_t, ctab_c, cst, dt, sys%nd, ok)
-    if (.not. ok .or. nst /= CTL_NST .or. CTL_NCI /= 9 .or. CTL_NCP /= 15) then
+    ok = ok .and. .not. any(cint(10, :) /= 0 .and. (cint(11, :) < 1 .or. cint(11, :) > sys%nmk .or. &
+                                                    cint(12, :) < 1 .or. cint(12, :) > sys%nmk))
+    if (.not. ok .or. nst /= CTL_NST .or. CTL_NCI /= 12 .or. CTL_NCP /= 17) then
       status = STATUS_BAD_INPUT
       return
     end if

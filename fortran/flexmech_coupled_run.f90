@@ -14,7 +14,7 @@ module flexmech_coupled_run
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
   use flexmech_markers, only: marker_state, CON_POINT, CON_ANGLE, MAXCOL
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap
-  use flexmech_coupled_rows, only: eval_row, drive_load
+  use flexmech_coupled_rows, only: eval_row, drive_load, control_measure
   use flexmech_coupled_storage, only: link_mats
   use flexmech_coupled_assembly, only: assemble, assemble_residual
   use flexmech_coupled_solve, only: newton_solver, ns_setup, ns_factor, ns_rows, ns_correction, ns_gdot
@@ -516,13 +516,10 @@ contains
     type(coupled_system), intent(inout) :: sys
     real(dp), intent(in) :: tt, q(:), v(:)
     logical, intent(in) :: first
-    integer :: j, i, ncl, cols(2*MAXCOL)
-    real(dp) :: y(sys%ctl%n), yd(sys%ctl%n), acc0, grad(2*MAXCOL)
-    type(marker_state) :: ma, mb
+    integer :: j
+    real(dp) :: y(sys%ctl%n), yd(sys%ctl%n)
     do j = 1, sys%ctl%n
-      i = sys%ctl%ci(1, j)
-      call eval_row(sys, sys%dv(1, i), 0, sys%dv_dir(:, i), sys%dv(2, i), sys%dv(3, i), q, v, y(j), yd(j), acc0, &
-                    ncl, cols, grad, ma, mb)
+      call control_measure(sys, j, q, v, y(j), yd(j))
     end do
     if (first) then
       call ctl_start(sys%ctl, tt, y, yd)

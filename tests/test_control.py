@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py.control_study import closed_loop, cycloid, link_case, run, saturated_pid
+from flexmech_py.control_study import TIP, closed_loop, cycloid, link_case, run, saturated_pid, settles
 from flexmech_py.errors import CaseError, SolverError, ValidityWarning
 from flexmech_py.stepping import Simulation
 
@@ -63,6 +63,16 @@ def test_measurement_delay_shifts_the_output_of_a_p_controller():
     r, _ = cycloid(t)
     k = round(d / 1e-3)
     assert np.allclose(u[k:], 2.0 * (r[k:] - y[:-k]), atol=1e-9)
+
+
+def test_collocated_pd_settles_where_tip_position_feedback_goes_unstable():
+    """The classic result (Cannon & Schmitz 1984): PD feedback of the hub angle settles at every gain,
+    the same law on the tip's position (non-collocated) only below a critical gain (between 2.6 and 2.8
+    for k (e + 0.15 s e') on this link: docs/validation.md)."""
+    for k in (0.5, 50.0):
+        assert settles(k) < 1.0
+    assert settles(0.5, TIP) < 1.0
+    assert settles(8.0, TIP) >= 1.0 and settles(8.0) < 1.0
 
 
 def test_stepping_api_reproduces_the_case_file_loop():

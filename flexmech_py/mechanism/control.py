@@ -1,6 +1,6 @@
 """Feedback controllers on force-driven joints: the ``[[controllers]]`` tables of a case, checked, and
 packed into the flat layout of the Fortran module flexmech_control (docs/cases.md, controllers;
-docs/theory.md section 22).
+docs/theory.md section 23).
 
 A controller adds a PID effort to the force drive of its joint (that drive's own law keeps acting:
 a disturbance, or a feedforward of its own):
@@ -50,6 +50,8 @@ def check_controllers(raw, mech, solver: dict) -> list:
         v.keys(c, KEYS, w)
         joint = v.text(c, "joint", w, required=True)
         _force_driven(mech, joint, f"{w}.joint")
+        if isinstance(c.get("measure"), dict) and "point" in c["measure"]:
+            mech.point(c["measure"]["point"], f"{w}.measure.point")
         name = v.text(c, "name", w, default=f"{joint}_pid")
         if name in names:
             raise CaseError(f"{w}.name", f"{name!r} names two controllers; give each its own name")
@@ -66,7 +68,7 @@ def check_controllers(raw, mech, solver: dict) -> list:
 
 
 def refuse_superposition(case: dict, model: str) -> None:
-    """CaseError when a case with controllers is to run under a superposition model (docs/theory.md 22.3:
+    """CaseError when a case with controllers is to run under a superposition model (docs/theory.md 23.3:
     a loop that feeds the elastic motion back cannot close in a one-way model; the rigid-body loop alone
     is not built yet)."""
     if case.get("controllers") and model not in CONSTRAINED:
@@ -209,24 +211,34 @@ def _whole_steps(x: float, unit: float, where: str, minimum: int) -> float:
     return k * unit
 
 
-def _measure(c: dict, w: str) -> str:
-    m = v.text(c, "measure", w, default="joint")
-    if m != "joint":
-        raise CaseError(f"{w}.measure", f"{m!r}: only the joint's own coordinate and rate (\"joint\", "
-                                        "collocated) can be measured so far")
-    return m
+def _measure(c: dict, w: str):
+    """``"joint"`` (the joint's coordinate and rate, collocated) or ``{point = "<link>.<point>",
+    direction = [x, y]}``: the point's position along the unit direction (fixed in the frame of the
+    joint's body a) from the joint's point a, and its rate (non-collocated; the reference then in m)."""
+    m = c.get("measure", "joint")
+    where = f"{w}.measure"
+    if m == "joint":
+        return m
+    if not isinstance(m, dict):
+        raise CaseError(where, f"must be \"joint\" or {{point = \"<link>.end\", direction = [0, 1]}}, got {m!r}")
+    v.keys(m, {"point", "direction"}, where)
+    point = v.text(m, "point", where, required=True)
+    d = np.asarray(v.vector(m, "direction", where, 2, default=[0.0, 1.0]), float)
+    if not np.linalg.norm(d) > 0:
+        raise CaseError(f"{where}.direction", "must be a nonzero vector [x, y]")
+    return {"point": point, "direction": [float(x) for x in d / np.linalg.norm(d)]}
 
 
 class ControlPack:
     """The flat layout of flexmech_control: cint (9, n), cpar (9, n), the tables' splines ctab_t,
     ctab_c and a fresh state cst (NST, n) (n >= 1: a padding controller with drive 0 when none)."""
 
-    def __init__(self, controllers: list, force_joints: list, revolute: set, dt: float):
+    def __init__(self, controllers: list, force_joints: list, revolute: set, dt: float, rows: dict):
         n = max(1, len(controllers))
         self.names = [c["name"] for c in controllers]
         self.joints = [c["joint"] for c in controllers]
-        self.cint = np.zeros((9, n), np.int32, order="F")
-        self.cpar = np.zeros((15, n), order="F")
+        self.cint = np.zeros((12, n), np.int32, order="F")
+        self.cpar = np.zeros((17, n), order="F")
         tab_t, tab_c = [], []
         for k, c in enumerate(controllers):
             ref = Drive(joint=c["joint"], law=c["reference"]["law"],
@@ -239,10 +251,11 @@ class ControlPack:
             lo, hi = c.get("limits") or (-np.inf, np.inf)
             s = round(c["sample_time"] / dt) if c["sample_time"] else 0
             m = round(c["delay"] / dt)
+            kind, ma, mb, d = rows.get(c["name"], (0, -1, -1, (0.0, 0.0)))
             self.cint[:, k] = [force_joints.index(c["joint"]) + 1, ref.code, *rt, *ft, max(s, 1 if m else 0), m,
-                               int(c["joint"] in revolute)]
+                               int(c["joint"] in revolute and kind == 0), kind, ma + 1, mb + 1]
             amps, times = _impulses(c.get("shaper"))
-            self.cpar[:, k] = [c["kp"], c["ki"], c["kd"], lo, hi, *law["par"], *amps, *times]
+            self.cpar[:, k] = [c["kp"], c["ki"], c["kd"], lo, hi, *law["par"], *amps, *times, *d]
         self.ctab_t = np.asarray(tab_t or [0.0], float)
         self.ctab_c = np.asfortranarray(np.array(tab_c, float).T if tab_c else np.zeros((4, 1)))
         self.cst = np.zeros((CONTROL_NST, n), order="F")
@@ -266,7 +279,8 @@ def _append(tab_t: list, tab_c: list, table) -> list:
     return [first, len(table[0])]
 
 
-def pack_controllers(controllers: list, force_joints: list, revolute: set, dt: float) -> ControlPack:
+def pack_controllers(controllers: list, force_joints: list, revolute: set, dt: float, rows: dict) -> ControlPack:
     """The controllers for a run with step dt whose force drives act on ``force_joints`` (in the order
-    of the model's force drives); ``revolute``: the joints whose coordinate is an angle."""
-    return ControlPack(controllers, force_joints, revolute, dt)
+    of the model's force drives); ``revolute``: the joints whose coordinate is an angle; ``rows``:
+    {controller: (row kind, marker a, marker b (0-based), direction)} of the non-collocated ones."""
+    return ControlPack(controllers, force_joints, revolute, dt, rows)
