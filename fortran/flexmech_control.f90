@@ -35,7 +35,7 @@ module flexmech_control
   use flexmech_drivelaw, only: kinematic_law, spline_eval, LAW_HARMONIC
   implicit none
   private
-  public :: control_bank, ctl_setup, ctl_output, ctl_start, ctl_commit, ctl_save, ctl_active
+  public :: control_bank, ctl_setup, ctl_output, ctl_start, ctl_commit, ctl_save, ctl_places, ctl_active
   public :: CTL_NCI, CTL_NCP, CTL_NST, CTL_MAXDELAY
 
   integer, parameter :: CTL_NCI = 12, CTL_NCP = 17, CTL_MAXDELAY = 2000
@@ -61,16 +61,16 @@ contains
     integer, intent(in) :: cint(:, :), nd
     real(dp), intent(in) :: cpar(:, :), ctab_t(:), ctab_c(:, :), cst(:, :), h
     logical, intent(out) :: ok
-    integer :: k, j, nt
-    logical, allocatable :: keep(:)
+    integer :: j, nt
+    integer, allocatable :: idx(:)
     ok = size(cint, 1) == CTL_NCI .and. size(cpar, 1) == CTL_NCP .and. size(cst, 1) == CTL_NST .and. &
          size(cpar, 2) == size(cint, 2) .and. size(cst, 2) == size(cint, 2) .and. h > 0.0_dp
     if (.not. ok) return
-    keep = cint(1, :) > 0
-    cb%n = count(keep); cb%h = h
-    cb%ci = cint(:, pack([(k, k = 1, size(cint, 2))], keep))
-    cb%cp = cpar(:, pack([(k, k = 1, size(cint, 2))], keep))
-    cb%st = cst(:, pack([(k, k = 1, size(cint, 2))], keep))
+    idx = ctl_places(cint)
+    cb%n = size(idx); cb%h = h
+    cb%ci = cint(:, idx)
+    cb%cp = cpar(:, idx)
+    cb%st = cst(:, idx)
     cb%tt = ctab_t; cb%tc = ctab_c
     nt = size(ctab_t)
     do j = 1, cb%n
@@ -91,21 +91,20 @@ contains
   end function ctl_active
 
   !> The state back into the flat array (the caller's copy, for a continued run).
-  subroutine ctl_save(cb, cint, cst, uout)
+  subroutine ctl_save(cb, cint, cst)
     type(control_bank), intent(in) :: cb
     integer, intent(in) :: cint(:, :)
     real(dp), intent(inout) :: cst(:, :)
-    real(dp), intent(out) :: uout(:)          !< (size(cint, 2)) the outputs now [N m or N]
-    integer :: k, j
-    j = 0
-    uout = 0.0_dp
-    do k = 1, size(cint, 2)
-      if (cint(1, k) <= 0) cycle
-      j = j + 1
-      cst(:, k) = cb%st(:, j)
-      uout(k) = cb%st(2, j)
-    end do
+    cst(:, ctl_places(cint)) = cb%st
   end subroutine ctl_save
+
+  !> The places in the flat layout of the active controllers (drive index > 0), in the bank's order.
+  pure function ctl_places(cint) result(idx)
+    integer, intent(in) :: cint(:, :)
+    integer, allocatable :: idx(:)
+    integer :: k
+    idx = pack([(k, k = 1, size(cint, 2))], cint(1, :) > 0)
+  end function ctl_places
 
   !> [r, r', r''] of controller j's reference and ff(t), at time t [s].
   pure subroutine reference(cb, j, t, r, ff)

@@ -14,7 +14,7 @@ module flexmech_coupled_api
   use flexmech_coupled_solve, only: coupled_set_solver, coupled_set_multipliers, newton_solver, ns_setup, ns_structure
   use flexmech_coupled_storage, only: link_mats
   use flexmech_coupled_post, only: coupled_post
-  use flexmech_control, only: ctl_setup, ctl_save, CTL_NCI, CTL_NCP, CTL_NST
+  use flexmech_control, only: ctl_setup, ctl_save, ctl_places, CTL_NCI, CTL_NCP, CTL_NST
   implicit none
   private
   public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_set_start, cpl_set_inertia, cpl_residuals, cpl_rows
@@ -72,7 +72,7 @@ contains
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
     type(coupled_system) :: sys
-    real(dp) :: ulast(ncl), ufc(ncl, nframes)
+    real(dp) :: ufc(ncl, nframes)
     logical :: ok
     qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; la = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
     newton = 0.0_dp; uf = 0.0_dp
@@ -89,24 +89,10 @@ contains
     call coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, start, &
                      div_limit, seg_link, q, v, a, pa, carry, qf, vf, af, lf, la, ef, status, fail_step, iters, &
                      nvalid, newton, ufc(1:sys%ctl%n, :))
-    call ctl_save(sys%ctl, cint, cst, ulast)
-    call spread_outputs(cint, ufc, uf)
+    call ctl_save(sys%ctl, cint, cst)
+    uf(ctl_places(cint), :) = ufc(1:sys%ctl%n, :)
   end subroutine cpl_run
 
-  !> The outputs of the active controllers (rows 1.. of uc) onto their places in the flat layout.
-  subroutine spread_outputs(cint, uc, uf)
-    integer, intent(in) :: cint(:, :)
-    real(dp), intent(in) :: uc(:, :)
-    real(dp), intent(out) :: uf(:, :)
-    integer :: k, j
-    j = 0
-    uf = 0.0_dp
-    do k = 1, size(cint, 2)
-      if (cint(1, k) <= 0) cycle
-      j = j + 1
-      uf(k, :) = uc(j, :)
-    end do
-  end subroutine spread_outputs
 
   !> Linear solver of every later cpl_run in this process: mode -1 (default) automatic, 1 condensed
   !> onto the segment-end positions, 0 the whole band, 2 the bordered saddle band of a layout that

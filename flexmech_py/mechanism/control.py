@@ -23,6 +23,7 @@ from .. import validate as v
 from ..errors import CaseError, ValidityWarning
 from ..shaping import SHAPERS, design
 from .drives import KINEMATIC_LAWS, LAW_PARAMS, Drive, cubic_spline
+from .schema import table_samples
 
 __all__ = ["check_controllers", "refuse_superposition", "loop_suspect", "ControlPack", "pack_controllers", "CONTROL_NST", "MAX_DELAY_STEPS"]
 
@@ -137,7 +138,7 @@ def _reference(ref, w: str) -> dict:
     for key in sorted(req - set(ref)):
         raise CaseError(f"{w}.{key}", f"is missing; a '{law}' law needs {', '.join(sorted(req))}")
     if law == "table":
-        return {"law": law, **_samples(ref, w)}
+        return {"law": law, **table_samples({"t": ref.get("t"), "value": ref.get("value")}, w)}
     out = {"law": law}
     for key in sorted(req | set(opt)):
         if key == "profile":
@@ -148,24 +149,12 @@ def _reference(ref, w: str) -> dict:
     return {k: x for k, x in out.items() if x is not None}
 
 
-def _samples(tab: dict, w: str) -> dict:
-    t, y = tab.get("t"), tab.get("value")
-    if not isinstance(t, list) or not isinstance(y, list) or len(t) != len(y) or len(t) < 2:
-        raise CaseError(w, "needs lists t and value of equal length (at least 2 samples)")
-    t = [v.num({"x": x}, "x", f"{w}.t") for x in t]
-    y = [v.num({"x": x}, "x", f"{w}.value") for x in y]
-    if np.any(np.diff(t) <= 0):
-        raise CaseError(f"{w}.t", "the sample times must increase strictly")
-    return {"t": t, "value": y}
-
-
 def _feedforward(ff, w: str):
     if ff is None:
         return None
     if not isinstance(ff, dict):
         raise CaseError(w, "must be a table {t = [...], value = [...]} (the effort in time, N m or N)")
-    v.keys(ff, {"t", "value"}, w)
-    return _samples(ff, w)
+    return table_samples(ff, w)
 
 
 def _shaper(c: dict, w: str) -> dict:
