@@ -417,7 +417,8 @@ class CoupledStepper(RecordedFrames):
                 self.since = (its, alt)
                 if keep_from is not None and step >= keep_from and step % oe == 0:
                     ef = frame[4].copy()
-                    ef[3] = its
+                    ef[3] = its          # (the controllers' outputs ride behind the energies)
+                    ef = np.concatenate([ef, [u[j] for u in cm.last_run["controls"].values()]])
                     self.frames.append((c, a + j * every, cval[:, :, j * every], frame[:4] + (ef,), alt))
                 if step % oe == 0:
                     self.since = (0.0, 0.0)
@@ -456,6 +457,9 @@ class CoupledStepper(RecordedFrames):
         acc = Accumulated()
         acc.deflection = DeflectionReference(self.prep.case, self.prep.setup)
         diag = cpl_out.Diagnostics(self.cm)
+        controls = cols[4][4:]
+        cols = cols[:4] + (cols[4][:4],)
+        self.cm.last_run = dict(self.cm.last_run, controls=dict(zip(self.cm.last_run["controls"], controls)))
         return self.prep.coupled_block(self.cm, self.model, rm, np.asfortranarray(cval), i0, cols, self.iters, None,
                                        diag, acc, step, every=1, alternating=la)
 

@@ -82,6 +82,9 @@ def test_stepping_api_reproduces_the_case_file_loop():
     for _ in range(50):
         sim.advance(1)
     assert np.allclose(sim.joint("hub")[0], batch.columns["hub_angle"][-1], rtol=0, atol=1e-12)
+    stepped = sim.result().columns
+    for name in ("hub_angle", "torque", "control_hub_pid", "work_inputs"):
+        assert np.allclose(stepped[name], batch.columns[name], rtol=0, atol=1e-12), name
 
 
 @pytest.mark.parametrize("change, field", [
