@@ -21,6 +21,7 @@ from .bundled import resolve_case_path
 from .errors import CaseError
 from .inputs import read_text
 from .mechanism import mechanism_from_spec
+from .mechanism.control import check_controllers
 from .mechanism.schema import derived_keys, mechanism_spec
 from .mechanism.templates import expand_template
 from .sizes import check_mesh
@@ -102,7 +103,7 @@ ERROR_PARTS = ("time", "mesh", "model")
 TOLERANCE_DEFAULT = 0.05       # solver.tolerance: a fraction of each output's peak (budget.TOLERANCE)
 ELEMENTS_DEFAULT = 8           # mesh.elements_per_link of a case that gives none
 TOP_KEYS = {"case", "mechanism", "links", "bodies", "mesh", "joints", "drive", "drives", "initial", "point_masses",
-            "rotary_inertias", "loads", "solver", "outputs"}
+            "rotary_inertias", "loads", "solver", "outputs", "controllers"}
 
 
 class Case(dict):
@@ -284,6 +285,11 @@ def validate_case(raw: dict, source: str = "<case>") -> Case:
     r["loads"] = {"gravity": v.vector(loads, "gravity", "loads", 2, default=[0.0, 0.0])}
     r["solver"] = _solver(general.get("solver", {}), mech)
     _check_tables_cover_run(mech, r["solver"]["t_end"])
+    controllers = check_controllers(general.get("controllers"), mech, r["solver"])
+    if controllers:
+        r["controllers"] = controllers
+        if r["solver"]["model"] == "auto":      # (the superposition models cannot close a loop)
+            r["solver"]["model"] = "nonlinear"
     if "outputs" not in general:
         raise CaseError("outputs", "is missing; add an [outputs] table naming what to record, e.g. "
                                    "tip_x = {kind = 'position', at = 'arm.end', component = 'x'}")

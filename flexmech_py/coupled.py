@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
+from .mechanism.control import ControlPack, pack_controllers
 from .coupled_layout import CON_ANGLE, CON_POINT, CON_PROJECTION, Layout, LinkMesh, Row, SharedAngles, \
     flat_description, force_constant_positions, marker_key, node_segment, start_value
 
@@ -219,9 +220,13 @@ class CoupledModel:
         ispec, rspec = self._spec(gravity, rayleigh, kernel=True)
         if state is None:       # (a continued run keeps the structure its start took)
             self.solver = self._structure(ispec, rspec, q, v)
-        qf, vf, af, lk, lka, ef, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
+        ctl = self.controllers(dt)
+        if state is not None and state.get("cst") is not None:
+            ctl.cst[:] = state["cst"]
+        qf, vf, af, lk, lka, ef, uf, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
             ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
-            out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry)
+            out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry,
+            ctl.cint, ctl.cpar, ctl.ctab_t, ctl.ctab_c, ctl.cst)
         lf = np.zeros((nc, nframes))      # the interior welds of shared node angles carry none
         lf[keep] = lk[:keep.size]
         la = np.zeros((nc, nframes))
@@ -231,7 +236,8 @@ class CoupledModel:
                 qf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid])
         self.last_run = {"qf": qf, "vf": vf, "af": af, "lf": lf, "la": la, "ef": ef, "frames_valid": int(nvalid),
                          "q": q, "v": v, "a": a, "p": p, "carry": carry, "status": int(status), "fail_step": int(fail),
-                         "factorizations": int(newton[3])}
+                         "factorizations": int(newton[3]), "cst": ctl.cst,
+                         "controls": {n: uf[k] for k, n in enumerate(ctl.names)}}
         detail = ""
         if status == kernels.STATUS_NEWTON:
             detail = (f" (last iteration: residual norm {newton[0]:.3g}, acceleration correction {newton[1]:.3g} "
@@ -240,6 +246,25 @@ class CoupledModel:
                              step=int(fail), data={"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "iters": iters,
                                                    "q": q, "v": v, "a": a, "p": p, "newton": newton})
         return qf, vf, af, lf, ef, iters
+
+    def controllers(self, dt: float) -> ControlPack:
+        """The case's feedback controllers packed for a run with step dt (flexmech_control)."""
+        mech = self.case.mechanism
+        revolute = {j.name for j in mech.joints if j.kind != "prismatic"}
+        return pack_controllers(self.case.get("controllers", []), [d.joint for _, d in self.forces], revolute, dt,
+                                self.layout.control_rows)
+
+    def control_outputs(self, nf: int) -> dict:
+        """{controller: (nf,) its output [N m or N]} over the first nf frames of the last run."""
+        return {n: u[:nf].copy() for n, u in (self.last_run or {}).get("controls", {}).items()}
+
+    def control_effort(self, joint: str, nf: int) -> np.ndarray:
+        """(nf,) the summed outputs of the controllers acting on ``joint`` over the last run's first nf frames."""
+        out = np.zeros(nf)
+        for c in self.case.get("controllers", []):
+            if c["joint"] == joint:
+                out += self.last_run["controls"][c["name"]][:nf]
+        return out
 
     def structure(self, q, v) -> dict:
         """The linear algebra a run takes at the state (q, v) (all DOFs, the layout's angles), with the

@@ -190,6 +190,7 @@ class Layout:
         self.dof, self.fixed, self.node_ends, self.parent = {}, {}, {}, {}
         self._positions()
         self._joints()
+        self.control_rows = self._control_rows()
         self._lumped()
         self.n_el = np.array([k1 - k0 for _, k0, k1 in self.segments], np.int32)
         self.ld = self._ld_array()
@@ -301,6 +302,20 @@ class Layout:
         if key not in self.markers:
             self.markers.append(key)
         return self.markers.index(key)
+
+    def _control_rows(self) -> dict:
+        """{controller: (row kind, marker a, marker b (0-based), direction)} of the feedback controllers
+        that measure a point (non-collocated, flexmech_py.mechanism.control): the point's position along
+        the direction (fixed in the frame of the joint's body a) from the joint's point a."""
+        out = {}
+        for c in self.case.get("controllers", []):
+            if c["measure"] == "joint":
+                continue
+            where = f"controllers.{c['name']}.measure.point"
+            pr = self.mech.point(c["measure"]["point"], where)
+            out[c["name"]] = (CON_PROJECTION, self.joints[c["joint"]].markers[0],
+                              self.marker(marker_key(self, pr, where)), tuple(c["measure"]["direction"]))
+        return out
 
     def _joints(self) -> None:
         """Markers and rows of every joint (JOINT_ROWS), its drive, and the welds between the

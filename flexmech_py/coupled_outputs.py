@@ -336,10 +336,11 @@ def _component(start, edges) -> set:
 
 def drive_force(cm: CoupledModel, fr: ModelFrames, name: str) -> np.ndarray:
     """(nf,) the torque [N m] or force [N] the drive of joint ``name`` applies on its coordinate: a
-    kinematic drive's constraint force (-lambda), a force drive's law at the model's coordinate."""
+    kinematic drive's constraint force (-lambda), a force drive's law at the model's coordinate plus the
+    outputs of the controllers acting through it."""
     jm = cm.joints[name]
-    if jm.force is not None:
-        return fr.post["forces"][jm.force].copy()
+    if jm.force is not None:      # (with the outputs of the controllers acting through it)
+        return fr.post["forces"][jm.force] + cm.control_effort(name, fr.t.size)
     return -fr.lf[jm.rows["drive"]]
 
 

@@ -24,6 +24,7 @@ import numpy as np
 from . import coupled, kernels, notices
 from .case import integrator_of
 from .errors import MechanismError, SolverError
+from .mechanism.control import loop_suspect
 from .model import squared_frequencies
 
 __all__ = ["check_validity", "ValidityTracker", "failed", "frames_before", "fmt_time"]
@@ -372,6 +373,9 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
     evidence = _evidence(prep, model, geometric, res, data, code, t_fail, diagnose)
     geo = data.get("geometric", "none")
     cause, ctext = _likely_cause(prep, model, res, data, code, t_fail, evidence, geo)
+    loop = loop_suspect(prep.case, res.columns)
+    if loop is not None:            # (docs/theory.md 23: an unstable loop stops through this diagnosis)
+        cause, ctext = "unstable_control_loop", f"{loop} (the diagnosis without it: {ctext})"
     msg = (f"{model} run stopped at t = {fmt_time(t_fail)} s: {what}; {qtext}. Likely cause: {ctext}. "
            f"Partial results up to t = {fmt_time(res.t[-1])} s are kept.")
     failure = {"code": code, "step": exc.step, "what": what, "cause": cause, "message": msg,

@@ -13,6 +13,7 @@ from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients, i
 from .errors import CaseError, MechanismError, SolverError
 from . import guards, notices, step_doubling
 from . import coupled_outputs as cpl_out
+from .mechanism.control import refuse_superposition
 from .coupled import CoupledModel
 from .mechanism import MotionSource, prepare_motion
 from .mechanism.motion import RigidMotion
@@ -452,6 +453,7 @@ class Prepared:
         return out
 
     def _superposition_blocks(self, model: str, geometric: str | None, u0, v0):
+        refuse_superposition(self.case, model)
         fe, oe = self.fe, self.out_every
         sol = dict(self.case["solver"])
         if geometric is not None:
@@ -602,6 +604,10 @@ class Prepared:
             columns[k], units[k] = y, "J"
         columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
         columns.update(_drive_columns(cm, fr, units))
+        for name, u in cm.control_outputs(qf.shape[1]).items():      # the feedback controllers' outputs
+            joint = next(c["joint"] for c in case["controllers"] if c["name"] == name)
+            columns[f"control_{name}"] = u
+            units[f"control_{name}"] = "N" if case.mechanism.joint(joint).kind == "prismatic" else "N m"
         diag.add(fr, ef, rmf, iters, cval[:, :, idx])
         extra = {"integrator": integrator_summary(sol, model), "coupled": diag.summary(steps_done),
                  "step_alternation": cpl_out.multiplier_alternation(cm, alternating, lf,

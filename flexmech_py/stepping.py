@@ -32,6 +32,7 @@ from .mechanism.motion import RigidMotion
 from .mechanism.packing import force_constant_positions
 from .outputs import DeflectionReference
 from .results import Result
+from .mechanism.control import refuse_superposition
 from .simulate import Accumulated, Prepared, check_elastic_problem, elastic_torque_loads
 from .sizes import check_mesh
 
@@ -301,6 +302,7 @@ class SuperpositionStepper(RecordedFrames):
     """The superposition models' elastic loop (flexmech_ked) continued call by call."""
 
     def __init__(self, prep: Prepared, model: str, rigid: RigidBuffer):
+        refuse_superposition(prep.case, model)
         self.prep, self.model, self.rigid = prep, model, rigid
         self.fe = prep.fe
         sol = self.sol = dict(prep.case["solver"])
@@ -415,7 +417,8 @@ class CoupledStepper(RecordedFrames):
                 self.since = (its, alt)
                 if keep_from is not None and step >= keep_from and step % oe == 0:
                     ef = frame[4].copy()
-                    ef[3] = its
+                    ef[3] = its          # (the controllers' outputs ride behind the energies)
+                    ef = np.concatenate([ef, [u[j] for u in cm.last_run["controls"].values()]])
                     self.frames.append((c, a + j * every, cval[:, :, j * every], frame[:4] + (ef,), alt))
                 if step % oe == 0:
                     self.since = (0.0, 0.0)
@@ -454,6 +457,9 @@ class CoupledStepper(RecordedFrames):
         acc = Accumulated()
         acc.deflection = DeflectionReference(self.prep.case, self.prep.setup)
         diag = cpl_out.Diagnostics(self.cm)
+        controls = cols[4][4:]
+        cols = cols[:4] + (cols[4][:4],)
+        self.cm.last_run = dict(self.cm.last_run, controls=dict(zip(self.cm.last_run["controls"], controls)))
         return self.prep.coupled_block(self.cm, self.model, rm, np.asfortranarray(cval), i0, cols, self.iters, None,
                                        diag, acc, step, every=1, alternating=la)
 

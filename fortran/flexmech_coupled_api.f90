@@ -14,6 +14,7 @@ module flexmech_coupled_api
   use flexmech_coupled_solve, only: coupled_set_solver, coupled_set_multipliers, newton_solver, ns_setup, ns_structure
   use flexmech_coupled_storage, only: link_mats
   use flexmech_coupled_post, only: coupled_post
+  use flexmech_control, only: ctl_setup, ctl_save, ctl_places, CTL_NCI, CTL_NCP, CTL_NST
   implicit none
   private
   public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_set_start, cpl_set_inertia, cpl_residuals, cpl_rows
@@ -45,12 +46,16 @@ contains
   !> since the last frame (flexmech_alternation), ef (4, nframes) [kinetic, potential, work of the inputs, max
   !> Newton iterations since the last frame]; nvalid: number of valid frames; newton(4): the last
   !> iteration's residual, correction and acceleration norms, factorizations (coupled_run).
-  subroutine cpl_run(ni, nr, ndof, nc1, nsteps, nframes, nseg, ispec, rspec, cval, t0, dt, alpha_m, alpha_f, &
-                     beta, gamma, out_every, tol, maxit, start, div_limit, seg_link, q, v, a, pa, carry, &
-                     qf, vf, af, lf, la, ef, status, fail_step, iters, nvalid, newton)
-    integer, intent(in) :: ni, nr, ndof, nc1, nsteps, nframes, nseg
+  !> Feedback controllers (flexmech_control: the layout of cint (12, ncl), cpar (17, ncl), the tables'
+  !> splines ctab_t (nct), ctab_c (4, nct) and their state cst (NST, ncl), read on a continued run and
+  !> written back); padding controllers have cint(1, :) = 0.  uf (ncl, nframes): their outputs.
+  subroutine cpl_run(ni, nr, ndof, nc1, nsteps, nframes, nseg, ncl, nct, nst, ispec, rspec, cval, t0, dt, &
+                     alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, start, div_limit, seg_link, q, v, a, &
+                     pa, carry, cint, cpar, ctab_t, ctab_c, cst, qf, vf, af, lf, la, ef, uf, status, fail_step, &
+                     iters, nvalid, newton)
+    integer, intent(in) :: ni, nr, ndof, nc1, nsteps, nframes, nseg, ncl, nct, nst
     ! Python passes none of the sizes: f2py takes them from the arrays' shapes, nframes from out_every
-    !f2py intent(hide) :: ni, nr, ndof, nc1, nsteps, nseg
+    !f2py intent(hide) :: ni, nr, ndof, nc1, nsteps, nseg, ncl, nct, nst
     !f2py integer intent(hide), depend(cval, out_every) :: nframes = (out_every > 0 ? (shape(cval, 2) - 1)/out_every + 1 : 1)
     integer, intent(in) :: ispec(ni)
     real(dp), intent(in) :: rspec(nr)
@@ -59,19 +64,35 @@ contains
     integer, intent(in) :: out_every, maxit, start
     integer, intent(in) :: seg_link(nseg)
     real(dp), intent(inout) :: q(ndof), v(ndof), a(ndof), pa(ndof), carry(nc1 + 2)
+    integer, intent(in) :: cint(12, ncl)
+    real(dp), intent(in) :: cpar(17, ncl), ctab_t(nct), ctab_c(4, nct)
+    real(dp), intent(inout) :: cst(nst, ncl)
     real(dp), intent(out) :: qf(ndof, nframes), vf(ndof, nframes), af(ndof, nframes), ef(4, nframes)
-    real(dp), intent(out) :: lf(nc1, nframes), la(nc1, nframes)
+    real(dp), intent(out) :: lf(nc1, nframes), la(nc1, nframes), uf(ncl, nframes)
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
     type(coupled_system) :: sys
+    real(dp) :: ufc(ncl, nframes)
+    logical :: ok
     qf = 0.0_dp; vf = 0.0_dp; af = 0.0_dp; ef = 0.0_dp; lf = 0.0_dp; la = 0.0_dp; fail_step = 0; iters = 0; nvalid = 0
-    newton = 0.0_dp
+    newton = 0.0_dp; uf = 0.0_dp
     call build_checked(ispec, rspec, ndof, nc1, sys, status)
     if (status /= STATUS_OK) return
+    call ctl_setup(sys%ctl, cint, cpar, ctab_t, ctab_c, cst, dt, sys%nd, ok)
+    ok = ok .and. .not. any(cint(10, :) /= 0 .and. (cint(11, :) < 1 .or. cint(11, :) > sys%nmk .or. &
+                                                    cint(12, :) < 1 .or. cint(12, :) > sys%nmk))
+    if (.not. ok .or. nst /= CTL_NST .or. CTL_NCI /= 12 .or. CTL_NCP /= 17) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    ufc = 0.0_dp
     call coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, start, &
                      div_limit, seg_link, q, v, a, pa, carry, qf, vf, af, lf, la, ef, status, fail_step, iters, &
-                     nvalid, newton)
+                     nvalid, newton, ufc(1:sys%ctl%n, :))
+    call ctl_save(sys%ctl, cint, cst)
+    uf(ctl_places(cint), :) = ufc(1:sys%ctl%n, :)
   end subroutine cpl_run
+
 
   !> Linear solver of every later cpl_run in this process: mode -1 (default) automatic, 1 condensed
   !> onto the segment-end positions, 0 the whole band, 2 the bordered saddle band of a layout that

@@ -4,12 +4,13 @@
 module flexmech_coupled_rows
   use flexmech_kinds, only: dp
   use flexmech_drivelaw, only: force_law
+  use flexmech_control, only: ctl_output
   use flexmech_markers, only: marker_state, segment_marker, body_marker, ground_marker, constraint_row, &
                               CON_POINT, CON_ANGLE, CON_PROJECTION, MAXCOL
   use flexmech_coupled_system, only: coupled_system, MK_GROUND, MK_NODE, MK_BODY, NPAR
   implicit none
   private
-  public :: get_marker, eval_row, drive_load, coupled_rows, row_patterns
+  public :: get_marker, eval_row, drive_load, coupled_rows, row_patterns, control_measure
 
 contains
 
@@ -53,7 +54,8 @@ contains
   end subroutine eval_row
 
   !> Coordinate theta of force drive i at (q, v) (its gradient over cols(1:nc), marker states) and the
-  !> law's generalized force tau(theta, t) [N m or N].
+  !> law's generalized force tau(theta, t) [N m or N], plus the output of the controllers acting
+  !> through it (flexmech_control: ctl_effort, at theta and its rate).
   pure subroutine drive_load(sys, i, q, v, t, tau, theta, nc, cols, grad, ma, mb)
     type(coupled_system), intent(in) :: sys
     integer, intent(in) :: i
@@ -73,7 +75,49 @@ contains
       tau = force_law(sys%dv_par(:, i), sys%dv_harm(:, i), sys%dv_th(:, :, i), sys%tab_t(1:0), sys%tab_c(:, 1:0), &
                       theta, t)
     end if
+    if (sys%ctl%n > 0) tau = tau + control_effort(sys, i, q, v, t, theta, gd)
   end subroutine drive_load
+
+  !> Sum of the outputs [N m or N] of the controllers acting through force drive i at (q, v, t); theta,
+  !> gd: the drive's coordinate and rate (the collocated measurement).
+  pure real(dp) function control_effort(sys, i, q, v, t, theta, gd) result(u)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: i
+    real(dp), intent(in) :: q(:), v(:), t, theta, gd
+    integer :: j
+    real(dp) :: y, yd
+    u = 0.0_dp
+    do j = 1, sys%ctl%n
+      if (sys%ctl%ci(1, j) /= i) cycle
+      if (sys%ctl%ci(10, j) == 0) then
+        y = theta; yd = gd
+      else
+        call control_measure(sys, j, q, v, y, yd)
+      end if
+      u = u + ctl_output(sys%ctl, j, y, yd, t)
+    end do
+  end function control_effort
+
+  !> The signal y and rate yd controller j measures at (q, v): its drive's coordinate (collocated) or
+  !> its own row between two markers (non-collocated, e.g. a tip position).
+  pure subroutine control_measure(sys, j, q, v, y, yd)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: j
+    real(dp), intent(in) :: q(:), v(:)
+    real(dp), intent(out) :: y, yd
+    integer :: i, ncl, cols(2*MAXCOL)
+    real(dp) :: acc0, grad(2*MAXCOL)
+    type(marker_state) :: ma, mb
+    associate (c => sys%ctl%ci(:, j))
+      if (c(10) == 0) then
+        i = c(1)
+        call eval_row(sys, sys%dv(1, i), 0, sys%dv_dir(:, i), sys%dv(2, i), sys%dv(3, i), q, v, y, yd, acc0, ncl, &
+                      cols, grad, ma, mb)
+      else
+        call eval_row(sys, c(10), 0, sys%ctl%cp(16:17, j), c(11), c(12), q, v, y, yd, acc0, ncl, cols, grad, ma, mb)
+      end if
+    end associate
+  end subroutine control_measure
 
   !> The free DOFs on which every row's gradient can be nonzero (the columns of its two markers),
   !> without repetitions: gnz(1:ngnz(ic), ic), ic = 1..nc (gnz: (2 MAXCOL, >= nc)); at any (q, v).

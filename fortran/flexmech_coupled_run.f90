@@ -14,10 +14,11 @@ module flexmech_coupled_run
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_NEWTON, STATUS_DIVERGED
   use flexmech_markers, only: marker_state, CON_POINT, CON_ANGLE, MAXCOL
   use flexmech_coupled_system, only: coupled_system, set_mode, wrap
-  use flexmech_coupled_rows, only: eval_row, drive_load
+  use flexmech_coupled_rows, only: eval_row, drive_load, control_measure
   use flexmech_coupled_storage, only: link_mats
   use flexmech_coupled_assembly, only: assemble, assemble_residual
   use flexmech_coupled_solve, only: newton_solver, ns_setup, ns_factor, ns_rows, ns_correction, ns_gdot
+  use flexmech_control, only: ctl_start, ctl_commit
   use flexmech_alternation, only: alternation_monitor, alt_setup, alt_step, alt_take
   implicit none
   private
@@ -157,8 +158,8 @@ contains
   !> of the accelerations, number of factorizations of the iteration matrix].
   subroutine coupled_run(sys, cval, t0, dt, alpha_m, alpha_f, beta, gamma, out_every, tol, maxit, &
                          start, div_limit, seg_link, q, v, a, p, carry, qf, vf, af, lf, la, ef, status, &
-                         fail_step, iters, nvalid, newton)
-    type(coupled_system), intent(in) :: sys
+                         fail_step, iters, nvalid, newton, uf)
+    type(coupled_system), intent(inout) :: sys   !< inout: the state of its controllers (sys%ctl)
     real(dp), intent(in) :: cval(:, :, :)        !< (3, >= nc, nsteps+1) [value, rate, acceleration] of the rows
     real(dp), intent(in) :: t0, dt, tol
     real(dp), intent(in) :: alpha_m, alpha_f, beta, gamma   !< generalized-alpha parameters
@@ -170,6 +171,7 @@ contains
     real(dp), intent(out) :: qf(:, :), vf(:, :), af(:, :), lf(:, :), la(:, :), ef(:, :)
     integer, intent(out) :: status, fail_step, iters, nvalid
     real(dp), intent(out) :: newton(4)
+    real(dp), intent(out), optional :: uf(:, :)   !< (controllers, nframes) their outputs [N m or N]
     type(run_state) :: rs
     integer :: nsteps, n, itmax_frame
     status = STATUS_OK; fail_step = 0; iters = 0; nvalid = 0; newton = 0.0_dp
@@ -189,9 +191,11 @@ contains
     end if
     call run_setup(rs, sys, dt, alpha_m, alpha_f, beta, gamma, tol, maxit, q, v)
     if (start == 2) rs%lref = carry(size(carry) - 1)
+    if (start /= 2 .and. sys%ctl%n > 0) call control_step(sys, t0, q, v, .true.)
     call run_start(rs, sys, cval, t0, start, q, v, a, p, carry, status)
     if (status == STATUS_OK) then
       call store_frame(rs, 1, 0, q, v, a, qf, vf, af, lf, ef)
+      if (present(uf)) uf(1:sys%ctl%n, 1) = sys%ctl%st(2, :)
       call alt_setup(rs%alt, rs%nc)
       call alt_step(rs%alt, rs%lam(1:rs%nc))
       la = 0.0_dp
@@ -209,11 +213,16 @@ contains
         end if
         itmax_frame = max(itmax_frame, rs%it)
         call step_work(rs, sys, q, v)
+        if (sys%ctl%n > 0) then         ! the controllers' new state; the next step's work from their new output
+          call control_step(sys, rs%t, q, v, .false.)
+          call drive_state(sys, rs%t, q, v, rs%th0, rs%tau0)
+        end if
         call alt_step(rs%alt, rs%lam(1:rs%nc))
         if (mod(n, out_every) == 0) then
           call assemble(sys, q, v, a, rs%t, .false., 0.0_dp, 0.0_dp, rs%res, rs%lm, rs%energy)
           nvalid = nvalid + 1
           call store_frame(rs, nvalid, itmax_frame, q, v, a, qf, vf, af, lf, ef)
+          if (present(uf)) uf(1:sys%ctl%n, nvalid) = sys%ctl%st(2, :)
           call alt_take(rs%alt, la(1:rs%nc, nvalid))
           itmax_frame = 0
         end if
@@ -500,6 +509,24 @@ contains
                     q, v, gv(ic), gd, ac, ncl, cols, grad, ma, mb)
     end do
   end subroutine row_values
+
+  !> The controllers' measurements (their drives' coordinates and rates) at (q, v) and time tt: a
+  !> fresh start (first) or the commit of an accepted step (flexmech_control).
+  subroutine control_step(sys, tt, q, v, first)
+    type(coupled_system), intent(inout) :: sys
+    real(dp), intent(in) :: tt, q(:), v(:)
+    logical, intent(in) :: first
+    integer :: j
+    real(dp) :: y(sys%ctl%n), yd(sys%ctl%n)
+    do j = 1, sys%ctl%n
+      call control_measure(sys, j, q, v, y(j), yd(j))
+    end do
+    if (first) then
+      call ctl_start(sys%ctl, tt, y, yd)
+    else
+      call ctl_commit(sys%ctl, tt, y, yd)
+    end if
+  end subroutine control_step
 
   !> Coordinates th and generalized forces tau of the force drives at time tt and (q, v).
   subroutine drive_state(sys, tt, q, v, th, tau)

@@ -32,6 +32,7 @@ module flexmech_coupled_system
   use flexmech_beam, only: beam_mass, beam_stiffness
   use flexmech_markers, only: CON_POINT, con_valid
   use flexmech_assembly, only: half_bandwidth
+  use flexmech_control, only: control_bank
   implicit none
   private
   public :: coupled_system, coupled_build, set_mode, wrap, elem_index, shape_fn, th_index
@@ -83,6 +84,7 @@ module flexmech_coupled_system
     integer, allocatable :: dv(:, :)             !< (5, nd) force drives [kind, marker a, marker b, table first, knots]
     real(dp), allocatable :: dv_dir(:, :), dv_par(:, :), dv_harm(:, :), dv_th(:, :, :), tab_t(:), tab_c(:, :)
     real(dp) :: grav(2) = 0.0_dp, ray(2) = 0.0_dp
+    type(control_bank) :: ctl                    !< feedback controllers adding to the force drives (none: n = 0)
   end type coupled_system
 
 contains

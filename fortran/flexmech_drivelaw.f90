@@ -7,6 +7,9 @@
 !>                       t = T:  f = start + (w/T)(t^2/2 + (T/2 pi)^2 (cos(2 pi t/T) - 1)) for 0 <= t <= T,
 !>                       start + w (t - T/2) after (at rest for t < 0)
 !>   LAW_HARMONIC        par = [mean, amplitude, frequency, phase]   f = mean + amplitude sin(frequency t + phase)
+!>   LAW_REST_CYCLOIDAL  par = [start, travel, duration T, start time t0]   rest to rest:
+!>                       f = start + travel (s - sin(2 pi s)/(2 pi)), s = (t - t0)/T clipped to [0, 1]
+!>   LAW_REST_QUINTIC    par as above, f = start + travel (10 s^3 - 15 s^4 + 6 s^5)
 !>   LAW_TABLE           a cubic spline through samples (tab_t, tab_c; see spline_eval), held beyond its ends
 !>                       by its end polynomials (the Python side checks the run stays inside the table)
 !> A force law gives tau(theta, t) [N m or N] = par(1)
@@ -18,9 +21,10 @@ module flexmech_drivelaw
   implicit none
   private
   public :: kinematic_law, force_law, spline_eval
-  public :: LAW_CONSTANT_SPEED, LAW_SPINUP, LAW_HARMONIC, LAW_TABLE, LAW_FORCE
+  public :: LAW_CONSTANT_SPEED, LAW_SPINUP, LAW_HARMONIC, LAW_TABLE, LAW_FORCE, LAW_REST_CYCLOIDAL, LAW_REST_QUINTIC
 
   integer, parameter :: LAW_CONSTANT_SPEED = 1, LAW_SPINUP = 2, LAW_HARMONIC = 3, LAW_TABLE = 4, LAW_FORCE = 11
+  integer, parameter :: LAW_REST_CYCLOIDAL = 5, LAW_REST_QUINTIC = 6
   real(dp), parameter :: two_pi = 6.283185307179586476925286766559_dp
 
 contains
@@ -76,10 +80,29 @@ contains
            -par(2)*par(3)**2*sin(par(3)*t + par(4))]
     case (LAW_TABLE)
       f = spline_eval(tab_t, tab_c, t)
+    case (LAW_REST_CYCLOIDAL, LAW_REST_QUINTIC)
+      f = rest_to_rest(kind, par, t)
     case default
       f = 0.0_dp
     end select
   end function kinematic_law
+
+  !> [f, f', f''] of a rest-to-rest profile (LAW_REST_*, par = [start, travel, T, t0]) at time t [s].
+  pure function rest_to_rest(kind, par, t) result(f)
+    integer, intent(in) :: kind
+    real(dp), intent(in) :: par(:), t
+    real(dp) :: f(3), s, d, tt
+    tt = par(3); d = par(2)
+    s = min(max((t - par(4))/tt, 0.0_dp), 1.0_dp)
+    if (s <= 0.0_dp .or. s >= 1.0_dp) then
+      f = [par(1) + d*s, 0.0_dp, 0.0_dp]
+    else if (kind == LAW_REST_CYCLOIDAL) then
+      f = [par(1) + d*(s - sin(two_pi*s)/two_pi), d/tt*(1.0_dp - cos(two_pi*s)), d/tt**2*two_pi*sin(two_pi*s)]
+    else
+      f = [par(1) + d*s**3*(10.0_dp - 15.0_dp*s + 6.0_dp*s*s), d/tt*30.0_dp*s*s*(1.0_dp - s)**2, &
+           d/tt**2*(60.0_dp*s - 180.0_dp*s*s + 120.0_dp*s**3)]
+    end if
+  end function rest_to_rest
 
   !> Generalized force [N m or N] of a force law at joint coordinate theta and time t (layout above).
   pure real(dp) function force_law(par, harm, th, tab_t, tab_c, theta, t) result(tau)

@@ -10,6 +10,10 @@ the assembly configuration, so the mechanism starts where it was drawn):
   f = start + (w/T)(t^2/2 + (T/2 pi)^2 (cos(2 pi t/T) - 1)) up to T, then constant speed w.
 - ``harmonic``: ``amplitude``, ``frequency`` [rad/s], ``phase`` [rad], ``mean`` (default: the
   assembly value minus amplitude sin(phase)); f = mean + amplitude sin(frequency t + phase).
+- ``rest_to_rest``: ``travel``, ``duration`` T, ``profile`` (``"cycloidal"`` (default) or
+  ``"quintic"``), ``start_time`` t0 (default 0); with s = (t - t0)/T clipped to [0, 1],
+  f = start + travel (s - sin(2 pi s)/(2 pi)) or start + travel (10 s^3 - 15 s^4 + 6 s^5)
+  (flexmech_py.shaping.rest_to_rest is the same profile in Python).
 - ``table``: samples ``t`` [s] (increasing, from 0 at the latest) and ``value``, joined by a
   not-a-knot cubic spline (continuous accelerations).
 
@@ -27,14 +31,16 @@ import numpy as np
 
 __all__ = ["Drive", "KINEMATIC_LAWS", "LAW_CODES", "cubic_spline", "spinup", "constant_speed"]
 
-LAW_CODES = {"constant_speed": 1, "spinup": 2, "harmonic": 3, "table": 4, "force": 11}
-KINEMATIC_LAWS = ("constant_speed", "spinup", "harmonic", "table")
+LAW_CODES = {"constant_speed": 1, "spinup": 2, "harmonic": 3, "table": 4, "rest_to_rest": 5, "force": 11}
+KINEMATIC_LAWS = ("constant_speed", "spinup", "harmonic", "table", "rest_to_rest")
+REST_PROFILES = {"cycloidal": 5, "quintic": 6}     # the rest_to_rest law's codes in flexmech_drivelaw
 #: parameters of each law: (required, optional with defaults)
 LAW_PARAMS = {
     "constant_speed": ({"speed"}, {"start": None}),
     "spinup": ({"final_speed", "spinup_time"}, {"start": None}),
     "harmonic": ({"amplitude", "frequency"}, {"phase": 0.0, "mean": None}),
     "table": ({"t", "value"}, {}),
+    "rest_to_rest": ({"travel", "duration"}, {"profile": "cycloidal", "start_time": 0.0, "start": None}),
     "force": (set(), {"constant": 0.0, "sin": [], "cos": [], "time_harmonics": [], "table": None}),
 }
 
@@ -53,6 +59,8 @@ class Drive:
 
     @property
     def code(self) -> int:
+        if self.law == "rest_to_rest":
+            return REST_PROFILES[self.params.get("profile") or "cycloidal"]
         return LAW_CODES[self.law]
 
     def spec(self) -> dict:
@@ -79,6 +87,8 @@ class Drive:
             out["par"] = [mean, p["amplitude"], p["frequency"], p["phase"]]
         elif self.law == "table":
             out["table"] = (np.asarray(p["t"], float), cubic_spline(p["t"], p["value"]))
+        elif self.law == "rest_to_rest":
+            out["par"] = [_or(p.get("start"), start), p["travel"], p["duration"], p.get("start_time") or 0.0]
         else:
             tab = p.get("table")
             out.update(par=[p["constant"], 0.0, 0.0, 0.0], sin=list(p["sin"]), cos=list(p["cos"]),
@@ -94,6 +104,8 @@ class Drive:
         par = k["par"]
         if self.law == "harmonic":
             return par[0] + par[1] * math.sin(par[3])
+        if self.law == "rest_to_rest" and par[3] < 0.0:
+            return par[0] + par[1] * min(1.0, -par[3] / par[2])    # (the quintic's endpoints are the same)
         return par[0]
 
 

@@ -21,7 +21,8 @@ from .drives import LAW_CODES, LAW_PARAMS, Drive
 from .joints import JOINT_KINDS
 from .system import Mechanism
 
-__all__ = ["mechanism_from_spec", "mechanism_spec", "link_section", "derived_keys", "LINK_KEYS", "SECTION_KEYS"]
+__all__ = ["mechanism_from_spec", "mechanism_spec", "link_section", "derived_keys", "table_samples", "LINK_KEYS",
+           "SECTION_KEYS"]
 
 SECTION_KEYS = ("area", "second_moment", "youngs_modulus", "density")
 LINK_KEYS = {"name", "start", "end", "length", "angle", "area", "second_moment", "youngs_modulus", "density",
@@ -276,7 +277,7 @@ def _drives(mech: Mechanism, raw) -> None:
         for key in sorted(req - set(d)):
             raise CaseError(f"{w}.{key}", f"is missing; a '{law}' law needs {', '.join(sorted(req))}")
         if law == "table":
-            params = _table({"t": d["t"], "value": d["value"]}, w)
+            params = table_samples({"t": d["t"], "value": d["value"]}, w)
         else:
             params = {key: _law_param(d, key, w, opt.get(key)) for key in sorted(req | set(opt))}
         mech.drives.append(Drive(joint=joint, law=law, params=params))
@@ -297,11 +298,14 @@ def _law_param(d: dict, key: str, w: str, default):
             raise CaseError(f"{w}.{key}", "must be a list of [amplitude, angular frequency rad/s, phase rad] triples")
         return [[v.num({"x": x}, "x", f"{w}.{key}") for x in h] for h in val]
     if key == "table":
-        return _table(d[key], f"{w}.table")
-    return v.num(d, key, w, positive=key == "spinup_time")
+        return table_samples(d[key], f"{w}.table")
+    if key == "profile":
+        return v.text(d, key, w, choices=("cycloidal", "quintic"))
+    return v.num(d, key, w, positive=key in ("spinup_time", "duration"))
 
 
-def _table(tab, where: str) -> dict:
+def table_samples(tab, where: str) -> dict:
+    """A checked table {t = [...], value = [...]} (increasing times, at least 2 samples)."""
     if not isinstance(tab, dict):
         raise CaseError(where, "must be a table {t = [...], value = [...]}")
     v.keys(tab, {"t", "value"}, where)

@@ -1,0 +1,275 @@
+"""Feedback controllers on force-driven joints: the ``[[controllers]]`` tables of a case, checked, and
+packed into the flat layout of the Fortran module flexmech_control (docs/cases.md, controllers;
+docs/theory.md section 23).
+
+A controller adds a PID effort to the force drive of its joint (that drive's own law keeps acting:
+a disturbance, or a feedforward of its own):
+
+    u = sat(ff(t) + kp e + ki I + kd e'),   e = r(t) - y,  e' = r'(t) - y'
+
+r is any kinematic law of the drives (``reference``), y the joint coordinate (collocated), ff an
+optional table in time (``feedforward``), sat the output limits, and I the error's integral, held while
+the output is saturated in the direction the error pushes (anti-windup by clamping).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from .. import validate as v
+from ..errors import CaseError, ValidityWarning
+from ..shaping import SHAPERS, design
+from .drives import KINEMATIC_LAWS, LAW_PARAMS, Drive, cubic_spline
+from .schema import table_samples
+
+__all__ = ["check_controllers", "refuse_superposition", "loop_suspect", "ControlPack", "pack_controllers", "CONTROL_NST", "MAX_DELAY_STEPS"]
+
+KEYS = {"shaper", "name", "joint", "kp", "ki", "kd", "limit", "limits", "reference", "feedforward", "sample_time", "delay",
+        "measure"}
+MAX_DELAY_STEPS = 2000                      # flexmech_control: CTL_MAXDELAY
+CONTROL_NST = 5 + 2 * (MAX_DELAY_STEPS + 1)  # flexmech_control: CTL_NST
+CONSTRAINED = ("coupled", "nonlinear")
+
+
+def check_controllers(raw, mech, solver: dict) -> list:
+    """The checked controllers of a case (resolved dicts) from its ``[[controllers]]`` tables; a bad
+    one raises CaseError naming the field and the fix."""
+    if raw is None or raw == []:
+        return []
+    if not isinstance(raw, list):
+        raise CaseError("controllers", "must be an array of tables [[controllers]] (joint, kp, ki, kd, reference)")
+    if solver["model"] != "auto":
+        refuse_superposition({"controllers": raw}, solver["model"])
+    out, names = [], set()
+    for i, c in enumerate(raw):
+        w = f"controllers[{i}]"
+        if not isinstance(c, dict):
+            raise CaseError(w, "must be a table with joint, kp, ki, kd, reference")
+        v.keys(c, KEYS, w)
+        joint = v.text(c, "joint", w, required=True)
+        _force_driven(mech, joint, f"{w}.joint")
+        if isinstance(c.get("measure"), dict) and "point" in c["measure"]:
+            mech.point(c["measure"]["point"], f"{w}.measure.point")
+        name = v.text(c, "name", w, default=f"{joint}_pid")
+        if name in names:
+            raise CaseError(f"{w}.name", f"{name!r} names two controllers; give each its own name")
+        names.add(name)
+        gains = {k: v.num(c, k, w, default=0.0, nonneg=True) for k in ("kp", "ki", "kd")}
+        if not any(gains.values()):
+            raise CaseError(f"{w}.kp", "kp, ki and kd are all zero; give at least one positive gain")
+        resolved = {"name": name, "joint": joint, **gains, "limits": _limits(c, w),
+                    "reference": _reference(c.get("reference"), f"{w}.reference"),
+                    "feedforward": _feedforward(c.get("feedforward"), f"{w}.feedforward"),
+                    **_timing(c, w, solver["dt"]), "measure": _measure(c, w), **_shaper(c, w)}
+        out.append({k: x for k, x in resolved.items() if x is not None})   # (written back as TOML)
+    return out
+
+
+def refuse_superposition(case: dict, model: str) -> None:
+    """CaseError when a case with controllers is to run under a superposition model (docs/theory.md 23.3:
+    a loop that feeds the elastic motion back cannot close in a one-way model; the rigid-body loop alone
+    is not built yet)."""
+    if case.get("controllers") and model not in CONSTRAINED:
+        raise CaseError("solver.model", f"{model!r} cannot close the loop of controller "
+                                        f"{_name(case['controllers'][0])!r} (the superposition models solve the "
+                                        "rigid motion before the elastic one); use model = \"coupled\" or "
+                                        "\"nonlinear\"")
+
+
+def loop_suspect(case: dict, columns: dict) -> str | None:
+    """For a run that failed: the controller whose output grew most over its frames (the last quarter
+    against the first), named with its growth, when it grew tenfold or more; None otherwise."""
+    best = None
+    for c in case.get("controllers", []):
+        u = np.abs(np.asarray(columns.get(f"control_{c['name']}", []), float))
+        if u.size < 8:
+            continue
+        q = u.size // 4
+        growth = u[-q:].max() / max(u[:q].max(), 1e-300)
+        if growth >= 10.0 and (best is None or growth > best[1]):
+            best = (c["name"], growth, u[:q].max(), u[-q:].max())
+    if best is None:
+        return None
+    return (f"feedback controller {best[0]!r}: its output grew {best[1]:.3g}-fold before the stop ({best[2]:.3g} -> "
+            f"{best[3]:.3g}): an unstable closed loop; lower its gains, shorten its sample_time or its delay")
+
+
+def _name(c) -> str:
+    return c.get("name") or f"{c.get('joint')}_pid"
+
+
+def _force_driven(mech, joint: str, where: str) -> None:
+    mech.joint(joint, where)
+    drives = [d for d in mech.drives if d.joint == joint]
+    if any(d.kinematic for d in drives):
+        raise CaseError(where, f"joint {joint!r} is prescribed by a kinematic drive (law {drives[0].law!r}); a "
+                               f"controller acts through a force drive: make its [[drives]] law = \"force\"")
+    if not drives:
+        raise CaseError(where, f"joint {joint!r} has no force drive; add [[drives]] joint = \"{joint}\", "
+                               "law = \"force\" (the controller's effort adds to it)")
+
+
+def _limits(c: dict, w: str):
+    if "limit" in c and "limits" in c:
+        raise CaseError(f"{w}.limits", "give either limit (symmetric) or limits = [lo, hi], not both")
+    if "limit" in c:
+        u = v.num(c, "limit", w, positive=True)
+        return [-u, u]
+    if "limits" in c:
+        lo, hi = v.vector(c, "limits", w, 2)
+        if not lo < hi:
+            raise CaseError(f"{w}.limits", f"must be [lo, hi] with lo < hi, got [{lo}, {hi}]")
+        return [lo, hi]
+    return None
+
+
+def _reference(ref, w: str) -> dict:
+    if ref is None:
+        raise CaseError(w, "is missing; give the reference as a motion law, e.g. {law = \"rest_to_rest\", "
+                           "travel = 0.5, duration = 0.2}")
+    if not isinstance(ref, dict):
+        raise CaseError(w, "must be a table {law = ..., ...} of a kinematic law")
+    law = v.text(ref, "law", w, required=True, choices=KINEMATIC_LAWS)
+    req, opt = LAW_PARAMS[law]
+    v.keys(ref, {"law"} | req | set(opt), w)
+    for key in sorted(req - set(ref)):
+        raise CaseError(f"{w}.{key}", f"is missing; a '{law}' law needs {', '.join(sorted(req))}")
+    if law == "table":
+        return {"law": law, **table_samples({"t": ref.get("t"), "value": ref.get("value")}, w)}
+    out = {"law": law}
+    for key in sorted(req | set(opt)):
+        if key == "profile":
+            out[key] = v.text(ref, key, w, default="cycloidal", choices=("cycloidal", "quintic"))
+        else:
+            out[key] = v.num(ref, key, w, default=opt.get(key),
+                             positive=key in ("duration", "spinup_time"))
+    return {k: x for k, x in out.items() if x is not None}
+
+
+def _feedforward(ff, w: str):
+    if ff is None:
+        return None
+    if not isinstance(ff, dict):
+        raise CaseError(w, "must be a table {t = [...], value = [...]} (the effort in time, N m or N)")
+    return table_samples(ff, w)
+
+
+def _shaper(c: dict, w: str) -> dict:
+    """``shaper = {kind = "zv" | "zvd" | "ei", frequency_hz, damping = 0, tolerance = 0.05}``: the
+    reference convolved with its impulses (flexmech_py.shaping: the design)."""
+    sh = c.get("shaper")
+    if sh is None:
+        return {}
+    where = f"{w}.shaper"
+    if not isinstance(sh, dict):
+        raise CaseError(where, "must be a table {kind = \"zv\", frequency_hz = ...}")
+    v.keys(sh, {"kind", "frequency_hz", "damping", "tolerance"}, where)
+    kind = v.text(sh, "kind", where, required=True, choices=SHAPERS)
+    f = v.num(sh, "frequency_hz", where, required=True, positive=True)
+    zeta = v.num(sh, "damping", where, default=0.0, nonneg=True)
+    tol = v.num(sh, "tolerance", where, default=0.05, positive=True)
+    try:
+        design(kind, f, zeta, tol)
+        return {"shaper": {"kind": kind, "frequency_hz": f, "damping": zeta, "tolerance": tol}}
+    except CaseError as exc:
+        raise CaseError(f"{w}.{exc.field}", str(exc).split(": ", 1)[1]) from None
+
+
+def _timing(c: dict, w: str, dt: float) -> dict:
+    """sample_time and delay [s], each a whole number of steps (rounded, with a warning, when not)."""
+    ts = v.num(c, "sample_time", w, default=0.0, nonneg=True)
+    delay = v.num(c, "delay", w, default=0.0, nonneg=True)
+    out = {"sample_time": _whole_steps(ts, dt, f"{w}.sample_time", minimum=1) if ts > 0 else 0.0}
+    period = out["sample_time"] or dt
+    out["delay"] = _whole_steps(delay, period, f"{w}.delay", minimum=0) if delay > 0 else 0.0
+    steps = round(out["delay"] / dt)
+    if steps > MAX_DELAY_STEPS:
+        raise CaseError(f"{w}.delay", f"({delay} s) is {steps} steps of solver.dt; at most {MAX_DELAY_STEPS}: "
+                                      "shorten it or lengthen the sample time")
+    return out
+
+
+def _whole_steps(x: float, unit: float, where: str, minimum: int) -> float:
+    k = max(minimum, round(x / unit))
+    if abs(k * unit - x) > 1e-9 * max(x, unit):
+        warnings.warn(f"{where}: {x} s is not a whole number of {unit} s periods; taken as {k * unit:.6g} s",
+                      ValidityWarning, stacklevel=3)
+    return k * unit
+
+
+def _measure(c: dict, w: str):
+    """``"joint"`` (the joint's coordinate and rate, collocated) or ``{point = "<link>.<point>",
+    direction = [x, y]}``: the point's position along the unit direction (fixed in the frame of the
+    joint's body a) from the joint's point a, and its rate (non-collocated; the reference then in m)."""
+    m = c.get("measure", "joint")
+    where = f"{w}.measure"
+    if m == "joint":
+        return m
+    if not isinstance(m, dict):
+        raise CaseError(where, f"must be \"joint\" or {{point = \"<link>.end\", direction = [0, 1]}}, got {m!r}")
+    v.keys(m, {"point", "direction"}, where)
+    point = v.text(m, "point", where, required=True)
+    d = np.asarray(v.vector(m, "direction", where, 2, default=[0.0, 1.0]), float)
+    if not np.linalg.norm(d) > 0:
+        raise CaseError(f"{where}.direction", "must be a nonzero vector [x, y]")
+    return {"point": point, "direction": [float(x) for x in d / np.linalg.norm(d)]}
+
+
+class ControlPack:
+    """The flat layout of flexmech_control: cint (9, n), cpar (9, n), the tables' splines ctab_t,
+    ctab_c and a fresh state cst (NST, n) (n >= 1: a padding controller with drive 0 when none)."""
+
+    def __init__(self, controllers: list, force_joints: list, revolute: set, dt: float, rows: dict):
+        n = max(1, len(controllers))
+        self.names = [c["name"] for c in controllers]
+        self.joints = [c["joint"] for c in controllers]
+        self.cint = np.zeros((12, n), np.int32, order="F")
+        self.cpar = np.zeros((17, n), order="F")
+        tab_t, tab_c = [], []
+        for k, c in enumerate(controllers):
+            ref = Drive(joint=c["joint"], law=c["reference"]["law"],
+                        params={p: x for p, x in c["reference"].items() if p != "law"})
+            law = ref.packed(math.nan)     # a start left out: the coordinate measured at the run's start
+            rt = _append(tab_t, tab_c, law["table"])
+            ft = _append(tab_t, tab_c, None if c.get("feedforward") is None else
+                         (np.asarray(c["feedforward"]["t"], float),
+                          cubic_spline(c["feedforward"]["t"], c["feedforward"]["value"])))
+            lo, hi = c.get("limits") or (-np.inf, np.inf)
+            s = round(c["sample_time"] / dt) if c["sample_time"] else 0
+            m = round(c["delay"] / dt)
+            kind, ma, mb, d = rows.get(c["name"], (0, -1, -1, (0.0, 0.0)))
+            self.cint[:, k] = [force_joints.index(c["joint"]) + 1, ref.code, *rt, *ft, max(s, 1 if m else 0), m,
+                               int(c["joint"] in revolute and kind == 0), kind, ma + 1, mb + 1]
+            amps, times = _impulses(c.get("shaper"))
+            self.cpar[:, k] = [c["kp"], c["ki"], c["kd"], lo, hi, *law["par"], *amps, *times, *d]
+        self.ctab_t = np.asarray(tab_t or [0.0], float)
+        self.ctab_c = np.asfortranarray(np.array(tab_c, float).T if tab_c else np.zeros((4, 1)))
+        self.cst = np.zeros((CONTROL_NST, n), order="F")
+
+
+def _impulses(shaper):
+    """The shaper's amplitudes and times, 3 of each (padded with zeros); none: one unit impulse at 0."""
+    if shaper is None:
+        return [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+    sh = design(shaper["kind"], shaper["frequency_hz"], shaper["damping"], shaper["tolerance"])
+    a, t = [float(x) for x in sh.amplitudes], [float(x) for x in sh.times]
+    return a + [0.0] * (3 - len(a)), t + [0.0] * (3 - len(t))
+
+
+def _append(tab_t: list, tab_c: list, table) -> list:
+    if table is None:
+        return [0, 0]
+    first = len(tab_t) + 1
+    tab_t += list(table[0])
+    tab_c += list(table[1].T)
+    return [first, len(table[0])]
+
+
+def pack_controllers(controllers: list, force_joints: list, revolute: set, dt: float, rows: dict) -> ControlPack:
+    """The controllers for a run with step dt whose force drives act on ``force_joints`` (in the order
+    of the model's force drives); ``revolute``: the joints whose coordinate is an angle; ``rows``:
+    {controller: (row kind, marker a, marker b (0-based), direction)} of the non-collocated ones."""
+    return ControlPack(controllers, force_joints, revolute, dt, rows)

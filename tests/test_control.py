@@ -1,0 +1,142 @@
+"""Feedback controllers in the time loop ([[controllers]], fortran/flexmech_control.f90): the rigid
+limit of a PD-controlled link against the closed-loop linear response, the energy balance with the
+actuator's work, saturation and anti-windup, zero-order hold and measurement delay, the stepping API,
+and the refusals of bad input."""
+
+import copy
+
+import numpy as np
+import pytest
+
+import flexmech_py as fm
+from flexmech_py.control_study import TIP, closed_loop, cycloid, link_case, run, saturated_pid, settles
+from flexmech_py.errors import CaseError, SolverError, ValidityWarning
+from flexmech_py.stepping import Simulation
+
+
+@pytest.mark.parametrize("model", ["coupled", "nonlinear"])
+def test_rigid_limit_of_a_pd_link_is_the_closed_loop_second_order_response(model):
+    res = run(link_case(stiffness=1e4), model)
+    y = closed_loop(res.t, 2.0, 0.3)
+    err = np.abs(res.columns["hub_angle"] - y).max()
+    assert err < 2e-5 * np.abs(y).max(), err          # measured 2.3e-6 of the peak (coupled, dt 1e-3)
+    # the drive torque is the controller's output, the energy the actuator's work
+    assert np.allclose(res.columns["torque"], res.columns["control_hub_pid"])
+    e = res.columns["energy_kinetic"] + res.columns["energy_potential"]
+    assert abs(e[-1] - res.columns["work_inputs"][-1]) < 1e-4 * np.abs(res.columns["work_inputs"]).max()
+
+
+def test_flexible_link_energy_balance_includes_the_actuator_work():
+    res = run(link_case(kp=5.0, kd=0.5, t_end=0.4))
+    c = res.columns
+    e = c["energy_kinetic"] + c["energy_potential"]
+    assert c["energy_potential"].max() > 1e-3 * c["energy_kinetic"].max()     # the link does bend
+    assert np.abs(e - c["work_inputs"]).max() < 1e-3 * np.abs(c["work_inputs"]).max()
+
+
+def test_saturation_holds_the_limit_and_clamping_is_the_specified_anti_windup():
+    gains, limit = dict(kp=20.0, ki=40.0, kd=1.5), 0.6
+    res = run(link_case(stiffness=1e4, limit=limit, t_end=1.5, **gains))
+    u, y = res.columns["control_hub_pid"], res.columns["hub_angle"]
+    assert np.abs(u).max() <= limit * (1 + 1e-12)
+    assert np.isclose(np.abs(u).max(), limit)                   # the limit is reached
+    clamped = saturated_pid(res.t, limit=limit, **gains)
+    wound = saturated_pid(res.t, limit=limit, clamp=False, **gains)
+    err = np.abs(y - clamped).max()
+    assert err < 0.01 * 0.5, err                                # measured: see docs/validation.md
+    assert np.abs(wound - clamped).max() > 5 * err              # the clamping is what makes the difference
+    assert abs(y[-1] - 0.5) < 0.01                              # and the move ends at its target
+
+
+def test_zero_order_hold_holds_the_output_between_samples():
+    res = run(link_case(sample_time=5e-3, t_end=0.2))
+    u = res.columns["control_hub_pid"]
+    steps = np.flatnonzero(np.diff(u) != 0) + 1
+    assert steps.size > 0 and np.all(steps % 5 == 0)          # changes only at the samples (every 5 steps)
+
+
+def test_measurement_delay_shifts_the_output_of_a_p_controller():
+    """A P controller on a delayed measurement: its output at t is the undelayed law on y(t - d)."""
+    d = 0.01
+    res = run(link_case(stiffness=1e4, kp=2.0, kd=0.0, delay=d, t_end=0.3))
+    t, y, u = res.t, res.columns["hub_angle"], res.columns["control_hub_pid"]
+    r, _ = cycloid(t)
+    k = round(d / 1e-3)
+    assert np.allclose(u[k:], 2.0 * (r[k:] - y[:-k]), atol=1e-9)
+
+
+def test_collocated_pd_settles_where_tip_position_feedback_goes_unstable():
+    """The classic result (Cannon & Schmitz 1984): PD feedback of the hub angle settles at every gain,
+    the same law on the tip's position (non-collocated) only below a critical gain (between 2.6 and 2.8
+    for k (e + 0.15 s e') on this link: docs/validation.md)."""
+    for k in (0.5, 50.0):
+        assert settles(k) < 1.0
+    assert settles(0.5, TIP) < 1.0
+    assert settles(8.0, TIP) >= 1.0 and settles(8.0) < 1.0
+
+
+def test_stepping_api_reproduces_the_case_file_loop():
+    raw = link_case(t_end=0.05)
+    batch = run(raw)
+    sim = Simulation(fm.validate_case(copy.deepcopy(raw)))
+    for _ in range(50):
+        sim.advance(1)
+    assert np.allclose(sim.joint("hub")[0], batch.columns["hub_angle"][-1], rtol=0, atol=1e-12)
+    stepped = sim.result().columns
+    for name in ("hub_angle", "torque", "control_hub_pid", "work_inputs"):
+        assert np.allclose(stepped[name], batch.columns[name], rtol=0, atol=1e-12), name
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"kp": -1.0}, "controllers[0].kp"),
+    ({"kp": 0.0, "kd": 0.0}, "controllers[0].kp"),
+    ({"limit": 0.0}, "controllers[0].limit"),
+    ({"limits": [1.0, -1.0]}, "controllers[0].limits"),
+    ({"sample_time": -1e-3}, "controllers[0].sample_time"),
+    ({"delay": float("nan")}, "controllers[0].delay"),
+    ({"delay": 10.0}, "controllers[0].delay"),
+    ({"measure": "tip"}, "controllers[0].measure"),
+    ({"reference": {"law": "rest_to_rest", "travel": 0.5, "duration": 0.0}}, "controllers[0].reference.duration"),
+    ({"joint": "nowhere"}, "controllers[0].joint"),
+])
+def test_bad_controller_fields_are_refused_naming_the_field(change, field):
+    with pytest.raises(CaseError) as err:
+        fm.validate_case(link_case(**change))
+    assert err.value.field == field
+
+
+def test_a_prescribed_joint_or_a_superposition_model_is_refused():
+    raw = link_case()
+    raw["drives"] = [{"joint": "hub", "law": "constant_speed", "speed": 1.0}]
+    with pytest.raises(CaseError, match="force drive") as err:
+        fm.validate_case(raw)
+    assert err.value.field == "controllers[0].joint"
+    with pytest.raises(CaseError, match="coupled") as err:
+        fm.validate_case(link_case(model="hac"))
+    assert err.value.field == "solver.model"
+
+
+def test_a_sample_time_off_the_step_grid_is_resampled_with_a_warning():
+    with pytest.warns(ValidityWarning, match="sample_time"):
+        case = fm.validate_case(link_case(sample_time=2.5e-3))
+    assert case["controllers"][0]["sample_time"] == pytest.approx(2e-3)
+
+
+def test_no_model_named_runs_a_controlled_case_under_the_nonlinear_model():
+    raw = link_case()
+    del raw["solver"]["model"]
+    assert fm.validate_case(raw)["solver"]["model"] == "nonlinear"
+
+
+def test_an_unstable_loop_stops_through_the_failure_diagnosis_naming_the_controller():
+    """A PD loop sampled far too slowly (kd Ts / J = 3.6: the sampled loop's poles leave the unit
+    circle) grows until the divergence guard stops the run; the diagnosis names the controller."""
+    with pytest.raises(SolverError, match="feedback controller 'hub_pid': its output grew") as err:
+        run(link_case(kp=50.0, kd=20.0, sample_time=0.02, t_end=1.0))
+    assert err.value.partial.failure["cause"] == "unstable_control_loop"
+
+
+def test_a_stable_loop_has_no_controller_suspect():
+    from flexmech_py.mechanism.control import loop_suspect
+    res = run(link_case(t_end=0.3))
+    assert loop_suspect(res.case, res.columns) is None
