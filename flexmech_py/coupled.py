@@ -143,7 +143,7 @@ class CoupledModel:
     def constraint_values(self, rm, start=None) -> np.ndarray:
         """(3, max(1, nc), nt) [value, rate, acceleration] of the rows on the rigid motion's grid: the
         drive law (the rigid joint coordinate) for a kinematic drive, the initial value for a held
-        coordinate (a weld, a locked joint, a prismatic joint's relative angle), zero otherwise.
+        coordinate (a weld, a locked joint, a guided joint's relative angle), zero otherwise.
         ``start``: the rigid motion whose first sample holds the initial values (default ``rm``; a
         later chunk of a run passes its first chunk, so held values stay those of t = 0)."""
         start = rm if start is None else start
