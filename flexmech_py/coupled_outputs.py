@@ -462,7 +462,7 @@ class Diagnostics:
             ls = cm.case["links"][li]["length"] * (cm.fracs[li][k1] - cm.fracs[li][k0])
             self.stretch = max(self.stretch, float(np.max(np.abs(np.hypot(*(fr.qf[d[2:4]] - fr.qf[d[0:2]])) / ls - 1.0))))
         for k, v in constraint_violation(cm, fr, cval).items():
-            self.violation[k] = max(self.violation[k], v)
+            self.violation[k] = max(self.violation.get(k, 0.0), v)
         self._add_drift(fr, rm)
 
     def _add_drift(self, fr: ModelFrames, rm) -> None:
@@ -505,7 +505,7 @@ def constraint_violation(cm: CoupledModel, fr: ModelFrames, cval) -> dict:
     """Largest |g - value| over the frames of the constraint rows by kind: point coincidence and guide
     normal [m], angles [rad] (welds, held joints, kinematic drives, a nonlinear link's interior
     nodes), slides [m] (kinematic drives and locked guided joints), and any other row kind under its
-    name and unit (mechanism.rows: a gear mesh's rolled arc, ``gear_m``)."""
+    name and unit (mechanism.rows: e.g. ``<name>_m``)."""
     out = {"point_m": 0.0, "guide_normal_m": 0.0, "angle_rad": 0.0, "slide_m": 0.0}
     for i, r in enumerate(cm.rows):
         err = fr.post["measures"][0, i] - cval[0, i]

@@ -114,6 +114,9 @@ def _draw_instant(ax, sf, i: int, scale: float, marks, colours) -> None:
     for m in marks:
         if m.point is not None:
             _draw_joint(ax, m, sf.x[i, m.point] + scale * sf.d[i, m.point])
+            ends = [e if e is None or isinstance(e, np.ndarray) else sf.x[i, e] + scale * sf.d[i, e] for e in m.ends]
+            for line in (m.joint.glyph_lines(*ends) if all(e is not None for e in ends) else ()):
+                ax.plot(line[:, 0], line[:, 1], "-", color="0.2", lw=1.0, zorder=4)   # the kind's own outline
 
 
 def _draw_joint(ax, m, pos) -> None:

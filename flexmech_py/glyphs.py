@@ -45,7 +45,9 @@ def glyph_of(kind: str) -> dict:
 class JointMark:
     """Where a joint is drawn: ``point`` the index of its non-ground side's point among the drawn
     points (None when that point is not drawn), ``ground`` the ground point [m] when one side is the
-    ground (else None), ``axis`` the unit direction of a guided joint's guide on the ground."""
+    ground (else None), ``axis`` the unit direction of a guided joint's guide on the ground; ``ends`` its
+    two sides a and b: a point index among the drawn points, the ground point [m], or None (not drawn),
+    for the kind's own outline (``Joint.glyph_lines``: a gear pair's pitch circles)."""
 
     name: str
     kind: str
@@ -53,6 +55,8 @@ class JointMark:
     ground: np.ndarray | None
     axis: np.ndarray | None
     driven: bool
+    joint: object = None
+    ends: tuple = (None, None)
 
 
 def joint_marks(mech, sf) -> list[JointMark]:
@@ -65,12 +69,16 @@ def joint_marks(mech, sf) -> list[JointMark]:
         side = b if b.body is not None else a
         grounded = a.body is None or b.body is None
         ground = np.asarray((a if a.body is None else b).position, float) if grounded else None
-        label = side.point
-        if side.body.kind == "link" and not side.body.rigid:
-            label = f"{side.body.fraction(side.point):.12g}"
         axis = np.asarray(j.unit_axis(), float) if grounded and j.guided else None
-        out.append(JointMark(j.name, j.kind, sf.point(side.body.name, label), ground, axis, j.name in driven))
+        ends = tuple(np.asarray(p.position, float) if p.body is None else _drawn_point(sf, p) for p in (a, b))
+        out.append(JointMark(j.name, j.kind, _drawn_point(sf, side), ground, axis, j.name in driven, j, ends))
     return out
+
+
+def _drawn_point(sf, p) -> int | None:
+    """The index of point reference ``p`` (on a body) among sf's drawn points (None: not drawn)."""
+    label = f"{p.body.fraction(p.point):.12g}" if p.body.kind == "link" and not p.body.rigid else p.point
+    return sf.point(p.body.name, label)
 
 
 def legend_words(marks) -> list[str]:

@@ -73,7 +73,7 @@ def _end_name(frac: float) -> str:
 def mechanism_joints(case: dict) -> list[Joint]:
     """The mechanism's revolute and weld joints between flexible links (and the ground), with their
     elastic conditions: those the FE model expresses by shared or fixed DOFs.  Joints that touch a rigid
-    link or body, guided joints and joints whose points do not coincide (a gear pair) are relations
+    link or body, guided joints and joints whose points do not coincide (a kind with its own rows) are relations
     (flexmech_py/slaving.py)."""
     mech = case.mechanism
     out = []

@@ -469,7 +469,7 @@ def build_slaving(mech, ndof: int, fixed: np.ndarray, node_dofs) -> tuple:
             continue                                     # flexible links and the ground: shared DOFs (model.py)
         if not j.guided and not j.shares_point:
             _check_fixed_centres(mech, j)
-        rot = j.ties_rotation or mech.condition(j) in j.holding
+        rot = j.ties_rotation or (not j.guided and mech.condition(j) in j.holding)   # a guide holds its slide
         atts.append(Attachment(j, a, b, rot, by_joint.get(j.name)))
     if not atts:
         return parts, slides, None, ndof, fixed, names
@@ -479,9 +479,9 @@ def build_slaving(mech, ndof: int, fixed: np.ndarray, node_dofs) -> tuple:
 
 
 def _check_fixed_centres(mech, j) -> None:
-    """A joint whose two points do not coincide (a gear pair) is a relation of the elastic rotations
-    alone: exact when neither point moves elastically, i.e. each is the ground or a ground pivot of its
-    body.  CaseError naming the joint otherwise."""
+    """A joint whose two points do not coincide (a kind with its own rows) is a relation of the elastic
+    rotations alone: exact when neither point moves elastically, i.e. each is the ground or a ground
+    pivot of its body.  CaseError naming the joint otherwise."""
     pivots = set()
     for other in mech.joints:
         pa, pb = mech.joint_points(other)

@@ -84,12 +84,12 @@ def test_a_joint_kind_declares_its_behaviour(kind):
     assert cls.kind == kind and cls.rows > 0
     assert cls.conditions and cls.driven_default in cls.conditions and set(cls.released) <= set(cls.conditions)
     assert set(cls.holding) <= set(cls.conditions)
-    assert cls.coupled_rows and set(cls.coupled_rows) <= {"point", "normal", "angle"}
+    assert cls.coupled_rows and set(cls.coupled_rows) <= {"point", "normal", "angle", "own"}
     assert cls.coupled_coordinate == ("slide" if cls.guided else "angle")
     assert (cls.unit == "m") == cls.guided
     assert cls.has_coordinate == bool(cls.released)
     assert ("point" in cls.coupled_rows) == cls.shares_point
-    assert ("angle" in cls.coupled_rows) == cls.ties_rotation
+    assert ("angle" in cls.coupled_rows or "own" in cls.coupled_rows) == cls.ties_rotation
 
 
 def test_a_joint_kind_names_its_rows_from_the_one_vocabulary():

@@ -128,7 +128,8 @@ class RigidMotion:
         else:
             n = _guide_normal(self, j)
             out[:, :2] = -self.lam[:, [r0]] * n
-            out[:, 2] = -self.lam[:, r0 + 1]
+            if j.ties_rotation:
+                out[:, 2] = -self.lam[:, r0 + 1]
         return out
 
     def point_positions(self, ref) -> np.ndarray:

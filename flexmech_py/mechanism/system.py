@@ -132,8 +132,9 @@ class Mechanism:
         raise CaseError(where, f"unknown body {name!r}; bodies are {', '.join(self.body_names()) or 'none'}")
 
     def body_index(self, body) -> int:
-        """0-based body number (None for the ground)."""
-        return None if body is None else next(i for i, b in enumerate(self.bodies) if b is body)
+        """0-based body number (None for the ground), by name: ``body`` may be the same body of a copy of
+        this mechanism (a probe's remeshed case reads the rigid motion of the run's)."""
+        return None if body is None else next(i for i, b in enumerate(self.bodies) if b.name == body.name)
 
     def link_index(self, name: str) -> int:
         return next(i for i, ln in enumerate(self.links) if ln.name == name)

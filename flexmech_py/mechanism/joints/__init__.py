@@ -6,13 +6,14 @@ and one row routine in the Fortran constraint vocabulary (docs/architecture.md).
 from __future__ import annotations
 
 from .base import Joint
+from .gear import Gear
 from .prismatic import Prismatic
 from .revolute import Revolute
 from .weld import Weld
 
-__all__ = ["Joint", "Revolute", "Prismatic", "Weld", "JOINT_KINDS", "case_fields"]
+__all__ = ["Joint", "Revolute", "Prismatic", "Weld", "Gear", "JOINT_KINDS", "case_fields"]
 
-_KINDS = (Revolute, Prismatic, Weld)
+_KINDS = (Revolute, Prismatic, Weld, Gear)
 #: the joint kinds by their case-file ``type``
 JOINT_KINDS = {cls.kind: cls for cls in _KINDS}
 

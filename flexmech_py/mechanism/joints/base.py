@@ -105,8 +105,8 @@ class Joint:
         return (-1.0, 1.0)
 
     def check_placed(self, a, b) -> None:
-        """CaseError when the joint's drawn points (PointRefs a, b) do not fit the kind (e.g. a gear
-        pair's centre distance); the mechanism's check calls it after :meth:`check`."""
+        """CaseError when the joint's drawn points (PointRefs a, b) do not fit the kind (e.g. a centre
+        distance its radii fix); the mechanism's check calls it after :meth:`check`."""
 
     def own_rows(self, pose) -> list:
         """A kind whose coupled rows include the role ``own``: its rows ``(role, kind, aux, d)`` in the
@@ -131,7 +131,7 @@ class Joint:
 
     def glyph_lines(self, pa, pb) -> list:
         """Polylines ((n, 2) arrays) drawing the joint beside its marker, given its two points' drawn
-        positions (a gear pair's pitch circles); none for most kinds."""
+        positions (e.g. two pitch circles); none for most kinds."""
         return []
 
     def default_condition(self, driven: bool) -> str:
