@@ -163,3 +163,86 @@ def test_the_geared_fivebar_in_every_family_against_the_nonlinear_model(model):
         diff = np.max(np.abs(res[name] - ref[name])) / np.max(np.abs(ref[name]))
         print(f"\n{model} {name}: max |difference| / peak of nonlinear = {diff:.3e}")
         assert diff < (0.01 if model == "coupled" else 0.03), name
+
+
+# ------------------------------------------------------------------------------ pin in a slot
+def test_the_scotch_yoke_moves_r_cos_theta_and_the_slot_pushes_with_m_a():
+    """Rigid: the yoke's x = r cos(theta) (the guide's coordinate from the drawn x = r), the pin's slide
+    in the slot r sin(theta); the slot's force on the pin is normal to the slot (x) and equals -m x''
+    of the yoke (its only load), with no moment."""
+    case = fm.load_case("scotch_yoke")
+    t = np.linspace(0.0, 0.09, 901)
+    rm = MotionSource(prepare_motion(case.mechanism), rtol=1e-12, atol=1e-14)(t)
+    th, x, s = rm.joint("crank_pivot"), rm.joint("guide"), rm.joint("pin")
+    r = 0.1
+    assert np.max(np.abs(r + x[:, 0] - r * np.cos(th[:, 0]))) < 1e-12
+    assert np.max(np.abs(s[:, 0] - r * np.sin(th[:, 0]))) < 1e-12
+    f = rm.reaction("pin")
+    assert np.max(np.abs(f[:, 1:])) == 0.0
+    assert np.allclose(-f[:, 0], 0.5 * x[:, 2], rtol=1e-9, atol=1e-9 * np.max(np.abs(x[:, 2])))
+
+
+@pytest.mark.parametrize("model", ["classic", "hac", "coupled"])
+def test_the_scotch_yoke_in_every_family_against_the_nonlinear_model(model):
+    over = ["solver.t_end=0.02", "mesh.elements_per_link=2", "solver.dt=2e-5"]
+    ref = fm.simulate(fm.load_case("scotch_yoke", overrides=over + ["solver.model=nonlinear"]))
+    res = fm.simulate(fm.load_case("scotch_yoke", overrides=over + [f"solver.model={model}"]))
+    for name in ("crank_tip_transverse", "strain_crank_root", "slot_force_x"):
+        diff = np.max(np.abs(res[name] - ref[name])) / np.max(np.abs(ref[name]))
+        print(f"\n{model} {name}: max |difference| / peak of nonlinear = {diff:.3e}")
+        assert diff < 0.05, name
+    if model == "coupled":
+        summ = res.summary()["coupled"]
+        assert summ["energy_balance"]["relative_drift"] < 1e-4
+        assert summ["constraint_violation"]["guide_normal_m"] < 1e-12
+
+
+def _slotted_lever(flexible: bool) -> dict:
+    """The crank-shaper of cases/quick_return.toml with the crank pin running in a slot along the rocker
+    (no block): a slotted-lever quick-return; ``flexible``: the rocker, slot and all, is an aluminium
+    beam."""
+    spec = _spec("quick_return")
+    spec["bodies"] = []
+    spec["joints"] = [j for j in spec["joints"] if j["name"] not in ("crank_pin", "guide")]
+    spec["joints"].append({"name": "slot", "type": "slot", "connects": ["rocker.start", "crank.end"],
+                           "axis": [0.4472135954999579, 0.8944271909999159]})
+    if flexible:
+        rocker = spec["links"][1]
+        rocker.pop("rigid")
+        rocker.update(second_moment=1.6666666666666667e-9, youngs_modulus=7.1e10, density=2710.0, area=2.0e-4)
+    spec["outputs"] = {"rocker": {"kind": "joint_angle", "joint": "rocker_pivot"},
+                       "slide": {"kind": "joint_displacement", "joint": "slot"},
+                       "slot_force": {"kind": "reaction", "joint": "slot", "component": "magnitude"},
+                       "strain": {"kind": "strain", "link": "crank", "at": 0.0}}
+    spec["solver"].update(t_end=0.02, dt=2e-5)
+    spec["mesh"] = {"elements_per_link": 4}
+    return spec
+
+
+def test_the_slotted_lever_follows_its_closed_form():
+    """The rocker points at the crank pin: phi = atan2(0.2 + r sin theta, r cos theta), the slide along
+    it |pin - O4| (from the drawn one)."""
+    case = fm.validate_case(_slotted_lever(False))
+    t = np.linspace(0.0, 0.2, 801)
+    rm = MotionSource(prepare_motion(case.mechanism), rtol=1e-12, atol=1e-14)(t)
+    th = rm.joint("crank_pivot")[:, 0]
+    pin = np.stack([0.1 * np.cos(th), 0.2 + 0.1 * np.sin(th)], axis=1)
+    phi = np.unwrap(np.arctan2(pin[:, 1], pin[:, 0]))
+    assert np.max(np.abs(rm.joint("rocker_pivot")[:, 0] - (phi - phi[0]) - rm.joint("rocker_pivot")[0, 0])) < 1e-10
+    length = np.hypot(pin[:, 0], pin[:, 1])
+    assert np.max(np.abs(rm.joint("slot")[:, 0] - rm.joint("slot")[0, 0] - (length - length[0]))) < 1e-10
+
+
+def test_a_slot_in_a_flexible_link_runs_in_the_coupled_models_and_is_refused_by_superposition():
+    spec = _slotted_lever(True)
+    for model in SUPERPOSITION_MODELS:
+        with pytest.raises(fm.CaseError, match=r"joints\.slot\.connects: a slot joint's guide must be the ground or "
+                                               r"a rigid body; 'rocker' is a flexible link"):
+            fm.simulate(fm.validate_case({**spec, "solver": {**spec["solver"], "model": model}}))
+    ref = fm.simulate(fm.validate_case({**spec, "solver": {**spec["solver"], "model": "nonlinear"}}))
+    res = fm.simulate(fm.validate_case({**spec, "solver": {**spec["solver"], "model": "coupled"}}))
+    for name in ("strain", "slot_force"):
+        diff = np.max(np.abs(res[name] - ref[name])) / np.max(np.abs(ref[name]))
+        print(f"\nflexible slotted lever, coupled {name}: max |difference| / peak of nonlinear = {diff:.3e}")
+        assert diff < 0.05, name
+    assert res.summary()["coupled"]["energy_balance"]["relative_drift"] < 1e-4

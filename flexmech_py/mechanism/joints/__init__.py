@@ -9,11 +9,12 @@ from .base import Joint
 from .gear import Gear
 from .prismatic import Prismatic
 from .revolute import Revolute
+from .slot import Slot
 from .weld import Weld
 
-__all__ = ["Joint", "Revolute", "Prismatic", "Weld", "Gear", "JOINT_KINDS", "case_fields"]
+__all__ = ["Joint", "Revolute", "Prismatic", "Weld", "Gear", "Slot", "JOINT_KINDS", "case_fields"]
 
-_KINDS = (Revolute, Prismatic, Weld, Gear)
+_KINDS = (Revolute, Prismatic, Weld, Gear, Slot)
 #: the joint kinds by their case-file ``type``
 JOINT_KINDS = {cls.kind: cls for cls in _KINDS}
 
