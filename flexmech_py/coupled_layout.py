@@ -44,7 +44,8 @@ J_FLOOR = 1e-6     # a rigid body without rotary inertia: J_S = J_FLOOR m lref^2
 class Row:
     """A constraint row (or a measure) between markers a and b: ``kind`` CON_*, ``aux`` (the component
     of a point row; 1 for a row whose value moves), ``d`` the direction of a projection in a's frame,
-    ``value``: ("zero",), ("start", joint, what) its initial value, or ("drive", joint)."""
+    ``value``: ("zero",), ("start", joint, what) its initial value, ("drive", joint), or ("rigid", joint,
+    role) a kind's own row's value on the rigid motion (Joint.held_values)."""
 
     kind: int
     a: int
@@ -147,14 +148,10 @@ def marker_key(m, pr, where: str) -> tuple:
 
 
 def start_value(mech, rm, joint: str, what: str) -> float:
-    """Initial value of a held quantity of a joint: its relative body angle ("angle"), its coordinate
-    ("coordinate") or the value of one of its kind's own rows (any other role: Joint.held_value) on
-    the first sample of the rigid motion."""
+    """Initial value of a held quantity of a joint: its relative body angle ("angle") or its coordinate
+    ("coordinate") on the first sample of the rigid motion."""
     if what == "coordinate":
         return float(rm.joint(joint)[0, 0])
-    if what != "angle":
-        j = mech.joint(joint)
-        return float(j.held_value(what, joint_pose(mech, j, rm.z[0])))
     a, b = mech.joint_points(mech.joint(joint))
     ang = [0.0 if p.body is None else float(rm.z[0, 3 * mech.body_index(p.body) + 2]) for p in (a, b)]
     return ang[1] - ang[0]
@@ -357,11 +354,11 @@ class Layout:
                 self._add_row(jm, name, Row(CON_POINT, ma, mb, aux=comp))
         elif role == "normal":
             self._add_row(jm, "normal", Row(CON_PROJECTION, ma, mb, d=(-jm.axis[1], jm.axis[0])))
-        elif role == "own":     # the kind's own rows (Joint.own_rows), held at their start values
+        elif role == "own":     # the kind's own rows (Joint.own_rows), held at their rigid-motion values
             j = self.mech.joint(jm.name)
             for name, kind, aux, d in j.own_rows(joint_pose(self.mech, j, drawn_coordinates(self.mech))):
                 jm.own.append(name)
-                self._add_row(jm, name, Row(kind, ma, mb, aux=aux, d=d, value=("start", jm.name, name)))
+                self._add_row(jm, name, Row(kind, ma, mb, aux=aux, d=d, value=("rigid", jm.name, name)))
         else:   # the relative angle held at its initial value
             self._add_row(jm, "angle", Row(CON_ANGLE, ma, mb, value=("start", jm.name, "angle")))
 

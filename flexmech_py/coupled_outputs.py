@@ -13,7 +13,7 @@ from . import kernels
 from .coupled import CON_ANGLE, CON_POINT, CON_PROJECTION, CoupledModel
 from .mechanism.motion import LinkMotion
 from .mechanism.placement import point_state
-from .mechanism.rows import ROW_KINDS
+from .mechanism.rows import ROW_KINDS, residual
 from .outputs import axial_output, load_output, point_components, wrap_angle
 
 __all__ = ["ModelFrames", "model_frames", "chord_motion", "body_angles", "node_state", "deviation", "curvature",
@@ -508,9 +508,7 @@ def constraint_violation(cm: CoupledModel, fr: ModelFrames, cval) -> dict:
     name and unit (mechanism.rows: e.g. ``<name>_m``)."""
     out = {"point_m": 0.0, "guide_normal_m": 0.0, "angle_rad": 0.0, "slide_m": 0.0}
     for i, r in enumerate(cm.rows):
-        err = fr.post["measures"][0, i] - cval[0, i]
-        if r.kind == CON_ANGLE:
-            err = np.arctan2(np.sin(err), np.cos(err))
+        err = residual(r.kind, r.d, fr.post["measures"][0, i] - cval[0, i])
         key = {CON_POINT: "point_m", CON_ANGLE: "angle_rad"}.get(r.kind,
                                                                   "guide_normal_m" if r.role == "normal" else "slide_m")
         if r.kind not in (CON_POINT, CON_ANGLE, CON_PROJECTION):     # another row kind: its name and unit

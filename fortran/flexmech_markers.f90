@@ -37,7 +37,7 @@ module flexmech_markers
   implicit none
   private
   public :: marker_state, segment_marker, body_marker, ground_marker, constraint_row
-  public :: row_point, row_angle, row_projection, row_gear, con_valid, con_in_radians
+  public :: row_point, row_angle, row_projection, row_gear, con_valid, con_residual, con_in_radians
   public :: CON_POINT, CON_ANGLE, CON_PROJECTION, CON_GEAR, NCON, MAXCOL
 
   integer, parameter :: CON_POINT = 1, CON_ANGLE = 2, CON_PROJECTION = 3, CON_GEAR = 4
@@ -160,6 +160,29 @@ contains
     integer, intent(in) :: kind
     con_in_radians = kind == CON_ANGLE
   end function con_in_radians
+
+  !> The residual r = g - value of a row reduced to the representative the solvers drive to zero:
+  !> CON_ANGLE wrapped to (-pi, pi]; CON_GEAR less the nearest of 2 pi (n_a d1 + n_b d2), n in
+  !> {-1, 0, 1} (a frame angle psi taken on the other side of its +-pi cut than the value's: a segment
+  !> node's angle is the chord's atan2 plus the node's rotation); other kinds unchanged.
+  pure real(dp) function con_residual(kind, d, r)
+    integer, intent(in) :: kind
+    real(dp), intent(in) :: d(2), r
+    real(dp), parameter :: TWO_PI = 6.283185307179586_dp
+    real(dp) :: x
+    integer :: na, nb
+    con_residual = r
+    if (kind == CON_ANGLE) then
+      con_residual = r - TWO_PI*anint(r/TWO_PI)
+    else if (kind == CON_GEAR) then
+      do na = -1, 1
+        do nb = -1, 1
+          x = r - TWO_PI*(na*d(1) + nb*d(2))
+          if (abs(x) < abs(con_residual)) con_residual = x
+        end do
+      end do
+    end if
+  end function con_residual
 
   !> Row of kind CON_* between markers a and b (aux: the component of CON_POINT; d: the direction of
   !> CON_PROJECTION in a's frame).  Columns: a's then b's (nc = ma%n + mb%n).  An index outside the

@@ -107,7 +107,8 @@ def test_a_joint_kind_names_its_rows_from_the_one_vocabulary():
 def test_a_kind_field_on_another_kind_is_refused_naming_the_kinds_that_take_it():
     spec = tomllib.loads(fm.case_path("slider_crank").read_text())
     spec["joints"][0]["axis"] = [1.0, 0.0]
-    with pytest.raises(fm.CaseError, match=r"joints\[0\]\.axis.*applies to prismatic joints only, not to a revolute"):
+    with pytest.raises(fm.CaseError,
+                       match=r"joints\[0\]\.axis.*applies to prismatic and slot joints only, not to a revolute"):
         fm.validate_case(spec)
 
 

@@ -22,8 +22,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 __all__ = ["CON_POINT", "CON_ANGLE", "CON_PROJECTION", "CON_GEAR", "ROW_KINDS", "in_radians", "gear_branch",
-           "gear_theta"]
+           "gear_theta", "residual"]
 
 CON_POINT, CON_ANGLE, CON_PROJECTION, CON_GEAR = 1, 2, 3, 4
 
@@ -50,3 +52,16 @@ def gear_theta(c, branch: int) -> float:
     """The angle of c on CON_GEAR's branch ``branch`` [rad] (as row_gear computes it)."""
     x, y = {0: (c[0], c[1]), 1: (c[1], -c[0]), 2: (-c[0], -c[1]), 3: (-c[1], c[0])}[branch]
     return math.atan2(y, x) + branch * 0.5 * math.pi
+
+
+def residual(kind: int, d, r):
+    """g - value reduced as flexmech_markers' con_residual reduces it (arrays allowed): CON_ANGLE
+    wrapped to (-pi, pi], CON_GEAR less the nearest 2 pi (n_a d1 + n_b d2), n in {-1, 0, 1}."""
+    r = np.asarray(r, float)
+    if kind == CON_ANGLE:
+        return r - 2.0 * np.pi * np.round(r / (2.0 * np.pi))
+    if kind == CON_GEAR:
+        shifts = np.array([2.0 * np.pi * (na * d[0] + nb * d[1]) for na in (-1, 0, 1) for nb in (-1, 0, 1)])
+        cand = r[..., None] - shifts
+        return np.take_along_axis(cand, np.argmin(np.abs(cand), axis=-1)[..., None], -1)[..., 0]
+    return r

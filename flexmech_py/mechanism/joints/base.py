@@ -110,11 +110,12 @@ class Joint:
 
     def own_rows(self, pose) -> list:
         """A kind whose coupled rows include the role ``own``: its rows ``(role, kind, aux, d)`` in the
-        coupled and nonlinear models, each held at :meth:`held_value` of the start."""
+        coupled and nonlinear models, each held at :meth:`held_values` on the rigid motion."""
         return []
 
-    def held_value(self, role: str, pose) -> float:
-        """The start value of the own row ``role`` at ``pose`` (see :meth:`own_rows`)."""
+    def held_values(self, role: str, ang_a, ang_b, pa, pb):
+        """(N,) the value of the own row ``role`` given the markers' frame angles (N,) as the model
+        takes them and positions (N, 2) over the rigid motion (see :meth:`own_rows`)."""
         raise NotImplementedError(f"joint kind {self.kind!r} has no own rows")
 
     def reaction_from(self, lam, pa, pb):

@@ -122,9 +122,11 @@ class Gear(Joint):
         (kind, aux, d, _), = self.rigid_rows(pose)
         return [("tooth", kind, aux, d)]
 
-    def held_value(self, role: str, pose) -> float:
-        """The start value of the own row ``role`` at ``pose``."""
-        return self.row_value(pose, gear_branch(np.asarray(pose.pb, float) - np.asarray(pose.pa, float)))
+    def held_values(self, role: str, ang_a, ang_b, pa, pb) -> np.ndarray:
+        """The mesh row's value over the rigid motion, on the branch of the assembled line of centres."""
+        branch = gear_branch(pb[0] - pa[0])
+        theta = np.array([gear_theta(c, branch) for c in pb - pa])
+        return self.radii[0] * ang_a + self.sign * self.radii[1] * ang_b - self.centre_distance * theta
 
     def reaction_from(self, lam, pa, pb) -> np.ndarray:
         """(N, 3) [F_x, F_y, M] gear a exerts on gear b, at b's centre, from the row's multiplier (N, 1)

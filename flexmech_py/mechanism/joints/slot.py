@@ -26,60 +26,41 @@ from typing import ClassVar
 import numpy as np
 
 from ... import validate as v
-from ...errors import CaseError
 from ..rows import CON_PROJECTION
 from .base import Joint
+from .guide import Guide
 
 __all__ = ["Slot"]
 
 
 @dataclass
-class Slot(Joint):
-    axis: tuple = (1.0, 0.0)
+class Slot(Guide):
+    #: the slot's drawn length [m] (the outline only; the row is the whole line)
+    slot_length: float | None = None
 
     kind: ClassVar[str] = "slot"
     rows: ClassVar[int] = 1
-    unit: ClassVar[str] = "m"
     conditions: ClassVar[tuple] = ("free", "locked", "force")
     driven_default: ClassVar[str] = "locked"
     released: ClassVar[tuple] = ("free", "force")
     coupled_rows: ClassVar[tuple] = ("normal",)
-    coupled_coordinate: ClassVar[str] = "slide"
     holding: ClassVar[tuple] = ("locked",)
-    guided: ClassVar[bool] = True
     glyph: ClassVar[dict] = {**Joint.glyph, "legend": "⊂⊃ pin in a slot (slot outline)"}
     case_fields: ClassVar[tuple] = ("axis", "slot_length")
 
-    #: the slot's drawn length [m] (the outline only; the row is the whole line)
-    slot_length: float | None = None
-
     @classmethod
     def fields_from_case(cls, table: dict, where: str) -> dict:
-        axis = v.vector(table, "axis", where, 2)
-        if axis is None:
-            raise CaseError(f"{where}.axis", "is missing; give the slot's direction, e.g. axis = [0, 1]")
         length = v.num(table, "slot_length", where, positive=True)
-        return {"axis": tuple(axis), "slot_length": length}
+        return {**super().fields_from_case(table, where), "slot_length": length}
 
     def spec(self) -> dict:
-        out = {**super().spec(), "axis": [float(x) for x in self.axis]}
+        out = super().spec()
         if self.slot_length is not None:
             out["slot_length"] = float(self.slot_length)
         return out
 
-    def check(self) -> None:
-        if not np.linalg.norm(np.asarray(self.axis, float)) > 0:
-            raise CaseError(f"joints.{self.name}.axis", "the slot direction has zero length; give e.g. axis = [0, 1]")
-
-    def unit_axis(self) -> np.ndarray:
-        u = np.asarray(self.axis, float)
-        return u / np.linalg.norm(u)
-
     def rigid_rows(self, pose) -> tuple:
         return ((CON_PROJECTION, 0, (-pose.axis[1], pose.axis[0]), 0.0),)
-
-    def coordinate_row(self, axis) -> tuple:
-        return (CON_PROJECTION, 0, (axis[0], axis[1]))
 
     def glyph_lines(self, pa, pb) -> list:
         """The slot's outline (a stadium about its line through point a, ``slot_length`` long, or reaching
@@ -90,8 +71,8 @@ class Slot(Joint):
         u = d / dist if dist > 1e-9 else self.unit_axis()
         if self.slot_length is None and dist > 1e-9 and float(d @ self.unit_axis()) < 0:
             u = -u
-        w = 0.012 * max(dist, 0.05)
-        half = 0.5 * self.slot_length if self.slot_length is not None else dist + 3.0 * w
+        half = 0.5 * self.slot_length if self.slot_length is not None else 1.15 * dist
+        w = 0.05 * max(half, 1e-3)
         n = np.array([-u[1], u[0]])
         t = np.linspace(-0.5 * np.pi, 0.5 * np.pi, 13)[:, None]
         cap = np.cos(t) * u + np.sin(t) * n
