@@ -24,7 +24,7 @@ __all__ = ["JOINT_GLYPHS", "GROUND_PIVOT", "GROUND_GUIDE", "BODY_STYLES", "BODY_
 JOINT_GLYPHS = {kind: dict(cls.glyph) for kind, cls in JOINT_KINDS.items()}
 #: a joint to the ground other than a guided one: a triangle under the ground point
 GROUND_PIVOT = {"marker": "triangle", "size": 11.0, "fill": "#d9d9d9", "edge": "#000000", "legend": "▲ ground pivot"}
-#: a guided joint's guide on the ground (a prismatic joint's, a slot's): a line through the ground point along the joint's axis
+#: a guided joint's guide on the ground (Joint.guided): a line through the ground point along the joint's axis
 GROUND_GUIDE = {"colour": "#595959", "width": 1.0, "legend": "(grey line: its guide on the ground)"}
 #: body kind (flexmech_py.shapes.KINDS) -> its deformed line: ``width`` [pt], ``fill`` opacity of a
 #: rigid body's outline (0: none)
@@ -47,7 +47,7 @@ class JointMark:
     points (None when that point is not drawn), ``ground`` the ground point [m] when one side is the
     ground (else None), ``axis`` the unit direction of a guided joint's guide on the ground; ``ends`` its
     two sides a and b: a point index among the drawn points, the ground point [m], or None (not drawn),
-    for the kind's own outline (``Joint.glyph_lines``: a gear pair's pitch circles)."""
+    for the kind's own outline (``Joint.glyph_lines``, drawn in the PNGs)."""
 
     name: str
     kind: str
