@@ -41,16 +41,17 @@ def _installed_instead():
 
 
 _installed_instead()   # after a handover the imports below find the installed modules, already loaded
-__version__ = "0.1.0"
+from .version import __version__  # noqa: E402
 
 from .bundled import case_names, case_path  # noqa: E402
-from .case import MODELS, SUPERPOSITION_MODELS, Case, apply_overrides, load_case, validate_case  # noqa: E402
+from .case import Case, apply_overrides, load_case, validate_case  # noqa: E402
 from .errors import (AccuracyWarning, CaseError, FlexmechError, FlexmechWarning, Interrupted,  # noqa: E402
                      MechanismError, MechanismWarning, SolverError, StabilityWarning, ValidityWarning)
+from .families import FAMILIES, MODELS, SUPERPOSITION_MODELS, Family, family  # noqa: E402
 from .mechanism import Mechanism  # noqa: E402
 from .simulate import simulate  # noqa: E402
 
 __all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "Case", "Mechanism", "MODELS",
-           "SUPERPOSITION_MODELS", "FlexmechError", "CaseError", "MechanismError", "SolverError", "Interrupted", "case_path",
+           "SUPERPOSITION_MODELS", "FAMILIES", "Family", "family", "FlexmechError", "CaseError", "MechanismError", "SolverError", "Interrupted", "case_path",
            "case_names", "FlexmechWarning", "ValidityWarning", "AccuracyWarning", "MechanismWarning", "StabilityWarning",
            "__version__"]

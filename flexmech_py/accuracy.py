@@ -43,13 +43,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .case import MODELS, apply_overrides, read_case_file, study_model, validate_case
+from .case import apply_overrides, read_case_file, study_model, validate_case
 from .errors import CaseError
+from .families import MODELS, family
 from .notices import silenced
 from .outdir import ResultFolder
 from .parallel import run_tasks
-from .results import _atomic_write, _json_default
 from .sizes import MAX_STEPS, check_elements, format_count
+from .fileio import atomic_write, json_default
 
 __all__ = ["accuracy_study", "run_point", "richardson", "successive_orders", "parse_integrators", "Integrator",
            "Study", "INTEGRATORS", "DEFAULT_KINDS"]
@@ -193,10 +194,10 @@ def run_point(task: dict) -> dict:
                 kcpu.append(time.process_time() - c0)
         return wrapper
 
-    if task["model"] in ("coupled", "nonlinear"):
+    if family(task["model"]).constrained:
         from .coupled import CoupledModel
 
-        cm = CoupledModel.from_case(prep.case, split=(task["model"] == "nonlinear"))
+        cm = CoupledModel.from_case(prep.case, split=family(task["model"]).element_frames)
         cm.run = timed(cm.run)
         prep.coupled[task["model"]] = cm
     else:
@@ -394,7 +395,7 @@ def _study(case_path, *, overrides, models, integrators, dt_levels, elements, gr
     n_coarse = max(1, math.ceil(t_end / (dt_case * 2 ** kmax) - 1e-9))
     N0 = n_coarse * 2 ** kmax                              # dt_0 = t_end / N0 <= dt_case
     _check_ladder_sizes(case, models, N0 * 2 ** r, t_end, elements, n_ref, "--dt-levels" if kmax >= r else "--ref-dt-factor")
-    from . import __version__
+    from .version import __version__
 
     def task(model, it: Integrator, nsteps, n_el, reps=1):
         return {"raw": raw_run, "source": source, "overrides": it.overrides, **({"drop": it.drop} if it.drop else {}),
@@ -433,7 +434,7 @@ def _study(case_path, *, overrides, models, integrators, dt_levels, elements, gr
 
     # expensive runs first (better load balance): cost ~ steps x elements
     keys = sorted(points, key=lambda k: -points[k]["nsteps"] * (points[k]["elements"] or case_mesh or 2)
-                  * (8 if points[k]["model"] in ("coupled", "nonlinear") else 1))
+                  * (8 if family(points[k]["model"]).constrained else 1))
     out_dir = Path(out_dir)
     batch = run_tasks(run_point, [points[k]["task"] for k in keys], jobs=jobs, cache_dir=out_dir / "cache",
                       progress=progress, label="accuracy runs", scheduler=scheduler)
@@ -640,18 +641,18 @@ def _write(study: Study, out_dir: Path, plots: bool, points, keys, ladders) -> l
     fields = ROW_FIELDS + [f"err_{c}" for c in cols] + ["err_worst", "worst_column", "est_time_worst", "error_message"]
     paths = []
     p = out_dir / "accuracy.csv"
-    _atomic_write(p, _csv_text(study.rows, fields))
+    atomic_write(p, _csv_text(study.rows, fields))
     paths.append(p)
     p = out_dir / "orders.csv"
-    _atomic_write(p, _csv_text(study.orders, ["model", "integrator", "direction", "source", "column", "levels", "order"]))
+    atomic_write(p, _csv_text(study.orders, ["model", "integrator", "direction", "source", "column", "levels", "order"]))
     paths.append(p)
     p = out_dir / "accuracy.json"
     doc = {"settings": study.settings, "batch": study.batch, "reference": study.reference,
            "orders": study.orders, "cheapest": study.cheapest}
-    _atomic_write(p, json.dumps(doc, indent=1, default=_json_default))
+    atomic_write(p, json.dumps(doc, indent=1, default=json_default))
     paths.append(p)
     p = out_dir / "report.md"
-    _atomic_write(p, report_markdown(study))
+    atomic_write(p, report_markdown(study))
     paths.append(p)
     if plots:
         from .plots import work_precision_figure

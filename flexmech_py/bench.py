@@ -45,12 +45,12 @@ from .bench_side_by_side import exudyn_sections, exudyn_rows, exudyn_report
 from .errors import FlexmechError
 from .inputs import checked_file, checked_folder
 from .outdir import ResultFolder
+from .families import MODELS, family
 from .plots import save_figure
 from .bench_stepping import bench_stepping
 
 __all__ = ["run_bench", "flops_superposition", "flops_newton", "fit_exponent", "DT"]
 
-MODELS = ("hac", "classic", "classic-translational", "coupled", "nonlinear")
 SEED = "fourbar_hac.toml"
 
 
@@ -62,7 +62,7 @@ def flops_superposition(nel: int, nlinks: int, n: int, kb: int, model: str = "ha
     element the band scatter, residual and rigid load (284, classic models 308), the banded LU
     2 n kl (kl + ku) with kl = ku = kb, its forward/back substitution 2 n (2 kl + ku), and the
     Newmark predictor/corrector (12 n)."""
-    per_el = 284 if model == "hac" else 308
+    per_el = 284 if family(model).load_mass == "translational" else 308
     f = {"assembly": 504 * nlinks + per_el * nel, "factorization": 2 * n * kb * (2 * kb),
          "solve": 2 * n * (3 * kb), "update": 12 * n}
     f["total"] = sum(f.values())
@@ -167,11 +167,10 @@ def bench_seed_cases(cases: Path, reps: int) -> list[dict]:
 
 def _ladder_steps(model: str, epl: int, quick: bool) -> int:
     if quick:
-        base = {"coupled": 400, "nonlinear": 400}.get(model, 2000)
+        base = 400 if family(model).constrained else 2000
         return max(20, 10 * round(base / epl / 10))
-    if model in ("coupled", "nonlinear"):
-        base = 40000 if model == "coupled" else 20000
-        s = base / epl if model == "nonlinear" else base / epl ** 1.5
+    if family(model).constrained:   # cost per step ~ epl (element frames, the bordered band) or epl^1.5
+        s = 20000 / epl if family(model).element_frames else 40000 / epl ** 1.5
     else:
         s = 100000 / epl
     return int(min(25000, max(20, 10 * round(s / 10))))
@@ -193,9 +192,9 @@ def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
                 preps = {k: v for k, v in preps.items() if k[0] == epl}   # keep memory bounded
                 preps[key] = Prepared(bench_case(seed, steps, 10), elements_per_link=epl)
                 # the zero-stiffness check (a dense eigenvalue problem) would cost more than a timing run
-                preps[key]._checked = True
+                preps[key].elastic_checked = True
             p = preps[key]
-            reps = 3 if steps * epl <= 20000 and model not in ("coupled", "nonlinear") else 1
+            reps = 3 if steps * epl <= 20000 and family(model).superposition else 1
             kern = kcpu = math.inf
             try:
                 for _ in range(reps):
@@ -209,7 +208,7 @@ def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
                              "flops_per_step": nan, "gflops": nan, "peak_fraction": nan})
                 continue
             fe = p.fe
-            if model in ("coupled", "nonlinear"):
+            if family(model).constrained:
                 cm = p.coupled[model]
                 nw = res.extra["coupled"]["newton"]
                 n, kb, it = int(cm.free_of.max()), cm.solver["band_half_width"], nw["mean_per_step"]

@@ -57,7 +57,7 @@ def run_flexmech(case, model: str = "nonlinear", columns=("strain_coupler_mid", 
     from .simulate import Prepared
 
     p = Prepared(case)
-    p._checked = True
+    p.elastic_checked = True
     r = p.run(model)
     return {"t": r.t, **{k: r.columns[k] for k in columns}, "cpu_s": p.last_cpu["kernel_cpu_s"],
             "newton": r.extra["coupled"]["newton"], "rigid": p.rm}

@@ -21,6 +21,7 @@ import numpy as np
 
 from .bench_exudyn import (cable_links, coord_marker, ground_pin, link_geometry, midspan_sensors, midspan_strain,
                            relative_difference, run_flexmech, smallest_times, solve_dynamic, tie_nodes, unavailable)
+from .case import load_case
 
 __all__ = ["mechanism_case", "build_exudyn_mechanism", "run_exudyn_mechanism", "mechanism_side_by_side"]
 
@@ -38,7 +39,6 @@ EXUDYN_ABSOLUTE_TOLERANCE = 1e-4
 def mechanism_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float, node_angles: str = "relative"):
     """The case run for t_end with steps dt, generalized-alpha rho_inf, epl elements per link, no
     error estimate, frames every 10th step."""
-    from .case import load_case
 
     return load_case(case_path, overrides=[f"solver.dt={dt!r}", f"solver.t_end={t_end!r}", "solver.output_every=10",
                                            f"solver.node_angles={node_angles!r}", "solver.integrator='generalized-alpha'",

@@ -9,6 +9,7 @@ import math
 
 from . import mesh_error, model_error
 from .definitions import rigid_in_superposition
+from .families import family, large_deflection_reference
 
 __all__ = ["budget_warning", "budget_lines", "choice_lines", "pct", "significant_digits", "quote"]
 
@@ -61,11 +62,11 @@ def _remedy(part: str, name: str, c: dict, out: dict, est: dict, prep, model: st
         return (f"a finer mesh cuts it (the spatial error falls as h^{mesh_error.MESH_ORDER}): --elements-per-link {m} "
                 f"or mesh.elements_per_link = {m} instead of {n}")
     if part == "model":
-        better = "--model nonlinear (the exact model)"
-        if model not in ("coupled", "nonlinear") and rigid_in_superposition(prep.case, name):
+        better = f"--model {large_deflection_reference().name} (the exact model)"
+        if family(model).superposition and rigid_in_superposition(prep.case, name):
             return (f"{name} is the rigid-body solution's drive force in {model_error.label(model, geometric)} (docs/theory.md section 18.5), "
                     f"which no geometric stiffness changes; {better} includes the links' elasticity in it")
-        if model not in ("coupled", "nonlinear") and geometric in (None, "none"):
+        if family(model).superposition and geometric in (None, "none"):
             better = ("the geometric stiffness of the axial forces (--set solver.geometric_stiffness=lagged) or "
                       + better)
         return (f"a better model than {model_error.label(model, geometric)} cuts it: {better}, or --model auto "

@@ -19,6 +19,8 @@ from pathlib import Path
 from . import validate as v
 from .bundled import resolve_case_path
 from .errors import CaseError
+from .families import (AUTO, DEFAULT_INTEGRATORS, MODEL_CHOICES, MODELS, RHO_INF_DEFAULT, STUDY_MODEL,
+                       SUPERPOSITION_MODELS, family)
 from .inputs import read_text
 from .mechanism import mechanism_from_spec
 from .mechanism.control import check_controllers
@@ -36,20 +38,12 @@ __all__ = ["Case", "load_case", "validate_case", "apply_overrides", "MODELS", "M
            "STUDY_MODEL", "study_model", "OUTPUT_KINDS", "INTEGRATORS", "integrator_coefficients", "integrator_of",
            "DEFAULT_INTEGRATORS", "DIVERGENCE_FACTOR"]
 
-SUPERPOSITION_MODELS = ("hac", "classic", "classic-translational")
-MODELS = SUPERPOSITION_MODELS + ("coupled", "nonlinear")
-#: what solver.model and --model accept: a model, or "auto" (the cheapest model whose estimated model error
-#: is within solver.tolerance: flexmech_py.auto_model), the default of a case that names none
-MODEL_CHOICES = MODELS + ("auto",)
-#: the model of the studies of one model (accuracy, modes, steady, stability) when the case says "auto"
-STUDY_MODEL = "hac"
-
 
 def study_model(model: str | None, case: dict) -> str:
     """The model a study of one model uses: ``model``, else the case's, with "auto" taken as STUDY_MODEL
     (auto chooses per run; a study of one model's discretization or frozen dynamics names it)."""
     model = case["solver"]["model"] if model is None else model
-    return STUDY_MODEL if model == "auto" else model
+    return STUDY_MODEL if model == AUTO else model
 
 
 INTEGRATORS = ("newmark", "hht", "generalized-alpha")
@@ -60,13 +54,6 @@ INTEGRATORS = ("newmark", "hht", "generalized-alpha")
 NODE_ANGLES = ("relative", "shared")
 INTEGRATOR_PARAMS = {"newmark": ("beta", "gamma"), "hht": ("hht_alpha",), "generalized-alpha": ("rho_inf",)}
 HHT_ALPHA_DEFAULT, HHT_ALPHA_MAX = 0.05, 1.0 / 3.0
-RHO_INF_DEFAULT = 0.8
-#: the integrator of a run whose case names none, by model family (docs/theory.md section 15.4): the
-#: superposition models keep average acceleration (no multipliers in their loop; their golden
-#: numbers); the coupled and nonlinear models' constraint multipliers need numerical dissipation
-#: (under average acceleration their period-2 dt error grows without bound, whatever the step)
-DEFAULT_INTEGRATORS = {"superposition": {"integrator": "newmark", "beta": 0.25, "gamma": 0.5},
-                       "constrained": {"integrator": "generalized-alpha", "rho_inf": RHO_INF_DEFAULT}}
 DIVERGENCE_FACTOR = 1.0   # default solver.divergence_limit = DIVERGENCE_FACTOR x the longest link length
 OUTPUT_KINDS = {
     # kind: (required keys, optional keys with defaults)
@@ -185,7 +172,7 @@ def integrator_of(sol: dict, model: str) -> dict:
     (a resolved ``case["solver"]``) or, when it names none, DEFAULT_INTEGRATORS of the model's family."""
     if "integrator" in sol:
         return {k: sol[k] for k in ("integrator",) + INTEGRATOR_PARAMS[sol["integrator"]] if k in sol}
-    return dict(DEFAULT_INTEGRATORS["superposition" if model in SUPERPOSITION_MODELS else "constrained"])
+    return family(model).default_integrator
 
 
 def _integrator(sol: dict) -> dict:
@@ -318,7 +305,7 @@ def _solver(sol: dict, mech) -> dict:
             "divergence_limit": v.num(sol, "divergence_limit", "solver", positive=True,
                                       default=DIVERGENCE_FACTOR * longest),
             "rayleigh": v.vector(sol, "rayleigh", "solver", 2, default=[0.0, 0.0], nonneg=True),
-            "model": v.text(sol, "model", "solver", default="auto", choices=MODEL_CHOICES),
+            "model": v.text(sol, "model", "solver", default=AUTO, choices=MODEL_CHOICES),
             "rigid_rtol": v.num(sol, "rigid_rtol", "solver", default=1e-10, positive=True),
             "rigid_atol": v.num(sol, "rigid_atol", "solver", default=1e-12, positive=True),
             "newton_tol": v.num(sol, "newton_tol", "solver", default=1e-8, positive=True),
@@ -478,7 +465,7 @@ def load_case(path, overrides: list[str] | None = None) -> dict:
     return case
 
 
-def _parse_value(text: str):
+def parse_value(text: str):
     try:
         return _shallow(tomllib.loads(f"v = {text}")["v"], "--set value")
     except tomllib.TOMLDecodeError:
@@ -516,7 +503,7 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
                                                 f"{parts[-1]!r} (its keys: {have})")
             del node[parts[-1]]
         else:
-            node[parts[-1]] = _parse_value(text.strip())
+            node[parts[-1]] = parse_value(text.strip())
     return raw
 
 

@@ -37,11 +37,12 @@ import sys
 from pathlib import Path
 
 from . import notices
-from .case import MODELS as MODELS_ALL
-from .cli_fmu import add_fmu_parser, cmd_fmu
 from .cli_design import add_design_options, add_optimize_parser, design_analysis, print_design, write_design
+from .cli_fmu import add_fmu_parser, cmd_fmu
 from .cli_run import add_view_parser, cmd_draw, cmd_run, cmd_view
 from .errors import FlexmechError
+from .families import MODEL_CHOICES, MODELS, large_deflection_reference
+from .version import __version__
 
 __all__ = ["main"]
 
@@ -73,14 +74,18 @@ _positive_int = _whole(1)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
-    from .case import MODEL_CHOICES, MODELS
-
-    from .case import INTEGRATORS
-
     p = argparse.ArgumentParser(prog="flexmech", description="Finite-element dynamics of flexible planar mechanisms.")
     p.add_argument("--version", action="version", version=f"flexmech {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add in (_add_run_parsers, _add_compare_parsers, _add_draw_parsers, _add_sweep_parsers, _add_accuracy_parser,
+                add_fmu_parser):
+        add(sub)
+    return p
+
+
+def _add_run_parsers(sub) -> None:
+    """The "run" and "reproduce" commands."""
+    from .case import INTEGRATORS  # start-up: the case schema loads only when a parser needs it
 
     r = sub.add_parser("run", help="run a case file and write timeseries.csv, summary.json and plots")
     r.add_argument("case", help="TOML case file (see docs/cases.md)")
@@ -125,11 +130,15 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--t-end", type=_positive_float, default=None,
                     help="shorten every run to this many seconds (quick look; the seed's claims need the full runs)")
 
+
+def _add_compare_parsers(sub) -> None:
+    """The "compare", "stability" and "steady" commands."""
     c = sub.add_parser("compare", help="compare a result with a reference curve, or several models of one case")
     c.add_argument("result", nargs="?", help="a folder written by `flexmech run` (its timeseries.csv)")
     c.add_argument("--reference", help="reference CSV (format: docs/compare.md)")
     c.add_argument("--models", metavar="CASE", help="run several models of CASE and compare each with one of them")
-    c.add_argument("--reference-model", default="nonlinear", choices=MODELS, help="the model compared against")
+    c.add_argument("--reference-model", default=large_deflection_reference().name, choices=MODELS,
+                   help="the model compared against")
     c.add_argument("--model-list", default=",".join(MODELS),
                    help="comma-separated models to run with --models (default: all)")
     c.add_argument("--x", default="t", choices=("t", "crank_angle"), help="align by time or by (unwrapped) crank angle")
@@ -170,6 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     sd.add_argument("--no-plots", action="store_true", help="do not write PNG plots")
     add_design_options(sd, window=False)
 
+
+def _add_draw_parsers(sub) -> None:
+    """The "draw" and "modes" commands."""
     dr = sub.add_parser("draw", help="draw the mechanism at frames of a run written with `flexmech run --draw`")
     dr.add_argument("result", help="a folder written by `flexmech run --draw` (its shape.csv and summary.json)")
     dr.add_argument("--frames", type=_positive_int, default=None,
@@ -200,6 +212,9 @@ def build_parser() -> argparse.ArgumentParser:
     md.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>-modes)")
     md.add_argument("--no-plots", action="store_true", help="do not write PNG drawings")
 
+
+def _add_sweep_parsers(sub) -> None:
+    """The "sweep" and "bench" commands."""
     sw = sub.add_parser("sweep", help="run a case over a parameter grid or Monte-Carlo samples in parallel "
                                       "(resumable) and tabulate it")
     sw.add_argument("case", help="TOML case file")
@@ -224,9 +239,6 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true", help="a reduced ladder (1..8 elements per link, fewer steps)")
     b.add_argument("--out", default="bench", help="output folder for the CSV files and bench.png (default: ./bench)")
     b.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
-    _add_accuracy_parser(sub)
-    add_fmu_parser(sub)
-    return p
 
 
 def _add_scheduler(p) -> None:
@@ -267,15 +279,15 @@ def _warn(messages) -> None:
 def _out(args, suffix: str):
     """--out as given (a string: an empty one is refused by the result folder), else
     results/<case file stem>-<suffix> (the stem made a safe file name)."""
-    from .names import safe_name
+    from .names import safe_name  # start-up: only this command loads it
 
     return args.out if args.out is not None else Path("results") / f"{safe_name(Path(args.case).stem)}-{suffix}"
 
 
 def _cmd_stability(args) -> int:
-    from .case import load_case, study_model
-    from .floquet import REFINE_ROUNDS, parse_range, stability_chart
-    from .outdir import ResultFolder
+    from .case import load_case, study_model  # start-up: only this command loads it
+    from .floquet import REFINE_ROUNDS, parse_range, stability_chart  # start-up: only this command loads it
+    from .outdir import ResultFolder  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set)
     speeds = parse_range(args.speed, "--speed")
@@ -294,8 +306,8 @@ def _cmd_stability(args) -> int:
 
 def _write_chart(rows, case, model, geometric, folder: Path, plots: bool):
     """stability.csv, stability_regions.csv and stability.png of a chart; (paths, regions)."""
-    from .floquet import STABLE_RATE, write_stability_csv
-    from .regions import unstable_regions, write_regions_csv
+    from .floquet import STABLE_RATE, write_stability_csv  # start-up: only this command loads it
+    from .regions import unstable_regions, write_regions_csv  # start-up: only this command loads it
 
     head = (f"case {case['case']['title']!r}; model {model}; geometric_stiffness {geometric}; "
             f"rayleigh {list(case['solver']['rayleigh'])}; dt <= {case['solver']['dt']:g} s; average acceleration; "
@@ -305,7 +317,7 @@ def _write_chart(rows, case, model, geometric, folder: Path, plots: bool):
     write_stability_csv(rows, paths[0], head)
     write_regions_csv(regions, paths[1], head)
     if plots:
-        from .plots import plot_stability
+        from .plots import plot_stability  # start-up: only this command loads it
 
         p = plot_stability(rows, folder / "stability.png", regions=regions, stable_rate=STABLE_RATE,
                            title=f"{case['case']['title']}\nmodel {model}, geometric stiffness {geometric}, "
@@ -319,8 +331,8 @@ def _report_chart(rows, runs, regions, paths) -> int:
     multiplier type, failed speeds (exit code 3), the files written."""
     import math
 
-    from .floquet import STABLE_RATE
-    from .regions import describe_region
+    from .floquet import STABLE_RATE  # start-up: only this command loads it
+    from .regions import describe_region  # start-up: only this command loads it
 
     bad = [r for r in rows if "error" in r]
     digits = max(0, math.ceil(0.5 - math.log10(runs.resolution))) if runs.resolution else 1
@@ -342,9 +354,9 @@ def _report_chart(rows, runs, regions, paths) -> int:
 
 
 def _cmd_steady(args) -> int:
-    from .case import load_case
-    from .floquet import PeriodicCase, floquet, steady_state
-    from .outdir import ResultFolder
+    from .case import load_case  # start-up: only this command loads it
+    from .floquet import PeriodicCase, floquet, steady_state  # start-up: only this command loads it
+    from .outdir import ResultFolder  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set)
     pc = PeriodicCase(case, args.model, geometric=args.geometric)
@@ -357,7 +369,7 @@ def _cmd_steady(args) -> int:
         design_paths = write_design(da, res, rf.stage, plots=not args.no_plots) if da is not None else []
         paths = res.write(rf.stage) + design_paths
         if not args.no_plots:
-            from .plots import plot_result
+            from .plots import plot_result  # start-up: only this command loads it
 
             paths += plot_result(res, rf.stage)
         rf.commit()
@@ -373,9 +385,9 @@ def _cmd_steady(args) -> int:
 
 
 def _cmd_modes(args) -> int:
-    from .case import load_case
-    from .modes import frequencies_along, modes
-    from .outdir import ResultFolder
+    from .case import load_case  # start-up: only this command loads it
+    from .modes import frequencies_along, modes  # start-up: only this command loads it
+    from .outdir import ResultFolder  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set)
     kw = {"count": args.count, "model": args.model, "geometric": args.geometric,
@@ -385,7 +397,7 @@ def _cmd_modes(args) -> int:
         al = frequencies_along(case, args.along_cycle, **kw) if args.along_cycle is not None else None
         paths = ms.write(rf.stage) + (al.write(rf.stage) if al is not None else [])
         if not args.no_plots:
-            from .drawing import draw_modes, plot_along
+            from .drawing import draw_modes, plot_along  # start-up: only this command loads it
 
             paths += [p for p in (draw_modes(rf.stage / "mode_shapes.png", ms),
                                   plot_along(rf.stage / "frequencies_along.png", al) if al is not None else None) if p]
@@ -407,7 +419,7 @@ def _cmd_sweep(args) -> int:
         return _cmd_sample(args)
     if args.samples is not None:
         raise FlexmechError("--samples: goes with --sample KEY.PATH=DIST, not with a --param grid")
-    from .sweep import sweep
+    from .sweep import sweep  # start-up: only this command loads it
 
     out = _out(args, "sweep")
     sw = sweep(args.case, args.param, model=args.model, overrides=args.set, jobs=args.jobs, out_dir=out,
@@ -418,7 +430,7 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_sample(args) -> int:
-    from .sampling import sample_study
+    from .sampling import sample_study  # start-up: only this command loads it
 
     if args.samples is None:
         raise FlexmechError("--samples: give the number of samples N with --sample, e.g. --samples 64")
@@ -456,7 +468,7 @@ def _add_accuracy_parser(sub) -> None:
     a = sub.add_parser("accuracy", help="error against run time over a ladder of steps and meshes (docs/accuracy.md)")
     a.add_argument("case", help="TOML case file")
     a.add_argument("--models", type=_csv_list(str), default=None, metavar="M,M",
-                   help=f"models to study, comma-separated, or 'all' ({', '.join(MODELS_ALL)}; default: the case's solver.model)")
+                   help=f"models to study, comma-separated, or 'all' ({', '.join(MODELS)}; default: the case's solver.model)")
     a.add_argument("--integrators", type=_csv_list(str), default=None, metavar="I,I",
                    help="time integrators: case (the case's own, default), newmark[:BETA,GAMMA], hht[:ALPHA], "
                         "generalized-alpha[:RHO_INF]")
@@ -488,11 +500,11 @@ def _add_accuracy_parser(sub) -> None:
 
 
 def _cmd_accuracy(args) -> int:
-    from .accuracy import accuracy_study
+    from .accuracy import accuracy_study  # start-up: only this command loads it
 
     models = args.models
     if models and [m.strip() for m in models] == ["all"]:
-        models = list(MODELS_ALL)
+        models = list(MODELS)
     out = _out(args, "accuracy")
     st = accuracy_study(args.case, overrides=args.set, models=models, integrators=args.integrators,
                         dt_levels=args.dt_levels, elements=args.elements, grid=args.grid, ref_dt_factor=args.ref_dt_factor,
@@ -522,7 +534,7 @@ def _cmd_accuracy(args) -> int:
 
 
 def _cmd_bench(args) -> int:
-    from .bench import report, run_bench
+    from .bench import report, run_bench  # start-up: only this command loads it
 
     res = run_bench(args.out, quick=args.quick, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True))
     print(report(res))
@@ -531,21 +543,21 @@ def _cmd_bench(args) -> int:
 
 
 def _cmd_compare(args) -> int:
-    from .compare import compare_models, compare_result_dir, table
+    from .compare import compare_models, compare_result_dir, table  # start-up: only this command loads it
 
     if args.models:
-        from .case import load_case
-        from .simulate import _with_elements
+        from .case import load_case  # start-up: only this command loads it
+        from .simulate import with_elements  # start-up: only this command loads it
 
         if args.result or args.reference:
             raise FlexmechError("compare: give either RESULT_DIR --reference FILE, or --models CASE, not both")
         case = load_case(args.models, overrides=args.set)
         if args.elements_per_link:
-            case = _with_elements(case, args.elements_per_link)
+            case = with_elements(case, args.elements_per_link)
         models = [m.strip() for m in args.model_list.split(",") if m.strip()]
-        bad = [m for m in models if m not in MODELS_ALL]
+        bad = [m for m in models if m not in MODELS]
         if bad:
-            raise FlexmechError(f"--model-list: unknown model(s) {', '.join(bad)}; choose from {', '.join(MODELS_ALL)}")
+            raise FlexmechError(f"--model-list: unknown model(s) {', '.join(bad)}; choose from {', '.join(MODELS)}")
         out, runs, paths = compare_models(case, models, args.reference_model, x=args.x, columns=args.columns,
                                           out_dir="compare" if args.out is None else args.out, jobs=args.jobs,
                                           scheduler=_scheduler(args))
@@ -563,7 +575,7 @@ def _cmd_compare(args) -> int:
 
 
 def _cmd_reproduce(args) -> int:
-    from .reproduce import reproduce
+    from .reproduce import reproduce  # start-up: only this command loads it
 
     report = reproduce(args.out, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True), t_end=args.t_end,
                        gap=not args.no_gap)
@@ -572,7 +584,7 @@ def _cmd_reproduce(args) -> int:
 
 
 def _commands() -> dict:
-    from .cli_optimize import cmd_optimize
+    from .cli_optimize import cmd_optimize  # start-up: only this command loads it
 
     return {"run": cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
             "steady": _cmd_steady, "modes": _cmd_modes, "draw": cmd_draw, "view": cmd_view, "sweep": _cmd_sweep,
@@ -581,8 +593,8 @@ def _commands() -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .errors import one_line, signal_words
-    from .signals import exit_code, stop_on_signals
+    from .errors import one_line, signal_words  # start-up: only this command loads it
+    from .signals import exit_code, stop_on_signals  # start-up: only this command loads it
 
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from .case import MODELS, load_case
+from .case import load_case
+from .families import MODELS
 from .fmu import export_fmu
 
 

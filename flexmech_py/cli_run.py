@@ -46,9 +46,9 @@ def integrator_overrides(args) -> list[str]:
 def _shapes(args, prep):
     """The ShapeCollector of ``--draw N`` and ``--view`` (None without either); its frames' memory
     checked first.  ``--view`` keeps as many frames as the page holds (flexmech_py.view.decimate)."""
-    from .shapes import ShapeCollector, body_points
-    from .sizes import check_count, format_count
-    from .view.decimate import frames_for, kept_points
+    from .shapes import ShapeCollector, body_points  # start-up: only this command loads it
+    from .sizes import check_count, format_count  # start-up: only this command loads it
+    from .view.decimate import frames_for, kept_points  # start-up: only this command loads it
 
     if args.draw is not None and args.draw < 2:
         raise FlexmechError(f"--draw: needs 2 frames or more, got {args.draw}")
@@ -65,10 +65,10 @@ def _shapes(args, prep):
 
 
 def cmd_run(args) -> int:
-    from .case import load_case
-    from .progress import RunProgress
-    from .runner import FileSink, execute
-    from .simulate import Prepared
+    from .case import load_case  # start-up: only this command loads it
+    from .progress import RunProgress  # start-up: only this command loads it
+    from .runner import FileSink, execute  # start-up: only this command loads it
+    from .simulate import Prepared  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set + integrator_overrides(args))
     prep = Prepared(case, dt=args.dt, elements_per_link=args.elements_per_link)
@@ -114,7 +114,7 @@ def _extras(res, shapes, sink, stage: Path, plots: bool, design=None, draw: bool
     if shapes is not None:
         paths += _write_drawing(res, shapes.result(), stage, plots=plots and draw)
     if plots:
-        from .plots import plot_result
+        from .plots import plot_result  # start-up: only this command loads it
 
         paths += plot_result(res.plot_view(), stage)
     page = [stage / "view.html"] if view else []
@@ -122,7 +122,7 @@ def _extras(res, shapes, sink, stage: Path, plots: bool, design=None, draw: bool
         res.extra["files"] = [p.name for p in paths + page]
         res.write_summary(stage)
     if view:
-        from .view import page_of
+        from .view import page_of  # start-up: only this command loads it
 
         page[0].write_text(page_of(stage)[0], encoding="utf-8")
     return paths + page
@@ -130,7 +130,7 @@ def _extras(res, shapes, sink, stage: Path, plots: bool, design=None, draw: bool
 
 def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
     """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
-    from .shapes import spread, write_shape_csv
+    from .shapes import spread, write_shape_csv  # start-up: only this command loads it
 
     head = [f"flexmech run --draw/--view; case {res.case['case']['title']!r}; model {res.model}",
             "per frame (index, t [s]) every drawn point: x, y its rigid position [m]; dx, dy its elastic "
@@ -138,7 +138,7 @@ def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
             "curvature at its nodes [1/m]"]
     paths = [write_shape_csv(out / "shape.csv", sf, head, key="t")]
     if plots:
-        from .drawing import draw_frames
+        from .drawing import draw_frames  # start-up: only this command loads it
 
         p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, spread(sf.key.size, MAX_PANELS),
                            title=f"{res.case['case']['title']} - model {res.model}")
@@ -148,7 +148,7 @@ def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
 
 def _run_cost(prep, model: str, sink) -> str:
     """The words of a run's cost line: steps, DOFs, the size of timeseries.csv."""
-    from .sizes import format_bytes
+    from .sizes import format_bytes  # start-up: only this command loads it
 
     dofs = prep.coupled[model].ndof if model in prep.coupled else prep.fe.nfree
     return (f"{prep.nsteps:,} steps of {dofs} DOFs, {prep.frames:,} frames, about "
@@ -196,8 +196,8 @@ def _draw_input(folder: Path):
     """(shape frames, case, summary) of a folder written by ``flexmech run --draw``."""
     import json
 
-    from .case import Case
-    from .shapes import read_shape_csv
+    from .case import Case  # start-up: only this command loads it
+    from .shapes import read_shape_csv  # start-up: only this command loads it
 
     if not (folder / "shape.csv").is_file():
         raise FlexmechError(f"{folder}: no shape.csv there; write one with `flexmech run CASE --draw --out {folder}`")
@@ -211,8 +211,8 @@ def _draw_input(folder: Path):
 
 
 def cmd_draw(args) -> int:
-    from .drawing import animate_frames, draw_frames
-    from .shapes import spread
+    from .drawing import animate_frames, draw_frames  # start-up: only this command loads it
+    from .shapes import spread  # start-up: only this command loads it
 
     folder = Path(args.result)
     sf, case, summary = _draw_input(folder)
@@ -242,8 +242,8 @@ def add_view_parser(sub) -> None:
 
 
 def cmd_view(args) -> int:
-    from .sizes import format_bytes
-    from .view import write_view
+    from .sizes import format_bytes  # start-up: only this command loads it
+    from .view import write_view  # start-up: only this command loads it
 
     info = write_view(args.result, args.out)
     what = f"; {info.frames} frames of {info.points} points" if info.kind == "run" else ""

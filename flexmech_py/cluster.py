@@ -63,7 +63,7 @@ def _import_distributed():
 
 
 def _flexmech_version() -> str:
-    from . import __version__
+    from .version import __version__
 
     return __version__
 
@@ -121,7 +121,7 @@ class DaskExecutor:
 
     def _check_workers(self, address: str) -> int:
         """The number of workers, once every one runs this flexmech version; FlexmechError if not."""
-        from . import __version__
+        from .version import __version__
 
         try:
             self.client.wait_for_workers(1, timeout=WORKER_WAIT_S)

@@ -16,11 +16,12 @@ import numpy as np
 
 from .definitions import definition_notes
 from .errors import CaseError, FlexmechError, MechanismError, SolverError
+from .families import family
+from .fileio import atomic_write
 from .inputs import read_text
 from .names import inside, safe_name
 from .outdir import ResultFolder
 from .plots import display_unit, line_figure
-from .results import _atomic_write
 
 __all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models", "model_run", "ModelRun"]
 
@@ -202,10 +203,10 @@ def _write(metrics: dict, out_dir: Path, x: str, title: str, labels=("result", "
             paths.append(p)
     clean = {c: {k: v for k, v in m.items() if not k.startswith("_")} for c, m in metrics.items()}
     js = out_dir / "compare.json"
-    _atomic_write(js, json.dumps({"x": x, **(extra or {}), "columns": clean}, indent=2) + "\n")
+    atomic_write(js, json.dumps({"x": x, **(extra or {}), "columns": clean}, indent=2) + "\n")
     csv = out_dir / "compare.csv"
     keys = ["max_error", "rms_error", "peak_ref", "peak_result", "peak_error", "peak_shift", "correlation", "points"]
-    _atomic_write(csv, "column," + ",".join(keys) + "\n"
+    atomic_write(csv, "column," + ",".join(keys) + "\n"
                   + "".join(f"{c}," + ",".join(f"{m[k]:.6g}" for k in keys) + "\n" for c, m in clean.items()))
     return [js, csv] + paths
 

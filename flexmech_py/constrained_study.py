@@ -23,6 +23,7 @@ import numpy as np
 from .bundled import case_names, case_path
 from .case import load_case
 from .errors import FlexmechError
+from .families import names
 from .simulate import Prepared
 
 __all__ = ["trammel", "steps", "rho", "bundled", "main"]
@@ -57,7 +58,7 @@ def _diff(res, ref, col: str) -> tuple[float, float]:
 def trammel() -> list[str]:
     out = ["| model | damping | integrator | drive force peak [N] | peak vs dt/8 | max \\|diff\\| / peak | "
            "largest alternating part |", "|---|---|---|---|---|---|---|"]
-    for model in ("coupled", "nonlinear"):
+    for model in names(superposition=False):
         for damp in ((), (DAMPED,)):
             ref = _run("trammel", model, (*damp, *GALPHA[0.8]), refine=8)
             for label, sets in (("default", ()), ("newmark", (NEWMARK,))):
@@ -97,7 +98,7 @@ def bundled(t_cap: float = 0.5) -> list[str]:
     for name in case_names():
         t_end = min(load_case(case_path(name))["solver"]["t_end"], t_cap if "spinup" not in name else 20.0)
         cells = []
-        for model in ("coupled", "nonlinear"):
+        for model in names(superposition=False):
             for sets in ((), (NEWMARK,)):
                 try:
                     res = _run(name, model, (*sets, f"solver.t_end={t_end!r}"))

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import kernels
 from .mechanism.control import ControlPack, pack_controllers
-from .coupled_layout import CON_ANGLE, CON_POINT, CON_PROJECTION, Layout, LinkMesh, Row, SharedAngles, \
+from .coupled_layout import CON_ANGLE, CON_POINT, CON_PROJECTION, MK_NODE, Layout, LinkMesh, Row, SharedAngles, \
     flat_description, force_constant_positions, marker_key, node_segment, start_value
 
 __all__ = ["CoupledModel", "LinkMesh", "validity", "CON_POINT", "CON_ANGLE", "CON_PROJECTION", "SOLVER_PATHS"]
@@ -144,7 +144,7 @@ class CoupledModel:
     def constraint_values(self, rm, start=None) -> np.ndarray:
         """(3, max(1, nc), nt) [value, rate, acceleration] of the rows on the rigid motion's grid: the
         drive law (the rigid joint coordinate) for a kinematic drive, the initial value for a held
-        coordinate (a weld, a locked joint, a prismatic joint's relative angle), zero otherwise.
+        coordinate (a weld, a locked joint, a guided joint's relative angle), zero otherwise.
         ``start``: the rigid motion whose first sample holds the initial values (default ``rm``; a
         later chunk of a run passes its first chunk, so held values stay those of t = 0)."""
         start = rm if start is None else start
@@ -154,6 +154,8 @@ class CoupledModel:
                 out[:, i] = rm.joint(r.value[1]).T
             elif r.value[0] == "start":
                 out[0, i] = start_value(self.case.mechanism, start, r.value[1], r.value[2])
+            elif r.value[0] == "rigid":
+                out[0, i] = self._own_row_value(rm, r)
         return np.asfortranarray(out)
 
     def set_force_constants(self, values: dict) -> None:
@@ -165,6 +167,22 @@ class CoupledModel:
             pos = force_constant_positions(self.layout, rspec.size, ispec)
             for joint, value in values.items():
                 rspec[pos[joint]] = float(value)
+
+    def _own_row_value(self, rm, r) -> np.ndarray:
+        """(nt,) the value of a kind's own row (Joint.own_rows) on the rigid motion, its frame angles
+        taken as the model's markers take them: a segment node's wrapped to (-pi, pi] (the chord's
+        atan2), a body's and a shared absolute node angle's as they are (flexmech_markers
+        con_residual reduces what is left across the cut)."""
+        mech = self.case.mechanism
+        j = mech.joint(r.value[1])
+        pts = mech.joint_points(j)
+        ang = []
+        for p, m in zip(pts, (r.a, r.b)):
+            x = np.zeros(rm.t.size) if p.body is None else rm.z[:, 3 * mech.body_index(p.body) + 2]
+            if self.markers[m][0] == MK_NODE and self.shared is None:
+                x = np.angle(np.exp(1j * x))
+            ang.append(x)
+        return j.held_values(r.value[2], *ang, *(rm.point_positions(p) for p in pts))
 
     # ------------------------------------------------------------------ kernel calls
     def _spec(self, gravity, rayleigh, kernel=False):

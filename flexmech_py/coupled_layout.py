@@ -12,8 +12,9 @@ inertias, and the kernel's flat description (fortran/flexmech_coupled_system.f90
   multipliers), a ground joint there fixes them.
 - A kinematic drive is a row on its joint's coordinate, a force drive a generalized force on it.
 
-The rows of each joint kind are in :data:`JOINT_ROWS`: a new joint kind is one entry there (and one
-constraint kind in Fortran when its rows are new).
+The rows of each joint kind are its class's ``coupled_rows`` and ``coupled_coordinate``
+(flexmech_py.mechanism.joints): a new joint kind declares them in its own module (and one row
+routine in Fortran when its rows are new).
 """
 
 from __future__ import annotations
@@ -24,10 +25,12 @@ import numpy as np
 
 from .coupled_ordering import bordered_numbering
 from .errors import CaseError
+from .mechanism.packing import drawn_coordinates, joint_pose
 from .mechanism.rows import CON_ANGLE, CON_POINT, CON_PROJECTION
-from .model import link_mesh, rcm_free_numbering, uniform_mesh
+from .mesh import mesh_fractions, uniform_mesh
+from .model import rcm_free_numbering
 
-__all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "JOINT_ROWS", "HOLDING", "CON_POINT", "CON_ANGLE",
+__all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "CON_POINT", "CON_ANGLE",
            "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",
            "start_value", "flat_description", "force_constant_positions"]
 
@@ -35,20 +38,14 @@ __all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "JOINT_ROW
 MK_GROUND, MK_NODE, MK_BODY = 0, 1, 2
 J_FLOOR = 1e-6     # a rigid body without rotary inertia: J_S = J_FLOOR m lref^2 in the iteration matrix
 
-#: the rows of each joint kind: "point" (2 rows, or shared position DOFs), "normal" (the prismatic
-#: guide's normal projection), "angle" (relative angle held at its initial value); the joint
-#: coordinate a drive acts on is an "angle" (revolute) or a "slide" projection (prismatic)
-JOINT_ROWS = {"revolute": (("point",), "angle"), "weld": (("point", "angle"), "angle"),
-              "prismatic": (("normal", "angle"), "slide")}
-#: elastic conditions that hold the joint coordinate at its initial value in these models (theory.md D9)
-HOLDING = {"revolute": ("locked", "clamp"), "prismatic": ("locked",), "weld": ()}
 
 
 @dataclass
 class Row:
     """A constraint row (or a measure) between markers a and b: ``kind`` CON_*, ``aux`` (the component
     of a point row; 1 for a row whose value moves), ``d`` the direction of a projection in a's frame,
-    ``value``: ("zero",), ("start", joint, what) its initial value, or ("drive", joint)."""
+    ``value``: ("zero",), ("start", joint, what) its initial value, ("drive", joint), or ("rigid", joint,
+    role) a kind's own row's value on the rigid motion (Joint.held_values)."""
 
     kind: int
     a: int
@@ -72,7 +69,9 @@ class JointModel:
     rows: dict = field(default_factory=dict)
     coordinate: Row | None = None
     force: int | None = None
-    axis: tuple = (1.0, 0.0)       # prismatic: the guide direction in a's frame
+    axis: tuple = (1.0, 0.0)       # a guided joint's guide direction in a's frame
+    guided: bool = False           # point b slides along a guide on body a (Joint.guided)
+    own: list = field(default_factory=list)    # the roles of the kind's own rows (Joint.own_rows)
 
 
 @dataclass
@@ -166,7 +165,7 @@ class Layout:
     {name: JointModel}, ``forces`` [(coordinate Row, Drive)], ``pm`` (segment, element, xi, mass),
     ``ri`` (segment, node, J), ``node_ends`` {position node: [(segment, 0 start / 1 end)]}; then
     ``ld``, ``n_el``, ``free_of``, ``q_fixed`` and ``mesh``.  ``hold_forced``: a force-driven joint
-    whose elastic condition holds it (HOLDING: a torque-driven crank's default ``clamp``) also gets a
+    whose elastic condition holds it (Joint.holding: a torque-driven crank's default ``clamp``) also gets a
     ``hold`` row, as the superposition models' elastic problem holds it; the frozen eigenproblem of
     ``flexmech modes`` uses it (a run leaves the joint to its force, whatever its condition).
     The nonlinear model's free numbering is that of its bordered saddle band
@@ -179,7 +178,7 @@ class Layout:
         if not any(not ln.rigid for ln in self.mech.links):
             raise CaseError("links", "no link is flexible: flexmech's models need at least one flexible link; make one flexible "
                                      "(rigid = false); the rigid-body motion alone is Prepared(case).rm (docs/api.md)")
-        self.fracs = [None if ln.rigid else link_mesh(ln, self.case["links"][li]["elements"])
+        self.fracs = [None if ln.rigid else mesh_fractions(self.mech, ln, self.case["links"][li]["elements"])
                       for li, ln in enumerate(self.mech.links)]
         self.segments = []
         for li, f in enumerate(self.fracs):
@@ -219,7 +218,7 @@ class Layout:
         """Shared position nodes (revolute and weld joints between segment ends), the DOFs of every
         segment (in the order the seed cases always had) and of the rigid bodies."""
         for j in self.mech.joints:
-            if j.kind in ("revolute", "weld"):
+            if j.shares_point:
                 na, nb = (self._end_node(p) for p in self.mech.joint_points(j))
                 if na is not None and nb is not None:
                     self.parent[self._find(na)] = self._find(nb)
@@ -318,15 +317,16 @@ class Layout:
         return out
 
     def _joints(self) -> None:
-        """Markers and rows of every joint (JOINT_ROWS), its drive, and the welds between the
+        """Markers and rows of every joint (its kind's coupled_rows), its drive, and the welds between the
         consecutive segments of a link (nonlinear model)."""
         for j in self.mech.joints:
             a, b = self.mech.joint_points(j)
             where = f"joints.{j.name}.connects"
             jm = JointModel(j.name, j.kind, (self.marker(marker_key(self, a, where)),
                                              self.marker(marker_key(self, b, where))))
-            base, coord = JOINT_ROWS[j.kind]
-            if j.kind == "prismatic":    # the guide direction in the frame of body a
+            base, coord = j.coupled_rows, j.coupled_coordinate
+            jm.guided = j.guided
+            if j.guided:    # the guide direction in the frame of body a
                 ang = 0.0 if a.body is None else a.body.angle
                 u = j.unit_axis()
                 jm.axis = (np.cos(ang) * u[0] + np.sin(ang) * u[1], -np.sin(ang) * u[0] + np.cos(ang) * u[1])
@@ -341,7 +341,7 @@ class Layout:
                 jm.force = len(self.forces)
                 self.forces.append((c, drive))
             held = drive is None or (self.hold_forced and not drive.kinematic)
-            if held and self.mech.condition(j) in HOLDING[j.kind]:
+            if held and self.mech.condition(j) in j.holding:
                 what = "angle" if coord == "angle" else "coordinate"
                 self._add_row(jm, "hold", Row(c.kind, *jm.markers, d=c.d, value=("start", j.name, what)))
             self.joints[j.name] = jm
@@ -369,6 +369,11 @@ class Layout:
                 self._add_row(jm, name, Row(CON_POINT, ma, mb, aux=comp))
         elif role == "normal":
             self._add_row(jm, "normal", Row(CON_PROJECTION, ma, mb, d=(-jm.axis[1], jm.axis[0])))
+        elif role == "own":     # the kind's own rows (Joint.own_rows), held at their rigid-motion values
+            j = self.mech.joint(jm.name)
+            for name, kind, aux, d in j.own_rows(joint_pose(self.mech, j, drawn_coordinates(self.mech))):
+                jm.own.append(name)
+                self._add_row(jm, name, Row(kind, ma, mb, aux=aux, d=d, value=("rigid", jm.name, name)))
         else:   # the relative angle held at its initial value
             self._add_row(jm, "angle", Row(CON_ANGLE, ma, mb, value=("start", jm.name, "angle")))
 

@@ -10,10 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernels
-from .coupled import CON_ANGLE, CON_POINT, CoupledModel
+from .coupled import CON_ANGLE, CON_POINT, CON_PROJECTION, CoupledModel
 from .mechanism.motion import LinkMotion
 from .mechanism.placement import point_state
-from .outputs import _axial_output, _load_output, point_components, wrap_angle
+from .mechanism.rows import ROW_KINDS, residual
+from .outputs import axial_output, load_output, point_components, wrap_angle
 
 __all__ = ["ModelFrames", "model_frames", "chord_motion", "body_angles", "node_state", "deviation", "curvature",
            "axial_forces", "joint_angles", "joint_coordinate", "joint_at_joint", "joint_output", "evaluate", "reaction",
@@ -201,7 +202,7 @@ def axial_forces(cm: CoupledModel, qf) -> np.ndarray:
 # ----------------------------------------------------------------------------- joints
 def joint_angles(cm: CoupledModel, qf) -> dict:
     """{joint: coordinate (nf,)} measured at the joint's markers (the tangent angles of flexible links
-    there; a prismatic joint's slide), angles unwrapped in time."""
+    there; a guided joint's slide), angles unwrapped in time."""
     zeros = np.zeros_like(qf)
     rows = [jm.coordinate for jm in cm.joints.values()]
     mv = cm.post(qf, zeros, zeros, np.zeros((max(1, len(cm.rows)), qf.shape[1])), np.zeros(qf.shape[1]),
@@ -212,9 +213,9 @@ def joint_angles(cm: CoupledModel, qf) -> dict:
 
 def joint_coordinate(cm: CoupledModel, fr: ModelFrames, name: str) -> np.ndarray:
     """(3, nf) [coordinate, rate, acceleration] of a joint in the model: the relative frame angle of its
-    bodies (a flexible link's chord), unwrapped, or a prismatic joint's slide along its guide."""
+    bodies (a flexible link's chord), unwrapped, or a guided joint's slide along its guide."""
     jm = cm.joints[name]
-    if jm.kind == "prismatic":
+    if jm.guided:
         return fr.measure(jm.coordinate)
     mech = cm.case.mechanism
     a, b = mech.joint_points(mech.joint(name))
@@ -229,10 +230,10 @@ def joint_at_joint(cm: CoupledModel, fr: ModelFrames, rm, name: str) -> np.ndarr
     """(3, nf) [coordinate, rate, acceleration] of a joint measured at the joint, as its constraint rows
     and drive measure it: the relative angle of the two bodies' tangents there (a flexible link's, a
     rigid body's frame), unwrapped and on the rigid-body solution's turn at the first frame, or a
-    prismatic joint's slide.  A kinematic drive's law, exactly, for a driven joint."""
+    guided joint's slide.  A kinematic drive's law, exactly, for a driven joint."""
     jm = cm.joints[name]
     val = np.array(fr.measure(jm.coordinate), float)
-    if jm.kind != "prismatic":
+    if not jm.guided:
         val[0] = np.unwrap(val[0])
         val[0] += 2 * np.pi * np.round((rm.joint(name)[0, 0] - val[0, 0]) / (2 * np.pi))
     return val
@@ -241,12 +242,12 @@ def joint_at_joint(cm: CoupledModel, fr: ModelFrames, rm, name: str) -> np.ndarr
 def joint_output(cm: CoupledModel, fr: ModelFrames, rm, name: str) -> np.ndarray:
     """(3, nf) a joint's ``joint_*`` outputs: a kinematically driven joint at the joint (its law), any
     other the model's rigid coordinate (:func:`joint_coordinate`: its bodies' chords and frames; a
-    prismatic joint's slide), the turn aligned with the rigid-body solution's at the first frame."""
+    guided joint's slide), the turn aligned with the rigid-body solution's at the first frame."""
     drive = cm.case.mechanism.drive_of(name)
     if drive is not None and drive.kinematic:
         return joint_at_joint(cm, fr, rm, name)
     val = np.array(joint_coordinate(cm, fr, name), float)
-    if cm.joints[name].kind != "prismatic":
+    if not cm.joints[name].guided:
         val[0] = np.unwrap(val[0])
         val[0] += 2 * np.pi * np.round((rm.joint(name)[0, 0] - val[0, 0]) / (2 * np.pi))
     return val
@@ -262,7 +263,12 @@ def reaction(cm: CoupledModel, fr: ModelFrames, name: str) -> np.ndarray:
     from the residual of the bodies on b's side at the shared node."""
     jm = cm.joints[name]
     out = np.zeros((fr.t.size, 3))
-    if jm.kind == "prismatic":
+    if jm.own:
+        pos = [fr.post["markers"][:2, m].T for m in jm.markers]
+        own = cm.case.mechanism.joint(name).reaction_from(np.stack([_lam(fr, jm, r) for r in jm.own], 1), *pos)
+        if own is not None:
+            return own
+    if jm.guided:
         psi = fr.post["markers"][2, jm.markers[0]]
         c, s = np.cos(psi), np.sin(psi)
         u = np.array([c * jm.axis[0] - s * jm.axis[1], s * jm.axis[0] + c * jm.axis[1]])
@@ -346,10 +352,11 @@ def drive_force(cm: CoupledModel, fr: ModelFrames, name: str) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- outputs
 def evaluate(cm: CoupledModel, specs: dict, fr: ModelFrames, rm, ref: LinkMotion, u_dev, axial,
-             superposition_fe=None, z_ref=None) -> dict:
+             superposition_fe=None, z_ref=None, run_loads=None) -> dict:
     """Every named output over the model's frames; rm the rigid-body solution at the frames (its
     reactions for ``source = "rigid"``, its positions for displacements), ref its LinkMotion;
-    superposition_fe: callable giving the FE model (inertia loads only); z_ref (nf, n) the rigid
+    superposition_fe: callable giving the FE model (inertia loads only); run_loads: the superposition
+    family an inertia load of model "run" means (the run's Family.inertia_loads); z_ref (nf, n) the rigid
     mechanism at the model's own coordinates (deflections; None: rm, every degree of freedom driven)."""
     out = {}
     for name, sp in specs.items():
@@ -364,16 +371,16 @@ def evaluate(cm: CoupledModel, specs: dict, fr: ModelFrames, rm, ref: LinkMotion
             kap = curvature(cm, fr.qf, li, sp["at"])
             out[name] = kap * cm.case["links"][li]["half_depth"] if kind == "strain" else kap
         elif kind == "axial_force":
-            out[name] = _axial_output(cm.mesh, axial, sp, name)
+            out[name] = axial_output(cm.mesh, axial, sp, name)
         elif kind in ("displacement", "deflection", "position"):
             out[name] = _point_output(cm, fr, rm, sp, name, z_ref)
         elif kind == "inertia_load":
             fe = superposition_fe()
-            model = "classic" if sp["model"] == "run" else sp["model"]
+            model = run_loads if sp["model"] == "run" else sp["model"]
             rig = np.asfortranarray(np.stack([fr.chord.phi, fr.chord.omega, fr.chord.alpha,
                                               fr.chord.ax - cm.case["loads"]["gravity"][0],
                                               fr.chord.ay - cm.case["loads"]["gravity"][1]]).transpose(0, 2, 1))
-            out[name] = _load_output(fe, fe.loads(rig, model), sp, name)
+            out[name] = load_output(fe, fe.loads(rig, model), sp, name)
         elif kind == "reaction":
             r = rm.reaction(sp["joint"]) if sp.get("source", "model") == "rigid" else reaction(cm, fr, sp["joint"])
             out[name] = {"x": r[:, 0], "y": r[:, 1], "moment": r[:, 2],
@@ -456,7 +463,7 @@ class Diagnostics:
             ls = cm.case["links"][li]["length"] * (cm.fracs[li][k1] - cm.fracs[li][k0])
             self.stretch = max(self.stretch, float(np.max(np.abs(np.hypot(*(fr.qf[d[2:4]] - fr.qf[d[0:2]])) / ls - 1.0))))
         for k, v in constraint_violation(cm, fr, cval).items():
-            self.violation[k] = max(self.violation[k], v)
+            self.violation[k] = max(self.violation.get(k, 0.0), v)
         self._add_drift(fr, rm)
 
     def _add_drift(self, fr: ModelFrames, rm) -> None:
@@ -466,7 +473,7 @@ class Diagnostics:
             mod = joint_coordinate(cm, fr, name)[0]
             rig = rm.joint(name)[:, 0]
             d = self.drift.setdefault(name, {})
-            if jm.kind == "prismatic":
+            if jm.guided:
                 d["max_abs_m"] = max(d.get("max_abs_m", 0.0), float(np.max(np.abs(mod - rig))))
                 d["final_m"] = float(mod[-1] - rig[-1])
                 continue
@@ -498,15 +505,17 @@ class Diagnostics:
 def constraint_violation(cm: CoupledModel, fr: ModelFrames, cval) -> dict:
     """Largest |g - value| over the frames of the constraint rows by kind: point coincidence and guide
     normal [m], angles [rad] (welds, held joints, kinematic drives, a nonlinear link's interior
-    nodes), slides [m] (kinematic drives and locked prismatic joints)."""
+    nodes), slides [m] (kinematic drives and locked guided joints), and any other row kind under its
+    name and unit (mechanism.rows: e.g. ``<name>_m``)."""
     out = {"point_m": 0.0, "guide_normal_m": 0.0, "angle_rad": 0.0, "slide_m": 0.0}
     for i, r in enumerate(cm.rows):
-        err = fr.post["measures"][0, i] - cval[0, i]
-        if r.kind == CON_ANGLE:
-            err = np.arctan2(np.sin(err), np.cos(err))
+        err = residual(r.kind, r.d, fr.post["measures"][0, i] - cval[0, i])
         key = {CON_POINT: "point_m", CON_ANGLE: "angle_rad"}.get(r.kind,
                                                                   "guide_normal_m" if r.role == "normal" else "slide_m")
-        out[key] = max(out[key], float(np.max(np.abs(err))))
+        if r.kind not in (CON_POINT, CON_ANGLE, CON_PROJECTION):     # another row kind: its name and unit
+            name, unit, _ = ROW_KINDS[r.kind]
+            key = f"{name}_{unit}"
+        out[key] = max(out.get(key, 0.0), float(np.max(np.abs(err))))
     return out
 
 

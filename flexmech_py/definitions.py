@@ -6,7 +6,7 @@ part (:mod:`flexmech_py.model_error`: a difference of unlike quantities is no mo
 
 from __future__ import annotations
 
-from .case import SUPERPOSITION_MODELS
+from .families import family
 
 __all__ = ["definition_notes", "rigid_in_superposition", "JOINT_OUTPUT_KINDS"]
 
@@ -22,8 +22,8 @@ def definition_notes(case: dict, model: str, reference_model: str, free_motion: 
     by their premise) and the ``joint_*`` outputs of a revolute or weld joint on a flexible link that no
     kinematic drive moves (the rigid-body solution's frames against the chords); ``inertia_load`` with
     ``model = "run"`` between different load models.  Every other kind means the same in every model."""
-    coupled = [m for m in (model, reference_model) if m not in SUPERPOSITION_MODELS]
-    own = {m: m if m in SUPERPOSITION_MODELS else "classic" for m in (model, reference_model)}  # a "run" load's model
+    coupled = [m for m in (model, reference_model) if family(m).constrained]
+    own = {m: family(m).inertia_loads for m in (model, reference_model)}  # a "run" load's model
     out = {}
     for name, sp in case["outputs"].items():
         if sp["kind"] == "displacement" and len(coupled) == 1 and free_motion:
@@ -62,6 +62,6 @@ def _frames_differ(mech, joint: str) -> bool:
     rigid-body solution's frames in the superposition models, the chords in the coupled ones."""
     j = mech.joint(joint)
     drive = mech.drive_of(joint)
-    if j.kind == "prismatic" or (drive is not None and drive.kinematic):
+    if j.guided or (drive is not None and drive.kinematic):
         return False
     return any(p.body is not None and p.body.kind == "link" and not p.body.rigid for p in mech.joint_points(j))

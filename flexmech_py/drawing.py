@@ -17,7 +17,7 @@ import numpy as np
 
 from .glyphs import (BODY_COLOURS, BODY_STYLES, GROUND_GUIDE, GROUND_PIVOT, RIGID_GHOST, glyph_of, joint_marks,
                      legend_words)
-from .plots import _PNG, have_matplotlib, save_figure
+from .plots import PNG, have_matplotlib, save_figure
 
 __all__ = ["magnification", "deformed_lines", "draw_frames", "animate_frames", "draw_modes", "plot_along",
            "TARGET_FRACTION"]
@@ -114,6 +114,9 @@ def _draw_instant(ax, sf, i: int, scale: float, marks, colours) -> None:
     for m in marks:
         if m.point is not None:
             _draw_joint(ax, m, sf.x[i, m.point] + scale * sf.d[i, m.point])
+            ends = [e if e is None or isinstance(e, np.ndarray) else sf.x[i, e] + scale * sf.d[i, e] for e in m.ends]
+            for line in (m.joint.glyph_lines(*ends) if all(e is not None for e in ends) else ()):
+                ax.plot(line[:, 0], line[:, 1], "-", color="0.2", lw=1.0, zorder=4)   # the kind's own outline
 
 
 def _draw_joint(ax, m, pos) -> None:
@@ -214,7 +217,7 @@ def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str =
     _legend_line(fig, (legend or f"elastic deflection {factor_text(scale)} (magnified)")
                  + ", rigid configuration dashed; " + _symbols(marks))
     fig.tight_layout(rect=(0, 0.035, 1, 1))
-    save_figure(fig, path, dpi=100, pil_kwargs=_PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=PNG)
     return Path(path), scale
 
 
@@ -317,5 +320,5 @@ def plot_along(path, al, *, title: str | None = None):
     fig.suptitle(title or f"{al.case['case']['title']}\nfrozen natural frequencies along the motion, model {al.model}"
                  + (", geometric stiffness" if al.geometric else ""), fontsize=9.5)
     fig.tight_layout()
-    save_figure(fig, path, dpi=100, pil_kwargs=_PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=PNG)
     return Path(path)

@@ -29,6 +29,7 @@ import numpy as np
 
 from .case import load_case
 from .errors import FlexmechError
+from .families import family
 from .notices import silenced
 from .floquet import PeriodicCase, floquet
 from .simulate import Prepared
@@ -717,7 +718,7 @@ def plots(results: dict, out: Path) -> list[Path]:
         save("extreme_long_run_amplitude.png", fig)
     if "torque_step" in results:
         series = results["torque_step"][1]
-        keys = [k for k in series if k[0] == "coupled"] or list(series)
+        keys = [k for k in series if family(k[0]).constrained] or list(series)
         fig, ax = plt.subplots(figsize=(8, 3.5))
         for (model, dt, lab) in keys:
             t, y = series[(model, dt, lab)]

@@ -33,6 +33,7 @@ from .errors import CaseError
 from .regions import default_resolution, multiplier_type, refinement_speeds
 from .sizes import check_points
 from .simulate import Prepared, check_elastic_problem
+from .fileio import atomic_write
 
 __all__ = ["PeriodicCase", "FloquetResult", "floquet", "steady_state", "frozen_frequencies", "stability_point",
            "STABLE_RATE", "ILL_CONDITIONED", "stability_chart", "ChartRuns", "REFINE_ROUNDS",
@@ -95,7 +96,7 @@ class PeriodicCase:
             raise CaseError("drives", f"the mechanism has {self.prep.setup.dof} degrees of freedom and one drive: its motion "
                                       "is not periodic; drive every degree of freedom")
         check_elastic_problem(self.fe, self.prep.rig, self.prep.setup.dof)
-        self.prep._checked = True
+        self.prep.elastic_checked = True
 
     @staticmethod
     def check(case: dict, model: str, geometric: str) -> int:
@@ -362,7 +363,6 @@ def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: 
 
 def write_stability_csv(rows: list, path, header: str = "") -> None:
     """stability.csv: one row per speed (units in the second comment line)."""
-    from .results import _atomic_write
 
     names = list(STABILITY_COLUMNS)
     for r in rows:
@@ -379,4 +379,4 @@ def write_stability_csv(rows: list, path, header: str = "") -> None:
             v = r.get(n, "")
             cells.append(f"{v:.10g}" if isinstance(v, float) else ('"' + str(v).replace('"', "'") + '"' if n == "error" and v else str(v)))
         lines.append(",".join(cells))
-    _atomic_write(path, "\n".join(lines) + "\n")
+    atomic_write(path, "\n".join(lines) + "\n")

@@ -16,9 +16,10 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from . import __version__
-from .case import MODELS, Case
+from .version import __version__
+from .case import Case
 from .errors import CaseError, FlexmechError
+from .families import MODELS
 from .outdir import ResultFolder
 from .stepping import Simulation
 

@@ -29,7 +29,7 @@ from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 
-from flexmech_py import __version__
+from flexmech_py.version import __version__
 from flexmech_py.case import load_case
 from flexmech_py.errors import FlexmechError
 from flexmech_py.stepping import Simulation

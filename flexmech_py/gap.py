@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from .families import family
 from .guards import THRESHOLDS, deflection_over_length
 from .notices import silenced
 from .simulate import Prepared
@@ -75,7 +76,7 @@ def gap_study(case: dict, column: str, windows, elements=8, ref_elements=16, con
         prep = preps[joint]
         row = {"model": model, "geometric": geo, "joint": joint, "elements": elements}
         try:
-            r = prep.run(model, geometric=geo if model not in ("coupled", "nonlinear") else None, estimate=False)
+            r = prep.run(model, geometric=geo if family(model).superposition else None, estimate=False)
         except Exception as exc:   # a configuration that fails is reported, not hidden
             row.update(errors=[float("nan")] * len(windows), validity_s=(float("nan"),) * 2, kernel_s=float("nan"),
                        failed=str(exc).split(":")[0] + ": " + str(exc).split(":", 1)[-1][:80])

@@ -1,7 +1,9 @@
 """How a drawn mechanism looks: the glyph of every joint kind, of the ground and of every body kind,
 and the joints' places among the drawn points.  One table for every drawing: the PNG panels and GIF
 of :mod:`flexmech_py.drawing` (matplotlib) and the page of :mod:`flexmech_py.view` (a canvas) both
-read it, so a new joint kind gets its glyph here once.  Colours are CSS hex strings (matplotlib
+read it.  A joint kind's glyph is declared by its module (``Joint.glyph``,
+:mod:`flexmech_py.mechanism.joints`): the table below is read from the kinds, so a new kind brings its
+glyph with it.  Colours are CSS hex strings (matplotlib
 takes them too), sizes in points (1/72 in).  Nothing here draws or computes physics.
 """
 
@@ -11,22 +13,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .mechanism.joints import JOINT_KINDS, Joint
+
 __all__ = ["JOINT_GLYPHS", "GROUND_PIVOT", "GROUND_GUIDE", "BODY_STYLES", "BODY_COLOURS", "RIGID_GHOST",
            "JointMark", "joint_marks", "glyph_of", "legend_words", "table"]
 
-#: joint kind -> its mark at the joint's point: ``marker`` circle | square, ``size`` [pt], ``fill`` of
-#: an undriven joint, ``driven_fill`` of a joint with a drive, ``edge`` colour; ``legend`` its word
-JOINT_GLYPHS = {
-    "revolute": {"marker": "circle", "size": 5.5, "fill": "#ffffff", "driven_fill": "#000000", "edge": "#000000",
-                 "legend": "o joint"},
-    "weld": {"marker": "circle", "size": 5.5, "fill": "#ffffff", "driven_fill": "#000000", "edge": "#000000",
-             "legend": "o joint"},
-    "prismatic": {"marker": "square", "size": 7.0, "fill": "#ffffff", "driven_fill": "#ffffff", "edge": "#000000",
-                  "legend": "■ slider"},
-}
-#: a joint to the ground other than a prismatic one: a triangle under the ground point
+#: joint kind -> its mark at the joint's point (``Joint.glyph`` of the kind's module): ``marker`` circle |
+#: square, ``size`` [pt], ``fill`` of an undriven joint, ``driven_fill`` of a joint with a drive, ``edge``
+#: colour; ``legend`` its word
+JOINT_GLYPHS = {kind: dict(cls.glyph) for kind, cls in JOINT_KINDS.items()}
+#: a joint to the ground other than a guided one: a triangle under the ground point
 GROUND_PIVOT = {"marker": "triangle", "size": 11.0, "fill": "#d9d9d9", "edge": "#000000", "legend": "▲ ground pivot"}
-#: a prismatic joint's guide on the ground: a line through the ground point along the joint's axis
+#: a guided joint's guide on the ground (Joint.guided): a line through the ground point along the joint's axis
 GROUND_GUIDE = {"colour": "#595959", "width": 1.0, "legend": "(grey line: its guide on the ground)"}
 #: body kind (flexmech_py.shapes.KINDS) -> its deformed line: ``width`` [pt], ``fill`` opacity of a
 #: rigid body's outline (0: none)
@@ -39,15 +37,17 @@ RIGID_GHOST = {"colour": "#8c8c8c", "width": 1.0, "dash": (4.0, 3.0)}
 
 
 def glyph_of(kind: str) -> dict:
-    """The glyph of a joint kind (a kind without one of its own is drawn as a revolute joint)."""
-    return JOINT_GLYPHS.get(kind, JOINT_GLYPHS["revolute"])
+    """The glyph of a joint kind (an unknown kind is drawn with the protocol's default glyph)."""
+    return JOINT_GLYPHS.get(kind, Joint.glyph)
 
 
 @dataclass
 class JointMark:
     """Where a joint is drawn: ``point`` the index of its non-ground side's point among the drawn
     points (None when that point is not drawn), ``ground`` the ground point [m] when one side is the
-    ground (else None), ``axis`` the unit direction of a prismatic joint's guide on the ground."""
+    ground (else None), ``axis`` the unit direction of a guided joint's guide on the ground; ``ends`` its
+    two sides a and b: a point index among the drawn points, the ground point [m], or None (not drawn),
+    for the kind's own outline (``Joint.glyph_lines``, drawn in the PNGs)."""
 
     name: str
     kind: str
@@ -55,6 +55,8 @@ class JointMark:
     ground: np.ndarray | None
     axis: np.ndarray | None
     driven: bool
+    joint: object = None
+    ends: tuple = (None, None)
 
 
 def joint_marks(mech, sf) -> list[JointMark]:
@@ -67,24 +69,31 @@ def joint_marks(mech, sf) -> list[JointMark]:
         side = b if b.body is not None else a
         grounded = a.body is None or b.body is None
         ground = np.asarray((a if a.body is None else b).position, float) if grounded else None
-        label = side.point
-        if side.body.kind == "link" and not side.body.rigid:
-            label = f"{side.body.fraction(side.point):.12g}"
-        axis = np.asarray(j.unit_axis(), float) if grounded and j.kind == "prismatic" else None
-        out.append(JointMark(j.name, j.kind, sf.point(side.body.name, label), ground, axis, j.name in driven))
+        axis = np.asarray(j.unit_axis(), float) if grounded and j.guided else None
+        ends = tuple(np.asarray(p.position, float) if p.body is None else _drawn_point(sf, p) for p in (a, b))
+        out.append(JointMark(j.name, j.kind, _drawn_point(sf, side), ground, axis, j.name in driven, j, ends))
     return out
+
+
+def _drawn_point(sf, p) -> int | None:
+    """The index of point reference ``p`` (on a body) among sf's drawn points (None: not drawn)."""
+    label = f"{p.body.fraction(p.point):.12g}" if p.body.kind == "link" and not p.body.rigid else p.point
+    return sf.point(p.body.name, label)
 
 
 def legend_words(marks) -> list[str]:
     """The legend of the joint glyphs drawn (only those present)."""
-    words = [JOINT_GLYPHS["revolute"]["legend"]]
+    words = [Joint.glyph["legend"]]
     if any(m.driven for m in marks):
         words.append("● driven joint")
     if any(m.ground is not None and m.axis is None for m in marks):
         words.append(GROUND_PIVOT["legend"])
-    if any(m.kind == "prismatic" for m in marks):
-        words.append(JOINT_GLYPHS["prismatic"]["legend"]
-                     + (" " + GROUND_GUIDE["legend"] if any(m.axis is not None for m in marks) else ""))
+    for kind in sorted({m.kind for m in marks}):
+        legend = glyph_of(kind)["legend"]
+        if legend in words:
+            continue
+        guides = any(m.axis is not None and m.kind == kind for m in marks)
+        words.append(legend + (" " + GROUND_GUIDE["legend"] if guides else ""))
     return words
 
 

@@ -24,12 +24,12 @@ import numpy as np
 from . import coupled, kernels, notices
 from .case import integrator_of
 from .errors import MechanismError, SolverError
+from .families import family, large_deflection_reference
 from .mechanism.control import loop_suspect
 from .model import squared_frequencies
 
 __all__ = ["check_validity", "ValidityTracker", "failed", "frames_before", "fmt_time"]
 
-LINEAR_MODELS = ("hac", "classic", "classic-translational")
 
 
 def frames_before(fail_step: int, out_every: int) -> int:
@@ -173,7 +173,7 @@ class ValidityTracker:
         model = res.model
         geo = res.extra.get("geometric_stiffness", {}).get("source", "none")
         # the nonlinear model follows large deflections and buckling: only yielding leaves its validity
-        limiting = [e for e in events if model != "nonlinear" or e[2] == "strain"]
+        limiting = [e for e in events if not family(model).large_deflection or e[2] == "strain"]
         overall["valid_until_s"] = limiting[0][0] if limiting else None
         overall["first_limit"] = ({"link": limiting[0][1], "kind": limiting[0][2], "time_s": limiting[0][0]}
                                   if limiting else None)
@@ -193,11 +193,12 @@ def check_validity(res) -> dict:
 
 
 def _advice(model: str, geo: str) -> str:
-    if model in LINEAR_MODELS and geo == "none":
+    ref = large_deflection_reference().name
+    if family(model).superposition and geo == "none":
         return ("a linear model without geometric stiffness neither stiffens in tension nor buckles in compression; "
-                "use --model nonlinear, or --set solver.geometric_stiffness=current")
-    if model in LINEAR_MODELS or model == "coupled":
-        return "use --model nonlinear"
+                f"use --model {ref}, or --set solver.geometric_stiffness=current")
+    if not family(model).large_deflection:
+        return f"use --model {ref}"
     return ""
 
 
@@ -222,7 +223,7 @@ def _validity_warnings(res, events, limiting, model, geo, speeds: dict) -> list[
         if speeds.get(t0) is not None:
             who, unit = _first_coordinate(res.case)
             speed = f" ({who} speed {abs(speeds[t0]):.4g} {unit}/s)"
-        if model == "nonlinear":
+        if family(model).large_deflection:
             out.append(f"the {model} model's results after t = {fmt_time(t0)} s{speed} are outside its validity: "
                        "the material yields there and every flexmech model is elastic")
         else:
@@ -234,13 +235,13 @@ def _validity_warnings(res, events, limiting, model, geo, speeds: dict) -> list[
         if kind == "compression":
             txt = (f"{name}: compressive axial force exceeds its Euler load ({v['euler_load_N']:.4g} N) from "
                    f"t = {fmt_time(tk)} s, up to {v['max_compression_over_euler']:.3g} times it")
-            txt += ("; the link buckles there (the nonlinear model follows it)" if model == "nonlinear" else
+            txt += ("; the link buckles there (the nonlinear model follows it)" if family(model).large_deflection else
                     f"; the {model} model's results after that time are outside its validity")
         elif kind == "deflection":
             txt = (f"{name}: elastic deflection exceeds 2 % of its length from t = {fmt_time(tk)} s, up to "
                    f"{100 * v['max_deflection_over_length']:.3g} %")
             txt += ("; beyond the range of the linear models (the nonlinear model remains valid while each "
-                    "element's deflection stays small: refine the mesh to check)" if model == "nonlinear" else
+                    "element's deflection stays small: refine the mesh to check)" if family(model).large_deflection else
                     "; beyond the small-deflection range of this model")
         else:
             txt = (f"{name}: strain exceeds its yield strain {v['yield_strain']:.3g} from t = {fmt_time(tk)} s, up to "
@@ -317,7 +318,7 @@ def _shortest_period(prep, model: str, res, data) -> float | None:
     """Shortest natural period [s] of the elastic model linearized at the last kept frame (dense
     eigenproblem; None for models above 1500 free DOFs)."""
     try:
-        if model in LINEAR_MODELS:
+        if family(model).superposition:
             if prep.fe.nfree > 1500:
                 return None
             lam = prep.fe.squared_frequencies(res.rig[:, :, -1], model)
@@ -333,8 +334,10 @@ def _shortest_period(prep, model: str, res, data) -> float | None:
     return 2 * np.pi / np.sqrt(lmax) if lmax > 0 else None
 
 
-def _half_step_check(prep, model: str, geometric, t_fail: float) -> dict:
-    """Rerun at dt/2 up to 1.5 t_fail (at least 20 steps past it): does the failure stay?"""
+def _half_step_check(prep, model: str, geometric, t_fail: float, rerun) -> dict:
+    """Rerun at dt/2 up to 1.5 t_fail (at least 20 steps past it): does the failure stay?  ``rerun``
+    (case, dt, out_every, model, geometric) -> (its step, an iterator over its blocks): the run hands it
+    to the check, which never builds a run itself."""
     case = copy.deepcopy(prep.case)
     t_check = min(case["solver"]["t_end"], 1.5 * t_fail + 20 * prep.dt)
     case["solver"]["t_end"] = t_check
@@ -342,9 +345,8 @@ def _half_step_check(prep, model: str, geometric, t_fail: float) -> dict:
     t0 = time.perf_counter()
     out = {"dt": None, "checked_until_s": t_check, "failed_at_s": None}
     try:
-        p2 = type(prep)(case, dt=prep.dt / 2, out_every=max(1, nsteps // 50))   # a Prepared
-        out["dt"] = p2.dt
-        for _ in p2.blocks(model, geometric):   # the frames are not needed: only whether it fails
+        out["dt"], blocks = rerun(case, prep.dt / 2, max(1, nsteps // 50), model, geometric)
+        for _ in blocks:   # the frames are not needed: only whether it fails
             pass
     except SolverError as exc:
         out["failed_at_s"] = exc.time
@@ -360,17 +362,19 @@ def _undamped_constraints(prep, model: str, data) -> bool:
     sol = prep.case["solver"]
     cm = (data or {}).get("cm")
     integ = integrator_of(sol, model)
-    return (model not in LINEAR_MODELS and integ["integrator"] == "newmark"
+    return (family(model).constrained and integ["integrator"] == "newmark"
             and abs(integ.get("gamma", 0.5) - 0.5) < 1e-12 and cm is not None and len(cm.rows) > 0)
 
 
-def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True) -> SolverError:
+def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True, rerun=None) -> SolverError:
     """The SolverError a failed run raises: one line naming the time, what stopped, the quantity
-    and the likely cause; ``partial`` is marked failed and its summary carries the diagnosis."""
+    and the likely cause; ``partial`` is marked failed and its summary carries the diagnosis.
+    ``rerun``: the run's own function that reruns it on another case or step (see _half_step_check);
+    without it there is no half-step evidence."""
     res, data, code, t_fail = exc.partial, exc.data or {}, exc.code, exc.time
     what = _what_stopped(prep, model, code, data)
     qtext, quantity = _stopping_quantity(res, model, code)
-    evidence = _evidence(prep, model, geometric, res, data, code, t_fail, diagnose)
+    evidence = _evidence(prep, model, geometric, res, data, code, t_fail, diagnose and rerun is not None, rerun)
     geo = data.get("geometric", "none")
     cause, ctext = _likely_cause(prep, model, res, data, code, t_fail, evidence, geo)
     loop = loop_suspect(prep.case, res.columns)
@@ -388,7 +392,7 @@ def failed(prep, model: str, geometric, exc: SolverError, diagnose: bool = True)
 def _what_stopped(prep, model: str, code: int, data: dict) -> str:
     """What stopped the run, in words (the Newton limits and the coupled loop's last iteration)."""
     what = kernels.STATUS_WHAT.get(code, f"status {code}")
-    if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:
+    if code == kernels.STATUS_NEWTON and family(model).superposition:
         return kernels.STATUS_WHAT_GEOMETRIC
     if code == kernels.STATUS_NEWTON:
         what += f" = {prep.case['solver']['newton_maxit']} (tolerance {prep.case['solver']['newton_tol']:g})"
@@ -404,7 +408,7 @@ def _stopping_quantity(res, model: str, code: int) -> tuple[str, dict]:
     iteration, the largest compression against the Euler load): text and numbers."""
     qtext, quantity = _largest_displacement(res)
     comp = res.extra["validity_overall"]
-    if code == kernels.STATUS_NEWTON and model in LINEAR_MODELS:
+    if code == kernels.STATUS_NEWTON and family(model).superposition:
         quantity.update(max_compression_over_euler=comp["max_compression_over_euler"],
                         link=comp["max_compression_link"])
         qtext += (f"; largest compression {comp['max_compression_over_euler']:.3g} x the Euler load "
@@ -412,14 +416,15 @@ def _stopping_quantity(res, model: str, code: int) -> tuple[str, dict]:
     return qtext, quantity
 
 
-def _evidence(prep, model: str, geometric, res, data: dict, code: int, t_fail: float, diagnose: bool) -> dict:
+def _evidence(prep, model: str, geometric, res, data: dict, code: int, t_fail: float, diagnose: bool,
+              rerun) -> dict:
     """The shortest elastic period against dt and (diagnose, a runtime failure) the run again at dt/2."""
     evidence = {}
     period = _shortest_period(prep, model, res, data)
     if period:
         evidence.update(shortest_period_s=period, dt_over_shortest_period=prep.dt / period)
     if diagnose and code in kernels.RUNTIME_FAILURES and code != kernels.STATUS_SINGULAR:
-        evidence["half_step"] = _half_step_check(prep, model, geometric, t_fail)
+        evidence["half_step"] = _half_step_check(prep, model, geometric, t_fail, rerun)
     return evidence
 
 

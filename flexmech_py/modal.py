@@ -156,7 +156,7 @@ def superposition_frequencies(fe, rig: np.ndarray, model: str, count: int, nax=N
 
 
 # ------------------------------------------------------------------------------ coupled models
-def _free_order(cm) -> np.ndarray:
+def free_order(cm) -> np.ndarray:
     """All-DOF numbers (0-based) of the free DOFs in the order of the free numbering."""
     free = np.flatnonzero(cm.free_of > 0)
     out = np.empty(free.size, int)
@@ -170,7 +170,7 @@ class _Linearization:
 
     def __init__(self, cm, v, a, t, gravity):
         self.cm, self.v, self.a, self.t, self.gravity = cm, v, a, t, gravity
-        self.free = _free_order(cm)
+        self.free = free_order(cm)
         self.h = FD_STEP * cm.case.mechanism.characteristic_length()
         self.angle_rows = np.array([r.kind == CON_ANGLE for r in cm.rows], bool)
 
@@ -211,7 +211,7 @@ def coupled_rigid_subspace(cm, q0: np.ndarray, m: np.ndarray) -> np.ndarray:
     zero = np.zeros(cm.ndof)
     k_el = cm.dense(q0, zero, zero)[3]
     _, gq = cm.row_values(q0[:, None])
-    n = _null_space(gq[:, _free_order(cm), 0], cm.nfree)
+    n = _null_space(gq[:, free_order(cm), 0], cm.nfree)
     return rigid_subspace(m, k_el, n)
 
 

@@ -14,9 +14,9 @@ Conventions (docs/theory.md):
   solved system ("free DOFs").
 - Free DOFs are numbered by reverse Cuthill-McKee to keep the band narrow.
 - Rigid links and rigid bodies are rigid bodies of the elastic problem (three DOFs at their centre of
-  mass), prismatic joints have an along DOF, and every joint that touches them is a relation between
+  mass), guided joints have an along DOF, and every joint that touches them is a relation between
   DOFs with time-varying coefficients whose slave DOFs are not solved for (flexmech_py/slaving.py);
-  the rigid samples then carry a column per rigid body and prismatic joint (:meth:`FEModel.rig_samples`).
+  the rigid samples then carry a column per rigid body and guided joint (:meth:`FEModel.rig_samples`).
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ from functools import cached_property
 import numpy as np
 
 from . import kernels
-from .case import SUPERPOSITION_MODELS
+from .mesh import mesh_fractions, uniform_mesh
+from .families import STUDY_MODEL, SUPERPOSITION_MODELS, family
 from .errors import CaseError
 
-__all__ = ["FEModel", "Joint", "LOAD_MODEL_CODE", "link_mesh"]
+__all__ = ["FEModel", "Joint"]
 
-LOAD_MODEL_CODE = {"hac": 1, "classic": 2, "classic-translational": 3}
 GEOMETRIC_CODE = {"none": 0, "current": 1, "lagged": 2, "quasi_static": 3}
 
 
@@ -50,6 +50,8 @@ class Joint:
     elastic: str
     kind: str = "revolute"
     sign: float = 1.0       # -1 when a and b were swapped to put the ground on the a side
+    ties_rotation: bool = False   # the kind always ties the two rotations (mechanism Joint.ties_rotation)
+    holding: tuple = ()           # the elastic conditions that tie them (mechanism Joint.holding)
 
     @property
     def inboard_end(self) -> str | None:
@@ -61,7 +63,7 @@ class Joint:
 
     @property
     def shares_rotation(self) -> bool:
-        return self.kind == "weld" or self.elastic in ("locked", "clamp")
+        return self.ties_rotation or self.elastic in self.holding
 
 
 def _end_name(frac: float) -> str:
@@ -71,12 +73,13 @@ def _end_name(frac: float) -> str:
 def mechanism_joints(case: dict) -> list[Joint]:
     """The mechanism's revolute and weld joints between flexible links (and the ground), with their
     elastic conditions: those the FE model expresses by shared or fixed DOFs.  Joints that touch a rigid
-    link or body, and prismatic joints, are relations (flexmech_py/slaving.py)."""
+    link or body, guided joints and joints whose points do not coincide (a kind with its own rows) are relations
+    (flexmech_py/slaving.py)."""
     mech = case.mechanism
     out = []
     for j in mech.joints:
         a, b = mech.joint_points(j)
-        if j.kind == "prismatic" or any(ref.body is not None and ref.body.rigid for ref in (a, b)):
+        if j.guided or not j.shares_point or any(ref.body is not None and ref.body.rigid for ref in (a, b)):
             continue
         sign = 1.0
         if b.body is None:      # the ground on the b side: swap, and flip the sign of the joint coordinate
@@ -84,33 +87,8 @@ def mechanism_joints(case: dict) -> list[Joint]:
         ai = None if a.body is None else mech.link_index(a.body.name)
         af = None if a.body is None else a.body.fraction(a.point)
         out.append(Joint(j.name, ai, af, mech.link_index(b.body.name), b.body.fraction(b.point), mech.condition(j),
-                         j.kind, sign))
+                         j.kind, sign, j.ties_rotation, j.holding))
     return out
-
-
-def joint_fractions(mech, link) -> set:
-    """Fractions of ``link`` where joints attach (each must be a mesh node)."""
-    out = set()
-    for j in mech.joints:
-        for ref in mech.joint_points(j):
-            if ref.body is link:
-                out.add(float(link.fraction(ref.point)))
-    return out
-
-
-def link_mesh(link, n: int, extra=()) -> np.ndarray:
-    """Node fractions (0 .. 1) of a link meshed with about n elements and a node at every named point
-    (and at the fractions ``extra``, e.g. its joint points)."""
-    cuts = sorted({0.0, 1.0} | {float(f) for f in link.points.values()} | {float(f) for f in extra})
-    if len(cuts) == 2:
-        return np.linspace(0.0, 1.0, n + 1)
-    fr = [0.0]
-    for lo, hi in zip(cuts[:-1], cuts[1:]):
-        if hi - lo <= 1e-12:
-            continue
-        k = max(1, int(round(n * (hi - lo))))
-        fr += list(np.linspace(lo, hi, k + 1)[1:])
-    return np.array(fr)
 
 
 def squared_frequencies(m: np.ndarray, k: np.ndarray, vectors: bool = False):
@@ -208,11 +186,6 @@ def _node_index(fracs: np.ndarray, frac: float) -> int:
     return k
 
 
-def uniform_mesh(fracs: np.ndarray) -> bool:
-    """True when a link's mesh fractions are equal elements."""
-    return np.allclose(fracs, np.linspace(0.0, 1.0, fracs.size), rtol=0.0, atol=1e-14) and fracs.size > 1
-
-
 def _merge_nodes(joints, fracs) -> tuple[list, int]:
     """Global nodes: one per (link, mesh node), merged where a revolute or weld joins two links."""
     nodes = _UnionFind()
@@ -305,7 +278,7 @@ class FEModel:
     node_frac: list = field(default_factory=list)   # node_frac[link][k]: fraction of the link's length of node k
     last_run: dict | None = field(default=None, repr=False)   # the last run's frames and final state (run())
     parts: dict = field(default_factory=dict)       # rigid link / body name -> slaving.RigidPart
-    slides: list = field(default_factory=list)      # slaving.Slide per prismatic joint
+    slides: list = field(default_factory=list)      # slaving.Slide per guided joint
     slaving: object = None                          # slaving.Slaving, None without relations
     uniform: list = field(default_factory=list)     # per link: equal elements
 
@@ -318,7 +291,7 @@ class FEModel:
         links = case["links"]
         names = [ln["name"] for ln in links]
         joints = mechanism_joints(case)
-        fracs = [np.zeros(0) if link.rigid else link_mesh(link, ln["elements"], joint_fractions(mech, link))
+        fracs = [np.zeros(0) if link.rigid else mesh_fractions(mech, link, ln["elements"])
                  for link, ln in zip(mech.links, links)]
         n_el = [max(f.size - 1, 0) for f in fracs]
         node_of, nnodes = _merge_nodes(joints, fracs)
@@ -504,7 +477,7 @@ class FEModel:
     def rig_samples(self, rm, gravity, idx=slice(None)) -> np.ndarray:
         """(5, ncols, N) kernel samples of a RigidMotion: the links' columns [phi, omega, alpha, a_O - g]
         (RigidMotion.kernel_samples), then one per rigid body [phi, omega, alpha, a_C - g] (its frame at
-        the centre of mass) and one per prismatic joint [d, d', d'', 0, 0] (flexmech_py/slaving.py)."""
+        the centre of mass) and one per guided joint [d, d', d'', 0, 0] (flexmech_py/slaving.py)."""
         base = rm.kernel_samples(gravity, idx)
         mech = self.case.mechanism
         if not mech.rigid_bodies and not self.slides:
@@ -545,16 +518,16 @@ class FEModel:
         return out
 
     # ------------------------------------------------------------------ kernel calls
-    def matrices(self, rig: np.ndarray, model: str = "hac", rayleigh=(0.0, 0.0)):
+    def matrices(self, rig: np.ndarray, model: str = STUDY_MODEL, rayleigh=(0.0, 0.0)):
         """Dense (M, C, K) over the free DOFs and the rigid-inertia load over all DOFs at one rigid sample."""
         rig = np.asfortranarray(rig, float)
         mm, cm, km, f, status = kernels.api.ked_matrices(
-            self.nfree, *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
+            self.nfree, *self._system_args(), family(model).load_code, np.asarray(rayleigh, float), rig,
             np.asfortranarray(self.slave_values(rig)[:, :, 0]))
         kernels.check_status(status, "ked_matrices")
         return mm, cm, km, f
 
-    def squared_frequencies(self, rig: np.ndarray, model: str = "hac", nax=None, vectors: bool = False):
+    def squared_frequencies(self, rig: np.ndarray, model: str = STUDY_MODEL, nax=None, vectors: bool = False):
         """Ascending w^2 of the frozen configuration at one rigid sample: (K [+ K_sigma(nax)], M) over
         the free DOFs, K the stiffness the model uses there (elastic, centrifugal and angular-
         acceleration terms; gyroscopic and damping terms left out).  See :func:`squared_frequencies`
@@ -577,7 +550,7 @@ class FEModel:
         """Rigid-inertia loads F_rigid over all DOFs, (ndof, ns), at rigid samples rig (5, nlinks, ns)."""
         if model not in SUPERPOSITION_MODELS:
             raise CaseError("model", f"must be one of {', '.join(SUPERPOSITION_MODELS)}, got {model!r}")
-        f, status = kernels.api.ked_loads(*self._system_args(), LOAD_MODEL_CODE[model], np.asfortranarray(rig, float))
+        f, status = kernels.api.ked_loads(*self._system_args(), family(model).load_code, np.asfortranarray(rig, float))
         kernels.check_status(status, "ked_loads")
         return f
 
@@ -615,7 +588,7 @@ class FEModel:
             q_free = np.ones(1, np.int32)
             q_val = np.zeros((1, nsteps + 1), order="F")
         uf, vf, af, nf, status, fail, geo_iters, nvalid = kernels.api.ked_run(
-            *self._system_args(), LOAD_MODEL_CODE[model], np.asarray(rayleigh, float), rig,
+            *self._system_args(), family(model).load_code, np.asarray(rayleigh, float), rig,
             self.slave_values(rig),
             np.asarray(q_free, np.int32), np.asfortranarray(q_val, float), dt, alpha_m, alpha_f, beta, gamma,
             out_every, int(a0 is None), GEOMETRIC_CODE[geometric], geo_tol, geo_maxit, float(div_limit), u, v, a, p)

@@ -11,18 +11,19 @@ and which outputs can be compared between the model families at all.
 
 from __future__ import annotations
 
-from .case import SUPERPOSITION_MODELS
 from .definitions import definition_notes
+from .families import AUTO_LADDER, SUPERPOSITION_MODELS
 
 __all__ = ["EXACT", "GEOMETRIC", "LADDER", "label", "comparable", "is_reference"]
 
+#: (model, geometric stiffness) from the cheapest to the exact one, as ``model = "auto"`` tries them
+#: (the registry's families.AUTO_LADDER)
+LADDER = AUTO_LADDER
 #: the exact model: the reference of every model-error estimate (its own model error is taken as 0)
-EXACT = ("nonlinear", None)
+EXACT = LADDER[-1]
 #: a superposition model with the geometric stiffness of its axial forces (those of the previous step:
 #: as close to the exact model as "current" on the cases measured, at a third of its cost)
-GEOMETRIC = ("classic", "lagged")
-#: (model, geometric stiffness) from the cheapest to the exact one, as ``model = "auto"`` tries them
-LADDER = (("hac", "none"), GEOMETRIC, EXACT)
+GEOMETRIC = LADDER[1]
 
 
 def label(model: str, geometric: str | None = None) -> str:

@@ -22,9 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from . import modal, shapes
-from .case import MODELS, SUPERPOSITION_MODELS, Case, study_model
+from .case import Case, study_model
+from .families import MODELS, family
 from .errors import CaseError
 from .sizes import check_count, format_count
+from .fileio import atomic_write, json_default
+from .version import versions
 
 __all__ = ["ModeSet", "Along", "modes", "frequencies_along", "drive_joint", "turn_angle", "configuration_time",
            "cycle_times", "resonance_crossings", "DEFAULT_COUNT"]
@@ -154,8 +157,8 @@ class _Frozen:
         if geometric not in ("none", "current", "lagged", "quasi_static"):
             raise CaseError("--geometric", f"must be none or quasi_static, got {geometric!r}")
         self.case, self.model, self.gravity = case, model, case["loads"]["gravity"]
-        self.geometric = model in SUPERPOSITION_MODELS and geometric != "none"
-        if model in SUPERPOSITION_MODELS:
+        self.geometric = family(model).superposition and geometric != "none"
+        if family(model).superposition:
             from .model import FEModel
 
             self.fe, self.cm = FEModel.from_case(case), None
@@ -163,7 +166,7 @@ class _Frozen:
         else:
             from .coupled import CoupledModel
 
-            self.fe, self.cm = None, CoupledModel.from_case(case, split=(model == "nonlinear"), hold_forced=True)
+            self.fe, self.cm = None, CoupledModel.from_case(case, split=family(model).element_frames, hold_forced=True)
             node_frac = self.cm.mesh.node_frac
         self.bodies = shapes.body_points(case.mechanism, node_frac)
         self.dofs = self.fe.nfree if self.cm is None else self.cm.ndof
@@ -209,7 +212,7 @@ class _Frozen:
 
         cm, n = self.cm, ev.lam.size
         dq = np.zeros((cm.ndof, n))
-        free = modal._free_order(cm)
+        free = modal.free_order(cm)
         dq[free] = ev.x
         eps = 1e-6 * self.case.mechanism.characteristic_length() / max(float(np.max(np.abs(dq))), 1e-300)
         out = []
@@ -226,10 +229,10 @@ def _model_and_geometric(case, model, geometric):
 
 
 def _prepared_case(case, elements_per_link):
-    from .simulate import _with_elements
+    from .simulate import with_elements
 
     case = case if isinstance(case, Case) else Case(case)
-    return _with_elements(case, elements_per_link) if elements_per_link is not None else case
+    return with_elements(case, elements_per_link) if elements_per_link is not None else case
 
 
 # ------------------------------------------------------------------------------ one configuration
@@ -257,11 +260,10 @@ class ModeSet:
         return self.omega / (2.0 * np.pi)
 
     def summary(self) -> dict:
-        from .results import versions
 
         return {"title": self.case["case"]["title"], "model": self.model,
                 "geometric_stiffness": "quasi_static" if self.geometric else "none",
-                "state": STATE[self.model in SUPERPOSITION_MODELS], "t_s": self.t, "crank_joint": self.joint,
+                "state": STATE[family(self.model).superposition], "t_s": self.t, "crank_joint": self.joint,
                 "crank_angle_deg": self.crank_angle,
                 "modes": [{"mode": k + 1, "kind": "rigid" if r else "elastic", "f_hz": float(f),
                            "omega_rad_s": float(w), "rigid_fraction": float(rf)}
@@ -280,7 +282,6 @@ class ModeSet:
 
     def write(self, out_dir) -> list[Path]:
         """modes.csv, mode_shapes.csv and modes.json in out_dir (created)."""
-        from .results import _atomic_write, _json_default
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -289,13 +290,13 @@ class ModeSet:
         rows = [f"{k + 1},{f:.10g},{w:.10g},{'rigid' if r else 'elastic'},{rf:.6g}"
                 for k, (f, w, r, rf) in enumerate(zip(self.hz, self.omega, self.rigid, self.rigid_fraction))]
         paths = [out / "modes.csv", out / "mode_shapes.csv", out / "modes.json"]
-        _atomic_write(paths[0], "\n".join([f"# {h}" for h in head] + ["mode,f_hz,omega_rad_s,kind,rigid_fraction"]
+        atomic_write(paths[0], "\n".join([f"# {h}" for h in head] + ["mode,f_hz,omega_rad_s,kind,rigid_fraction"]
                                           + rows) + "\n")
         shapes.write_shape_csv(paths[1], self.shapes, head + [
             "one block per mode (index = mode - 1, f_hz its frequency): x, y the rigid position [m]; dx, dy, rot "
             "the mass-normalized mode shape (phi^T M phi = 1, M in kg and kg m^2: dx, dy in m/sqrt(kg m^2) = "
             "1/sqrt(kg), rot in rad/sqrt(kg m^2))"], key="f_hz")
-        _atomic_write(paths[2], json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
+        atomic_write(paths[2], json.dumps(self.summary(), indent=2, default=json_default) + "\n")
         return paths
 
 
@@ -378,7 +379,6 @@ class Along:
         return resonance_crossings(self.t, self.x, self.hz, self.speed / (2 * np.pi), self.harmonics(), closed)
 
     def summary(self) -> dict:
-        from .results import versions
 
         return {"title": self.case["case"]["title"], "model": self.model,
                 "geometric_stiffness": "quasi_static" if self.geometric else "none", "positions": int(self.t.size),
@@ -389,7 +389,6 @@ class Along:
 
     def write(self, out_dir) -> list[Path]:
         """frequencies_along.csv and frequencies_along.json in out_dir."""
-        from .results import _atomic_write, _json_default
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -403,8 +402,8 @@ class Along:
                 ",".join(cols)]
         rows = [",".join(f"{v:.10g}" for v in row) for row in np.column_stack(data)]
         paths = [out / "frequencies_along.csv", out / "frequencies_along.json"]
-        _atomic_write(paths[0], "\n".join(head + rows) + "\n")
-        _atomic_write(paths[1], json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
+        atomic_write(paths[0], "\n".join(head + rows) + "\n")
+        atomic_write(paths[1], json.dumps(self.summary(), indent=2, default=json_default) + "\n")
         return paths
 
 

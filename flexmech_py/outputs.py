@@ -126,7 +126,7 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run
     rig_frames (5, nlinks, nf) the kernel rigid samples (for inertia loads); rm the RigidMotion at the
     frames (joint coordinates, reactions, drive forces of the rigid-body solution);
     axial: (nel, nf) element axial forces [N] for ``axial_force`` outputs; rates: (v_all, a_all) the
-    elastic velocities and accelerations (a prismatic joint's elastic slide adds to its rigid one);
+    elastic velocities and accelerations (a guided joint's elastic slide adds to its rigid one);
     reactions: callable(joint) -> (nf, 3) the model's joint reactions (``source = "model"``; without
     it the rigid-body reactions); z_ref (nf, n): the rigid mechanism at the model's coordinates (the
     reference of ``deflection``; None: the rigid-body solution rm, every degree of freedom driven).
@@ -146,14 +146,14 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run
             kap = link_curvature(fe, u_all, motion.phi[:, li], li, sp["at"])
             out[name] = kap * links[li]["half_depth"] if kind == "strain" else kap
         elif kind == "axial_force":
-            out[name] = _axial_output(fe, axial, sp, name)
+            out[name] = axial_output(fe, axial, sp, name)
         elif kind in ("displacement", "deflection", "position"):
             out[name] = _point_output(fe, u_all, motion, sp, name, rm, z_ref)
         elif kind == "inertia_load":
             model = run_model if sp["model"] == "run" else sp["model"]
             if model not in loads:
                 loads[model] = fe.loads(rig_frames, model)
-            out[name] = _load_output(fe, loads[model], sp, name)
+            out[name] = load_output(fe, loads[model], sp, name)
         elif kind == "reaction":
             model_source = sp.get("source", "model") == "model" and reactions is not None
             r = reactions(sp["joint"]) if model_source else rm.reaction(sp["joint"])
@@ -166,7 +166,7 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run
     return out
 
 
-def _axial_output(fe, axial, sp: dict, name: str) -> np.ndarray:
+def axial_output(fe, axial, sp: dict, name: str) -> np.ndarray:
     if axial is None:
         raise CaseError(f"outputs.{name}", "axial forces are not available for this model")
     li = fe.link_names.index(sp["link"])
@@ -176,7 +176,7 @@ def _axial_output(fe, axial, sp: dict, name: str) -> np.ndarray:
 
 
 def _elastic_slide(fe, joint: str, k: int, u_all, rates) -> np.ndarray | float:
-    """A prismatic joint's elastic slide (k = 0), its rate (1) or acceleration (2): the along DOF; 0 for
+    """A guided joint's elastic slide (k = 0), its rate (1) or acceleration (2): the along DOF; 0 for
     other joints."""
     dof = next((sl.dof for sl in getattr(fe, "slides", ()) if sl.joint.name == joint), None)
     if dof is None:
@@ -188,11 +188,11 @@ def _elastic_slide(fe, joint: str, k: int, u_all, rates) -> np.ndarray | float:
 def joint_at_joint(fe, rm, name: str, k: int, u_all, rates=None) -> np.ndarray:
     """A joint's coordinate (k = 0), rate (1) or acceleration (2) measured at the joint (the reference of
     ``deflection``): the rigid-body solution's plus the elastic part there (the relative elastic rotation
-    of the two bodies at a revolute or weld joint, zero where they share it; a prismatic joint's
+    of the two bodies at a revolute or weld joint, zero where they share it; a guided joint's
     elastic slide)."""
     mech = fe.case.mechanism
     j = mech.joint(name)
-    if j.kind == "prismatic":
+    if j.guided:
         return rm.joint(name)[:, k] + _elastic_slide(fe, name, k, u_all, rates)
     x = u_all if k == 0 else (None if rates is None else rates[k - 1])
     ra, rb = (fe.rotation_dof(p) for p in mech.joint_points(j))
@@ -259,7 +259,7 @@ def _point_output(fe, u_all, motion, sp: dict, name: str, rm=None, z_ref=None) -
     return point_components(d, rot, phi, sp["component"])
 
 
-def _load_output(fe, f: np.ndarray, sp: dict, name: str) -> np.ndarray:
+def load_output(fe, f: np.ndarray, sp: dict, name: str) -> np.ndarray:
     comp = sp["component"]
     if comp == "norm":  # forces only: the translational free DOFs [N]
         return np.linalg.norm(f[fe.free_translational()], axis=0)

@@ -51,7 +51,7 @@ from pathlib import Path
 from .errors import CaseError
 from .signals import die_with_parent
 from .worker import call_task, default_jobs, worker_lost, worker_name  # noqa: F401 (re-exported)
-from .results import _atomic_write, _json_default
+from .fileio import atomic_write, json_default
 
 __all__ = ["run_tasks", "Batch", "LocalPool", "open_executor", "using_executor", "default_jobs", "task_key",
            "MAX_WORKER_DEATHS"]
@@ -304,8 +304,8 @@ def run_tasks(func, tasks: list, *, jobs: int | None = None, cache_dir: str | os
             nonlocal done
             results[i], task_s[i], task_worker[i] = res, sec, worker
             if paths[i] is not None and store:
-                _atomic_write(paths[i], json.dumps({"task": tasks[i], "result": res, "seconds": sec, "worker": worker},
-                                                   indent=1, default=_json_default))
+                atomic_write(paths[i], json.dumps({"task": tasks[i], "result": res, "seconds": sec, "worker": worker},
+                                                   indent=1, default=json_default))
             done += 1
             bar.update(done, len(stored))
 

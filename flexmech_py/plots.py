@@ -20,7 +20,7 @@ __all__ = ["plot_result", "line_figure", "have_matplotlib", "plot_stability", "w
 MAX_POINTS = 2000
 #: two curves of a panel closer than this fraction of the panel's peak are drawn as one (and said so)
 COINCIDE = 0.01
-_PNG = {"compress_level": 1}   # zlib level 6 (the default) spends more time than the drawing
+PNG = {"compress_level": 1}   # zlib level 6 (the default) spends more time than the drawing
 
 _warned = False
 
@@ -261,7 +261,7 @@ def line_figure(path, panels, *, title=None, xlabel="t [s]"):
         fig.suptitle(title, fontsize=10.5, x=0.5 * (left + right))
     # fixed margins (tight_layout measures every text and doubles the drawing time)
     fig.subplots_adjust(left=left, right=right, bottom=bottom, top=top, hspace=hspace)
-    save_figure(fig, path, dpi=100, pil_kwargs=_PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=PNG)
     return Path(path)
 
 
@@ -658,5 +658,5 @@ def mechanism_sketch(path, res, *, title=None):
     if title:
         fig.suptitle(title, fontsize=9.5)
     fig.subplots_adjust(left=0.12, right=0.97, bottom=0.6 / fig.get_figheight(), top=1 - 0.55 / fig.get_figheight())
-    save_figure(fig, path, dpi=100, pil_kwargs=_PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=PNG)
     return Path(path)

@@ -12,7 +12,7 @@ bodies it joins:
   of a kinematic one) act on the joint's bodies besides the reactions.
 
 Each joint's unknowns: the force of a revolute joint (x, y) and, when it transmits a moment in the
-elastic problem (``locked``/``clamp``, welds), the moment; a prismatic joint's normal force, its moment
+elastic problem (``locked``/``clamp``, welds), the moment; a guided joint's normal force, its moment
 and, when ``locked``, the force along the guide.  The equations of all the joint nodes and rigid bodies
 are solved per frame by least squares; the solution satisfies them to round-off (the elastic solution
 satisfies its equations of motion), reported as ``equilibrium_residual``.  With very stiff links the
@@ -26,6 +26,7 @@ import weakref
 import numpy as np
 
 from . import kernels
+from .families import family
 
 __all__ = ["ModelReactions", "JointEquations", "joint_equations", "least_squares"]
 
@@ -41,6 +42,7 @@ class ModelReactions:
     def __init__(self, fe, model: str, rm, rig, state, sol: dict, axial=None):
         self.fe, self.model, self.rm, self.rig, self.state = fe, model, rm, rig, state
         self.mech = fe.case.mechanism
+        self.family = family(model)
         self.rayleigh = sol["rayleigh"]
         self.axial = axial if sol.get("geometric_stiffness", "none") != "none" else None
         self._out = None
@@ -84,7 +86,7 @@ class ModelReactions:
         for j, comps, c0 in eq.unknowns:
             r = np.zeros((nf, 3))
             for k, comp in enumerate(comps):
-                f, m = self._unit(j, comp, n)
+                f, m = self._sides(j, comp, n)[0]
                 r[:, :2] += f * x[:, c0 + k, None]
                 r[:, 2] += m * x[:, c0 + k]
             out[j.name] = r
@@ -106,17 +108,25 @@ class ModelReactions:
             pa, pb = eq.points[j.name]
             ka, kb = eq.keys[j.name]
             for k, comp in enumerate(comps):
-                f, m = self._unit(j, comp, n)                      # (n, 2), (n,)
-                for sign, key, ref, at in ((1.0, kb, pb, pb), (-1.0, ka, pa, pb if j.kind == "prismatic" else pa)):
+                for (f, m), key, ref, at in zip(self._sides(j, comp, n), (kb, ka), (pb, pa), (pb, pb if j.guided else pa)):
                     if key is None:
                         continue
                     r0 = eq.eqs[key]
-                    a[:, r0:r0 + 2, c0 + k] += sign * f
-                    a[:, r0 + 2, c0 + k] += sign * (m + self._moment_arm(key, at, ref, j, f))
+                    a[:, r0:r0 + 2, c0 + k] += f
+                    a[:, r0 + 2, c0 + k] += m + self._moment_arm(key, at, ref, j, f)
         return a
 
+    def _sides(self, j, comp: str, n: int) -> list:
+        """[(force (n, 2), moment (n,)) on body b, the same on body a] of a unit value of a joint's unknown:
+        equal and opposite, or a kind's own units (Joint.reaction_units: a gear pair's tooth force)."""
+        if comp == "own":
+            pa, pb = self.mech.joint_points(j)
+            return list(j.reaction_units(self.rm.point_positions(pa), self.rm.point_positions(pb)))
+        f, m = self._unit(j, comp, n)                      # (n, 2), (n,)
+        return [(f, m), (-f, -m)]
+
     def _guide(self, j) -> tuple[np.ndarray, np.ndarray]:
-        """(t, n) (N, 2) of a prismatic joint's guide in the rigid motion."""
+        """(t, n) (N, 2) of a guided joint's guide in the rigid motion."""
         sl = next(s for s in self.fe.slides if s.joint is j)
         a, _ = self.mech.joint_points(j)
         if a.body is None:
@@ -142,7 +152,7 @@ class ModelReactions:
         return s[:, 0] * f[:, 1] - s[:, 1] * f[:, 0]
 
     def _point_offset(self, part_name: str, at, j=None) -> np.ndarray:
-        """(N, 2) from a rigid part's centre of mass to a point: a point of the part, or (a prismatic joint's
+        """(N, 2) from a rigid part's centre of mass to a point: a point of the part, or (a guided joint's
         guide body) the contact point, where the slider point b is."""
         mech, part = self.mech, self.fe.parts[part_name]
         i = 3 * mech.body_index(part.body)
@@ -160,7 +170,7 @@ class ModelReactions:
             f = self.rm.drive_force(d.joint)
             pa, pb = eq.points[j.name]
             ka, kb = eq.keys[j.name]
-            if j.kind == "prismatic":
+            if j.guided:
                 t, _ = self._guide(j)
                 for sign, ref, key in ((1.0, pb, kb), (-1.0, pa, ka)):
                     if key is None:
@@ -189,7 +199,7 @@ class ModelReactions:
             a_c = self.rig[3:5, p.col] + (_accel_along(self.rig[:, p.col], p.zeta) if p.zeta else 0.0)
             out[:2] = p.mass * (acc[dofs[:2]] + ray_m * v[dofs[:2]] + a_c)
             out[2] = p.inertia * (acc[dofs[2]] + ray_m * v[dofs[2]])
-            if self.model != "classic-translational":
+            if self.family.rotary_loads:
                 out[2] += p.inertia * self.rig[2, p.col]
             return out
         _, node, li = key
@@ -203,7 +213,7 @@ class ModelReactions:
         for i in inertias:
             jr = fe.ri_prop[i]
             out[2] += jr * (acc[rot] + ray_m * v[rot])
-            if self.model != "classic-translational":
+            if self.family.rotary_loads:
                 out[2] += jr * self.rig[2, li]
         return out
 
@@ -229,10 +239,10 @@ class ModelReactions:
         ap = (cs * ax + sn * ay, -sn * ax + cs * ay)
         z2 = z1 + L
         w = [ap[0] - om2 * z1, ap[1] + al * z1, ap[0] - om2 * z2, ap[1] + al * z2]
-        if self.model == "hac":
+        if self.family.load_mass == "translational":
             r += m0 @ np.stack(w, axis=1)
         else:
-            rot = al if self.model == "classic" else 0.0 * al
+            rot = al if self.family.rotary_loads else 0.0 * al
             r += m @ np.stack([w[0], w[1], rot, w[2], w[3], rot], axis=1)
         return _to_global(r.transpose(1, 0, 2), phi).transpose(1, 0, 2)
 
@@ -259,9 +269,9 @@ class JointEquations:
             self.unknowns.append((j, comps, nu))
             nu += len(comps)
         self.rows, self.nu = 3 * len(self.eqs), nu
-        #: the matrix is the same in every frame: no rigid part (its moment arms turn) and no prismatic
-        #: joint (its guide turns)
-        self.constant = not any(k[0] == "part" for k in self.eqs) and all(j.kind != "prismatic" for j in mech.joints)
+        #: the matrix is the same in every frame: no rigid part (its moment arms turn), no guided joint
+        #: (its guide turns) and no kind with its own units (they follow the points)
+        self.constant = not any(k[0] == "part" for k in self.eqs) and all(j.shares_point for j in mech.joints)
         self.items, elements = {}, []
         for key in self.eqs:
             if key[0] == "node":
@@ -318,10 +328,12 @@ def joint_equations(fe) -> JointEquations:
 
 def _components(j, cond: str) -> list[str]:
     """A joint's unknown components (docs/theory.md §18.5) given its condition in the elastic problem."""
-    if j.kind == "weld":
+    if not j.shares_point and not j.guided:         # a kind's own row (Joint.reaction_units)
+        return ["own"]
+    if j.shares_point and j.ties_rotation:
         return ["x", "y", "m"]
-    if j.kind == "prismatic":
-        return ["n", "m"] + (["t"] if cond == "locked" else [])
+    if j.guided:
+        return ["n"] + (["m"] if j.ties_rotation else []) + (["t"] if cond == "locked" else [])
     return ["x", "y"] + (["m"] if cond in ("locked", "clamp") else [])
 
 

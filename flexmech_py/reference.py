@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .families import family
+
 OMEGA = np.array([[0.0, -1.0], [1.0, 0.0]])
 
 
@@ -79,12 +81,12 @@ def system(fe, rig, model, rayleigh=(0.0, 0.0)):
         ap = t[0:2, 0:2] @ np.array([ax, ay])
         a1 = [ap[0] - om**2 * z0, ap[1] + al * z0]
         a2 = [ap[0] - om**2 * (z0 + L), ap[1] + al * (z0 + L)]
-        if model == "hac":
+        fam = family(model)
+        if fam.load_mass == "translational":
             fl = m0 @ np.array([a1[0], a1[1], a2[0], a2[1]])
-        elif model == "classic":
-            fl = m @ np.array([a1[0], a1[1], al, a2[0], a2[1], al])
         else:
-            fl = m @ np.array([a1[0], a1[1], 0.0, a2[0], a2[1], 0.0])
+            rot = al if fam.rotary_loads else 0.0
+            fl = m @ np.array([a1[0], a1[1], rot, a2[0], a2[1], rot])
         F[dofs] += t.T @ fl
     for i in range(fe.lm_link.size):
         j = fe.lm_link[i] - 1
@@ -100,7 +102,7 @@ def system(fe, rig, model, rayleigh=(0.0, 0.0)):
         d = fe.ri_dof[i] - 1
         M[d, d] += fe.ri_prop[i]
         C[d, d] += rayleigh[0] * fe.ri_prop[i]
-        if model != "classic-translational":
+        if family(model).rotary_loads:
             F[d] += fe.ri_prop[i] * rig[2, fe.ri_link[i] - 1]
     return M, C, K, F
 

@@ -23,6 +23,8 @@ import math
 
 import numpy as np
 
+from .fileio import atomic_write
+
 __all__ = ["multiplier_type", "TYPE_TEXT", "PEAK_PROMINENCE", "REAL_TOLERANCE", "default_resolution",
            "refinement_speeds", "unstable_regions", "describe_region", "write_regions_csv"]
 
@@ -161,7 +163,6 @@ def describe_region(region: dict, digits: int = 1) -> str:
 
 def write_regions_csv(regions: list, path, header: str = "") -> None:
     """stability_regions.csv: one row per part of every unstable region."""
-    from .results import _atomic_write
 
     names = ["region", "speed_from", "speed_to", "stable_below", "stable_above", "multiplier", "angle_min_deg",
              "angle_max_deg", "max_abs_mu", "at_speed", "growth_rate"]
@@ -174,4 +175,4 @@ def write_regions_csv(regions: list, path, header: str = "") -> None:
             cells = [k, p["from"], p["to"], reg["below"], reg["above"], p["type"], ang[0], ang[1], p["max_abs_mu"],
                      p["at"], p["growth_rate"]]
             lines.append(",".join("" if c is None else (f"{c:.10g}" if isinstance(c, float) else str(c)) for c in cells))
-    _atomic_write(path, "\n".join(lines) + "\n")
+    atomic_write(path, "\n".join(lines) + "\n")

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from .bundled import cases_dir as cases_dir_bundled
-from .case import MODELS, SUPERPOSITION_MODELS, load_case
+from .case import load_case
+from .families import FAMILIES, MODELS, SUPERPOSITION_MODELS
 from .errors import CaseError
 from .notices import silenced
 from .inputs import checked_file, checked_folder
@@ -24,6 +25,8 @@ from .materials import MATERIALS
 from .outdir import ResultFolder
 from .plots import line_figure, mechanism_sketch
 from .reproduce_modes import modes_section
+from .seed_cases import SEED_CASES, load_vector_difference, model_differences
+from .seed_report import report_text
 from .simulate import simulate_models
 
 __all__ = ["reproduce", "seed_case_path", "model_differences"]
@@ -31,9 +34,7 @@ __all__ = ["reproduce", "seed_case_path", "model_differences"]
 STYLE = {"hac": {"color": "C0", "lw": 2.2}, "classic": {"color": "C3", "lw": 1.1, "ls": "--"},
          "classic-translational": {"color": "C2", "lw": 1.1, "ls": ":"}, "coupled": {"color": "k", "lw": 1.1, "ls": "--"},
          "rigid": {"color": "0.55", "lw": 1.0, "ls": "--"}, "nonlinear": {"color": "C1", "lw": 2.4, "alpha": 0.8}}
-LABEL = {"hac": "case I (hac, Eq. 15)", "classic": "case II (classic, Eq. 14)",
-         "classic-translational": "Eq. 14 translational (classic-translational)", "coupled": "coupled (one-pass, Sec. 3)",
-         "rigid": "rigid-body solution", "nonlinear": "nonlinear (co-rotational)"}
+LABEL = {**{name: f.label for name, f in FAMILIES.items()}, "rigid": "rigid-body solution"}
 #: drawing order: a thin dashed curve over a wide solid one it may coincide with (coupled over nonlinear)
 ORDER = ("hac", "classic", "classic-translational", "nonlinear", "coupled")
 NEEDED = {"fourbar_hac": ("crank_angle", "crank_speed", "strain_coupler_mid", "strain_follower_mid",
@@ -42,7 +43,6 @@ NEEDED = {"fourbar_hac": ("crank_angle", "crank_speed", "strain_coupler_mid", "s
           "manipulator_bricout": ("tip_dx_elastic", "tip_dy_elastic", "tip_dx_deflection", "tip_dy_deflection",
                                   "tip_transverse_deflection", "alpha", "beta"),
           "manipulator_bricout_no_payload": ("tip_dx_deflection", "tip_dy_deflection", "tip_transverse_deflection")}
-SEED_CASES = ("fourbar_hac", "fourbar_constant_speed", "manipulator_bricout", "manipulator_bricout_no_payload")
 #: (yield strength, Young's modulus) [Pa] of the two structural aluminium alloys the seed's links could be,
 #: from the materials table (flexmech_py.materials; sources in docs/cases.md): the seed gives E = 71 GPa
 #: and no alloy
@@ -53,31 +53,6 @@ ALLOYS = {name: (MATERIALS[name]["yield_strength"], MATERIALS[name]["youngs_modu
 def seed_case_path(name: str, cases_dir=None) -> Path:
     """Path of a seed case file: ``NAME.toml`` in ``cases_dir``, else the bundled one (bundled.cases_dir)."""
     return Path(cases_dir) / f"{name}.toml" if cases_dir is not None else cases_dir_bundled() / f"{name}.toml"
-
-
-def _rel_peak(a: np.ndarray, b: np.ndarray) -> float:
-    """max |a - b| / max |b|."""
-    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
-
-
-def model_differences(results: dict, columns, ref: str = "classic") -> dict:
-    """{model: {column: max|model - ref| / max|ref|}} over the given columns."""
-    return {m: {c: _rel_peak(r.columns[c], results[ref].columns[c]) for c in columns}
-            for m, r in results.items() if m != ref}
-
-
-def load_vector_difference(results: dict, a: str, b: str) -> dict:
-    """Difference of the rigid-inertia force vectors of models a and b (free translational DOFs), along the run."""
-    r = results[a]
-    free = r.fe.free_translational()
-    fa = r.fe.loads(r.rig, a)[free]
-    fb = r.fe.loads(r.rig, b)[free]
-    nb = np.linalg.norm(fb, axis=0)
-    d = np.linalg.norm(fb - fa, axis=0)
-    return {"max_norm_diff_over_max_norm": float(d.max() / nb.max()),
-            "max_componentwise_diff_over_max_component": float(np.max(np.abs(fb - fa)) / np.max(np.abs(fb))),
-            "rms_norm_diff_over_rms_norm": float(np.sqrt(np.mean(d ** 2) / np.mean(nb ** 2))),
-            "diff_norm": d, "norm_b": nb}
 
 
 def _fig(out, name, panels, title, xlabel):
@@ -114,7 +89,6 @@ def reproduce(out_dir="reproduce", cases_dir=None, progress=None, models=MODELS,
 
 def _reproduce_into(out: Path, cases_dir, progress, models, t_end, gap) -> Path:
     """What :func:`reproduce` writes, into ``out``."""
-    from .seed_report import report_text
 
     say = progress or (lambda msg: None)
     runs, timings = {}, {}

@@ -17,24 +17,16 @@ from __future__ import annotations
 
 import json
 import os
-import platform
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from .budget_text import budget_lines, choice_lines
+from .fileio import atomic_write, json_default
+from .version import versions
 
 __all__ = ["Result", "TimeseriesWriter", "read_timeseries", "versions"]
-
-
-def versions() -> dict:
-    import scipy
-
-    from . import __version__
-
-    return {"flexmech": __version__, "python": platform.python_version(), "numpy": np.__version__,
-            "scipy": scipy.__version__, "platform": platform.platform()}
 
 
 @dataclass
@@ -245,12 +237,12 @@ class Result:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         csv = out / "timeseries.csv"
-        _atomic_write(csv, "\n".join(self.csv_head()) + "\n" + csv_rows(self.t, self.columns))
+        atomic_write(csv, "\n".join(self.csv_head()) + "\n" + csv_rows(self.t, self.columns))
         return [csv, self.write_summary(out)]
 
     def write_summary(self, out_dir) -> Path:
         js = Path(out_dir) / "summary.json"
-        _atomic_write(js, json.dumps(self.summary(), indent=2, default=_json_default) + "\n")
+        atomic_write(js, json.dumps(self.summary(), indent=2, default=json_default) + "\n")
         return js
 
 
@@ -336,28 +328,6 @@ def _opened(path: Path, mode: str, **kw):
         return open(path, mode, **kw)
     except OSError as exc:
         raise OSError(exc.errno, exc.strerror, str(path)) from None
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o))
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` whole or not at all (a temporary file renamed); an OSError names ``path``."""
-    path = Path(path)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except BaseException as exc:
-        tmp.unlink(missing_ok=True)
-        if isinstance(exc, OSError):
-            raise OSError(exc.errno, exc.strerror, str(path)) from None
-        raise
 
 
 def read_timeseries(path) -> tuple[dict, dict]:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from . import alternation, auto_model, guards
 from .budget import TOLERANCE, ErrorBudget, parts_of
-from .case import MODEL_CHOICES
+from .families import AUTO, MODEL_CHOICES
 from .errors import CaseError, Interrupted, MechanismError, OutputError, SolverError, signal_words
 from .frames import ColumnStats, Envelope, join
 from .outdir import PARTIAL_DIR, ResultFolder, claim, release_reserve
@@ -187,7 +187,7 @@ def execute(prep, model: str | None, sink, *, geometric=None, estimate=None, dia
         raise CaseError("model", f"must be one of {', '.join(MODEL_CHOICES)}, got {model!r}")
     parts = estimate_parts(prep, estimate)
     tolerance = prep.case["solver"].get("tolerance", TOLERANCE)
-    choice = auto_model.choose(prep, tolerance) if model == "auto" else None
+    choice = auto_model.choose(prep, tolerance) if model == AUTO else None
     if choice is not None:
         model, geometric = choice.model, choice.geometric
     validity = guards.ValidityTracker()
@@ -239,10 +239,10 @@ def _finish(prep, model, geometric, res, sink, stop, checks, budget, diagnose, t
     res.timing["total_s"] = prep.t_prepare + time.perf_counter() - t_start
     for check in checks:      # validity, then the period-2 dt alternation
         check.finish(res)
-    prep._report_mechanism(res)
+    prep.report_mechanism(res)
     if isinstance(stop, SolverError):
         stop.partial = res
-        err = guards.failed(prep, model, geometric, stop, diagnose=diagnose)
+        err = guards.failed(prep, model, geometric, stop, diagnose=diagnose, rerun=prep.rerun)
         sink.close(res)
         raise err
     if isinstance(stop, KeyboardInterrupt):

@@ -35,6 +35,8 @@ from .errors import CaseError
 from .names import safe_name
 from .outdir import ResultFolder
 from .sizes import check_points
+from .fileio import atomic_write, csv_cell, json_default
+from .version import versions
 
 __all__ = ["Distribution", "parse_sample", "unit_points", "draw", "statistics", "correlations", "sample_study",
            "METHODS", "PERCENTILES"]
@@ -166,11 +168,8 @@ def correlations(inputs: dict, outputs: dict) -> list[dict]:
 
 
 def _write_rows(path: Path, rows: list[dict], names: list[str], header: str) -> Path:
-    from .results import _atomic_write
-    from .sweep import _cell
-
-    _atomic_write(path, "\n".join([f"# {header}", ",".join(names)]
-                                  + [",".join(_cell(r.get(n, "")) for n in names) for r in rows]) + "\n")
+    atomic_write(path, "\n".join([f"# {header}", ",".join(names)]
+                                  + [",".join(csv_cell(r.get(n, "")) for n in names) for r in rows]) + "\n")
     return path
 
 
@@ -214,7 +213,6 @@ def _write_study(out: Path, path: Path, base: dict, dists, rows, batch, notes, p
     """samples.csv, statistics.csv, correlations.csv, samples.json and samples.png of a finished study;
     {"paths", "statistics", "correlations", "key_outputs"}."""
     from .case import validate_case
-    from .results import _atomic_write, _json_default, versions
     from .sweep import write_table
 
     n, method, seed = settings["samples"], settings["method"], settings["seed"]
@@ -237,7 +235,7 @@ def _write_study(out: Path, path: Path, base: dict, dists, rows, batch, notes, p
             "retries": batch.retries, "failed": batch.failed, "wall_s": batch.wall_s, "warnings": notes,
             "versions": versions()}
     paths.append(out / "samples.json")
-    _atomic_write(paths[-1], json.dumps(info, indent=2, default=_json_default) + "\n")
+    atomic_write(paths[-1], json.dumps(info, indent=2, default=json_default) + "\n")
     if plots and ok:
         from .plots import plot_samples
 

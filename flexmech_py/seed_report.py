@@ -11,7 +11,7 @@ import numpy as np
 
 from .budget_text import quote
 from .guards import link_strains
-from .reproduce import ALLOYS, SEED_CASES, load_vector_difference, model_differences
+from .seed_cases import ALLOYS, SEED_CASES, load_vector_difference, model_differences
 
 __all__ = ["report_text", "first_time", "when", "torque_work", "discretization_error"]
 
@@ -337,7 +337,7 @@ def _manipulator(runs: dict, models, figs) -> list[str]:
                      + " | ".join(f"{1e3 * np.max(np.abs(rr[m].columns[c])):.4g}" for m in models) + " |")
         d = model_differences(rr, ["tip_dy_deflection"])
         L.append(f"| {name} | max abs difference / peak of tip_dy_deflection vs classic | "
-                 + " | ".join("-" if m == "classic" else _pct(d[m]["tip_dy_deflection"]) for m in models) + " |")
+                 + " | ".join(_pct(d[m]["tip_dy_deflection"]) if m in d else "-" for m in models) + " |")
     d = model_differences(man, ["tip_dy_deflection"])
     L += ["", f"Final joint angles (rigid): alpha = {man['hac'].columns['alpha'][-1]:.4g} rad, "
               f"beta = {man['hac'].columns['beta'][-1]:.4g} rad at t = {man['hac'].t[-1]:.3g} s (with payload).", "",

@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FlexmechError
+from .families import family
+from .fileio import atomic_write
 
 __all__ = ["Body", "ShapeFrames", "body_points", "rigid_positions", "superposition_displacements",
            "coupled_displacements", "node_curvatures", "write_shape_csv", "read_shape_csv", "ShapeCollector",
@@ -215,7 +217,6 @@ def write_shape_csv(path, sf: ShapeFrames, head: list[str], key: str = "t") -> P
     """Write ShapeFrames as CSV: ``#`` comment lines ``head``, a header
     ``index,<key>,body,kind,point,x,y,dx,dy,rot[,kappa]`` and one row per instant and point
     (atomically); ``kappa`` when sf has curvatures, empty at the points of rigid parts."""
-    from .results import _atomic_write
 
     with_k = sf.kappa is not None
     lines = [f"# {h}" for h in head] + [f"index,{key},{SHAPE_COLUMNS}" + (f",{KAPPA_COLUMN}" if with_k else "")]
@@ -228,7 +229,7 @@ def write_shape_csv(path, sf: ShapeFrames, head: list[str], key: str = "t") -> P
                 if with_k:
                     row += "," if np.isnan(sf.kappa[i, p]) else f",{sf.kappa[i, p]:.6e}"
                 lines.append(row)
-    _atomic_write(Path(path), "\n".join(lines) + "\n")
+    atomic_write(Path(path), "\n".join(lines) + "\n")
     return Path(path)
 
 
@@ -299,7 +300,7 @@ class ShapeCollector:
 
     def _points(self, block, idx: np.ndarray) -> ShapeFrames:
         rm = block.rigid.select(idx)
-        if block.model in ("coupled", "nonlinear"):      # the block's own: "auto" chooses the model in the run
+        if family(block.model).constrained:      # the block's own: "auto" chooses the model in the run
             cm = self.coupled[block.model]
             bodies = body_points(self.mech, cm.mesh.node_frac)
             d, rot = coupled_displacements(cm, bodies, block.u[:, idx], block.state[:, idx], rm)

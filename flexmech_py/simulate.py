@@ -9,7 +9,8 @@ import time
 
 import numpy as np
 
-from .case import MODELS, SUPERPOSITION_MODELS, Case, integrator_coefficients, integrator_of
+from .case import Case, integrator_coefficients, integrator_of
+from .families import AUTO, MODELS, SUPERPOSITION_MODELS, family
 from .errors import CaseError, MechanismError, SolverError
 from . import guards, notices, step_doubling
 from . import coupled_outputs as cpl_out
@@ -59,7 +60,7 @@ def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion, rig: np.ndarr
     q_val) or (None, None); ``rig`` the samples of rm (fe.rig_samples) when the model has slave relations.
 
     A torque on a revolute joint acts on the elastic rotation of its body b at the joint, its reaction
-    on body a's; a force on a prismatic joint acts on the joint's along DOF (the elastic slide: the
+    on body a's; a force on a guided joint acts on the joint's along DOF (the elastic slide: the
     force on b and its reaction on a at the contact point do the work F ds).  Assembled over all DOFs
     (constrained ones included), projected onto the masters of slaved DOFs and restricted to the free
     DOFs; rows that vanish identically (torques on clamped DOFs, or action and reaction on one locked
@@ -119,7 +120,7 @@ def check_elastic_problem(fe: FEModel, rig0: np.ndarray, dof: int | None = None)
         raise CaseError("links", "the mass matrix is not positive definite: every link needs density > 0 and area > 0") from None
     scale = np.max(np.abs(ev))
     nzero = int(np.sum(np.abs(ev) < 1e-13 * scale))
-    # a joint left free with 'torque' (a prismatic one with 'force') turns the mechanism's own degree of
+    # a joint left free with 'torque' (a guided one with 'force') turns the mechanism's own degree of
     # freedom into a zero-stiffness mode of the elastic problem, on purpose (theory.md section 14)
     mech = fe.case.mechanism
     released = sum(1 for j in mech.joints if mech.condition(j) in ("torque", "force"))
@@ -158,7 +159,7 @@ class Prepared:
         t_start = time.perf_counter()
         case = case if isinstance(case, Case) else Case(case)   # a resolved case that travelled as a plain dict
         if elements_per_link is not None:
-            case = _with_elements(case, elements_per_link)
+            case = with_elements(case, elements_per_link)
         self.case = case
         self.nsteps, self.dt, self.out_every = time_grid(case, dt, out_every)
         self._t = None
@@ -169,7 +170,7 @@ class Prepared:
         self.source = motion_source(case)
         self.setup = self.source.setup
         self.gravity = case["loads"]["gravity"]
-        self._checked = False
+        self.elastic_checked = False
         self._full = None
         self._rm = None
         self._rm_frames = None
@@ -316,6 +317,13 @@ class Prepared:
             tap.closed = True
         self.taps = []
 
+    def rerun(self, case: dict, dt: float, out_every: int, model: str, geometric: str | None = None):
+        """(its step, its blocks): ``model`` run on another ``case`` (the same mechanism) or step, as
+        the checks ask for evidence (guards: the failure again at dt/2); the run hands the checks this
+        function so that they never build a run themselves."""
+        other = Prepared(case, dt=dt, out_every=out_every)
+        return other.dt, other.blocks(model, geometric)
+
     # ------------------------------------------------------------------ runs
     def run(self, model: str | None = None, geometric: str | None = None, *, estimate: bool | None = None,
             diagnose: bool = True, u0=None, v0=None) -> Result:
@@ -362,12 +370,12 @@ class Prepared:
         (maybe none) and ``data`` the state; a rigid motion that stops raises MechanismError after the
         block that ends at the last output frame before the singular position."""
         model = self.case["solver"]["model"] if model is None else model
-        if model == "auto":
+        if model == AUTO:
             raise CaseError("model", "'auto' is chosen by a run (Prepared.run, Prepared.stream: flexmech_py.auto_model); "
                                      "name one of " + ", ".join(MODELS) + " for the blocks of a run")
         if model not in MODELS:
             raise CaseError("model", f"must be one of {', '.join(MODELS)}, got {model!r}")
-        if model in ("coupled", "nonlinear"):
+        if family(model).constrained:
             if u0 is not None or v0 is not None:
                 raise CaseError("model", f"an initial elastic state needs a superposition model, not {model!r}")
             return self._coupled_blocks(model)
@@ -470,9 +478,9 @@ class Prepared:
             i0, i1, rm = chunk
             ts, cs = time.perf_counter(), time.thread_time()
             rig, q_free, q_val = self._loads(i0, i1, rm)
-            if not self._checked:
+            if not self.elastic_checked:
                 check_elastic_problem(fe, rig[:, :, :1], self.setup.dof)
-                self._checked = True
+                self.elastic_checked = True
             acc.add_time("samples", ts, cs)
             t0, c0 = time.perf_counter(), time.thread_time()
             try:
@@ -541,8 +549,8 @@ class Prepared:
         model (one per element); the rigid-body solution on the grid is their reference."""
         case, sol, oe = self.case, self.case["solver"], self.out_every
         if model not in self.coupled:
-            check_mesh(case, model)      # the model's own arrays (sizes.MODEL_ELEMENT_BYTES, DOF2_BYTES)
-            self.coupled[model] = CoupledModel.from_case(case, split=(model == "nonlinear"))
+            check_mesh(case, model)      # the model's own arrays (Family.element_bytes, dof2_bytes)
+            self.coupled[model] = CoupledModel.from_case(case, split=family(model).element_frames)
         cm = self.coupled[model]
         integ = integrator_of(sol, model)
         am, af_, beta, gamma = integrator_coefficients(integ["integrator"], integ)
@@ -598,7 +606,7 @@ class Prepared:
         axial = cpl_out.axial_forces(cm, qf)
         z_ref = acc.deflection(rmf.t, lambda p: cpl_out.joint_at_joint(cm, fr, rmf, p)[0])
         columns = cpl_out.evaluate(cm, case["outputs"], fr, rmf, ref, u_dev, axial, superposition_fe=lambda: self.fe,
-                                   z_ref=z_ref)
+                                   z_ref=z_ref, run_loads=family(model).inertia_loads)
         units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
         for k, y in {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}.items():
             columns[k], units[k] = y, "J"
@@ -623,7 +631,7 @@ class Prepared:
                      reactions=cpl_out.FrameReactions(cm, fr))
         return _after(res, prev)
 
-    def _report_mechanism(self, res: Result) -> None:
+    def report_mechanism(self, res: Result) -> None:
         """summary.json's ``mechanism`` entry (degrees of freedom, mode, the joints of q, how far the
         assembly moved the drawn points) and the mechanism's own warnings beside the validity ones."""
         st = self.setup
@@ -692,7 +700,7 @@ def _coupled_curvature(cm, res: Result, li: int, frac: float) -> np.ndarray:
 
 def _drive_column_joints(cm) -> dict:
     """{column: joint} of the kinematic drives' extra columns: ``drive_torque`` (``drive_force`` on a
-    prismatic joint) for a single drive, ``drive_torque_<joint>`` for several; a name the case's
+    guided joint) for a single drive, ``drive_torque_<joint>`` for several; a name the case's
     outputs already use is left to them."""
     kin = [d for d in cm.case.mechanism.drives if d.kinematic]
     out = {}
@@ -705,7 +713,7 @@ def _drive_column_joints(cm) -> dict:
 
 
 def _drive_columns(cm, fr, units: dict) -> dict:
-    """The kinematic drives' torque (force on a prismatic joint) from the model's multipliers, as extra
+    """The kinematic drives' torque (force on a guided joint) from the model's multipliers, as extra
     columns (names: :func:`_drive_column_joints`)."""
     out = {}
     for name, joint in _drive_column_joints(cm).items():
@@ -754,7 +762,7 @@ def simulate_models(case: dict, models=SUPERPOSITION_MODELS, **kw) -> dict:
     return {m: prep.run(m) for m in models}
 
 
-def _with_elements(case: dict, n: int) -> dict:
+def with_elements(case: dict, n: int) -> dict:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise CaseError("elements_per_link", f"must be a whole number >= 1, got {n!r}")
     links = sum(1 for ln in case["links"] if not ln.get("rigid"))

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 from .errors import CaseError
+from .families import MODELS, family
 
 __all__ = ["available_memory", "format_bytes", "format_count", "memory_budget", "check_count", "check_mesh",
            "check_elements", "check_points", "check_steps", "mesh_bytes", "MEMORY_SHARE", "MAX_STEPS"]
@@ -26,14 +27,6 @@ MAX_STEPS = 2 ** 40
 #: memory of the superposition models per element [bytes] (FE arrays, band, frame blocks; measured
 #: 1.4 kB per DOF at 6 000-24 000 elements, three DOFs an element)
 ELEMENT_BYTES = 4_500
-#: memory of the nonlinear model per element [bytes]: linear in the mesh (its Newton step keeps the
-#: constraint gradients on their patterns and the bordered saddle band; measured peak resident
-#: memory above the interpreter's 7.7-8.7 kB per element at 3 000-6 000 elements on the seed
-#: four-bar and both six-bars, 3-5 steps; about a factor of two kept as margin)
-MODEL_ELEMENT_BYTES = {"nonlinear": 16_000}
-#: the coupled model's set-up and run hold arrays of ndof^2 entries (its condensed solve's columns
-#: per constraint row; measured 17-31 B per ndof^2 at 9 000-72 000 DOFs)
-DOF2_BYTES = {"coupled": 32}
 
 
 def available_memory() -> int | None:
@@ -101,10 +94,23 @@ def _elements(case) -> int:
     return sum(int(ln.get("elements", 0)) for ln in case["links"] if not ln.get("rigid"))
 
 
+def _dof2_bytes(model: str | None) -> int:
+    """A family's set-up and run memory per squared DOF count (Family.dof2_bytes; measured: coupled
+    17-31 B per ndof^2 at 9 000-72 000 DOFs), 0 for none or an unknown name."""
+    return family(model).dof2_bytes if model in MODELS else 0
+
+
+def _element_bytes(model: str | None) -> int:
+    """A family's memory per element (Family.element_bytes; measured: nonlinear 7.7-8.7 kB per element
+    at 3 000-6 000 elements, linear in the mesh), else ELEMENT_BYTES (the superposition models)."""
+    own = family(model).element_bytes if model in MODELS else 0
+    return own or ELEMENT_BYTES
+
+
 def mesh_bytes(elements: int, model: str | None = None) -> float:
     """Estimated memory [bytes] of a mesh of ``elements`` elements in ``model`` (None: the cheapest)."""
     ndof = 3.0 * elements
-    return MODEL_ELEMENT_BYTES.get(model, ELEMENT_BYTES) * float(elements) + DOF2_BYTES.get(model, 0) * ndof * ndof
+    return _element_bytes(model) * float(elements) + _dof2_bytes(model) * ndof * ndof
 
 
 def check_mesh(case, model: str | None = None, field: str = "mesh.elements_per_link") -> None:
@@ -123,7 +129,7 @@ def check_elements(n: int, links: int, model: str | None = None, field: str = "m
     per_link = 1
     while mesh_bytes(2 * per_link * links, model) <= budget:
         per_link *= 2
-    kind = f"the {model} model of " if model in DOF2_BYTES or model in MODEL_ELEMENT_BYTES else ""
+    kind = f"the {model} model of " if _dof2_bytes(model) or model in MODELS and family(model).element_bytes else ""
     example = f"{field} {per_link}" if field.startswith("--") else f"--set {field}={per_link}"
     raise CaseError(field, f"{kind}a mesh of {format_count(n)} elements takes about {format_bytes(need)} of memory and "
                            f"{format_bytes(budget / MEMORY_SHARE)} is available: use at most about "

@@ -1,4 +1,4 @@
-"""Rigid bodies, rigid links and prismatic joints in the superposition models (docs/theory.md §18).
+"""Rigid bodies, rigid links and guided joints in the superposition models (docs/theory.md §18).
 
 Elastic DOFs beyond the flexible links' nodes (flexmech_py/model.py):
 
@@ -6,23 +6,23 @@ Elastic DOFs beyond the flexible links' nodes (flexmech_py/model.py):
   DOFs (dx, dy, dtheta) at its centre of mass (global components): mass diag(m, m, J_C), rigid-inertia
   load m (a_C - g) and J_C alpha (a point mass and a rotary inertia on the body's own rigid-sample
   column), no stiffness;
-- every prismatic joint has an *along* DOF s: the elastic slide of the slider point relative to the
+- every guided joint has an *along* DOF s: the elastic slide of the slider point relative to the
   guide (fixed when the joint's elastic condition is ``locked``).
 
 Joints that DOF sharing cannot express (everything that touches a rigid body, a rigid link or a
-prismatic joint) are linear relations between DOFs with time-varying coefficients, C(t) u = 0, one row
+guided joint) are linear relations between DOFs with time-varying coefficients, C(t) u = 0, one row
 per constrained component:
 
 - revolute / weld at a point P: u_P(b) - u_P(a) = 0 (x, y), and theta(b) - theta(a) = 0 for a weld or
   a ``locked``/``clamp`` revolute; a point of a rigid body moves by u_P = d + dtheta z x s_P(t),
   s_P = R(phi(t)) s_P0 from the centre of mass, a flexible link's point is its mesh node;
-- prismatic (guide fixed to body a, the ground or a rigid body; slider point b):
+- guided (guide fixed to body a, the ground or a rigid body; slider point b):
   n(t).(u_b - u_a(C)) = 0, t(t).(u_b - u_a(C)) - s = 0, theta(b) - theta(a) = 0, with u_a(C) the
   motion of the guide body's material point at the contact C (it moves along the guide with the
   slide d(t)), t, n the guide's direction and normal turning with body a.
 
 One DOF per row is chosen once as its *slave* (preferably a translation of body b, then of body a;
-prismatic rows first, so that a slider's translation is expressed as s t + (n.u_a(C)) n and the 2 x 2
+guided rows first, so that a slider's translation is expressed as s t + (n.u_a(C)) n and the 2 x 2
 block [n; t] can never become singular).  Per time sample u_slaves = T(t) u_masters with
 T = -C_s^-1 C_m and its derivatives from C' T + C T' = 0, C'' T + 2 C' T' + C T'' = 0; the
 coefficients are computed here from the rigid samples (vectorised over a chunk) and passed to the
@@ -31,7 +31,7 @@ T^T (M T'' + C T' + K T) w = T^T (Q - F)).
 
 The rigid samples of the kernels gain columns (:meth:`flexmech_py.model.FEModel.rig_samples`): after
 the links, one per rigid body [phi, omega, alpha, a_C - g] (its frame at the centre of mass) and one
-per prismatic joint [d, d', d'', 0, 0] (its slide).  A case without rigid bodies and prismatic joints
+per guided joint [d, d', d'', 0, 0] (its slide).  A case without rigid bodies and guided joints
 has none of this (the seed cases keep their path bit for bit).
 """
 
@@ -125,7 +125,7 @@ class RigidPart:
 
 @dataclass
 class Slide:
-    """A prismatic joint: its along DOF, rig column and guide geometry in body a's frame."""
+    """A guided joint: its along DOF, rig column and guide geometry in body a's frame."""
 
     joint: object
     dof: int                 # all-DOF number of the along DOF s (elastic slide) [m]
@@ -176,7 +176,7 @@ class _Points:
         return {dx: Jet(1.0), dth: -s[1]}, {dy: Jet(1.0), dth: s[0]}, {dth: Jet(1.0)}
 
     def guide(self, att: Attachment):
-        """(t, n, contact x form, contact y form) of a prismatic joint's guide."""
+        """(t, n, contact x form, contact y form) of a guided joint's guide."""
         sl = att.slide
         if att.a.body is None:
             t, n = sl.t_body, sl.n_body
@@ -216,17 +216,18 @@ class Slaving:
         for att in self.attachments:
             ua, ub = P.point(att.a), P.point(att.b)
             name = att.joint.name
-            if att.slide is None:
+            if att.slide is None and att.joint.shares_point:
                 out += [_lin((1.0, ub[0]), (-1.0, ua[0])), _lin((1.0, ub[1]), (-1.0, ua[1]))]
                 labels += [(name, "x"), (name, "y")]
-            else:
+            elif att.slide is not None:
                 t, n, cx, cy = P.guide(att)
                 rel = (_lin((1.0, ub[0]), (-1.0, cx)), _lin((1.0, ub[1]), (-1.0, cy)))
                 out.append(_lin((n[0], rel[0]), (n[1], rel[1])))
                 out.append(_lin((t[0], rel[0]), (t[1], rel[1]), (-1.0, {att.slide.dof: Jet(1.0)})))
                 labels += [(name, "normal"), (name, "along")]
             if att.rotation:
-                out.append(_lin((1.0, ub[2]), (-1.0, ua[2])))
+                wa, wb = att.joint.rotation_weights()
+                out.append(_lin((wb, ub[2]), (wa, ua[2])))
                 labels.append((name, "rotation"))
         self.labels = labels
         return [{k: c for k, c in r.items() if not self.fixed[k]} for r in out]
@@ -237,9 +238,9 @@ class Slaving:
         for att in self.attachments:
             tb, rb = self._own(att.b)
             ta, ra = self._own(att.a)
-            if att.slide is None:
+            if att.slide is None and att.joint.shares_point:
                 out += [tb[:1] + ta[:1], tb[1:] + ta[1:]]
-            else:
+            elif att.slide is not None:
                 out += [tb + ta, tb + ta]
             if att.rotation:
                 out.append(rb + ra)
@@ -427,8 +428,8 @@ class Slaving:
 
 # ------------------------------------------------------------------------------ construction
 def rig_columns(mech) -> tuple[list, list]:
-    """The extra rig columns after the links: (rigid bodies, prismatic joints)."""
-    return list(mech.rigid_bodies), [j for j in mech.joints if j.kind == "prismatic"]
+    """The extra rig columns after the links: (rigid bodies, guided joints)."""
+    return list(mech.rigid_bodies), [j for j in mech.joints if j.guided]
 
 
 def build_slaving(mech, ndof: int, fixed: np.ndarray, node_dofs) -> tuple:
@@ -448,7 +449,7 @@ def build_slaving(mech, ndof: int, fixed: np.ndarray, node_dofs) -> tuple:
     for k, j in enumerate(prisms):
         a, b = mech.joint_points(j)
         if a.body is not None and a.body.name not in parts:
-            raise CaseError(f"joints.{j.name}.connects", f"a prismatic joint's guide must be the ground or a rigid body; "
+            raise CaseError(f"joints.{j.name}.connects", f"a {j.kind} joint's guide must be the ground or a rigid body; "
                             f"{a.body.name!r} is a flexible link: make it rigid (rigid = true) or swap the joint's points")
         ang = 0.0 if a.body is None else a.body.angle
         u0 = j.unit_axis()
@@ -462,17 +463,37 @@ def build_slaving(mech, ndof: int, fixed: np.ndarray, node_dofs) -> tuple:
         if mech.condition(sl.joint) == "locked":
             fixed[sl.dof] = True
     by_joint = {sl.joint.name: sl for sl in slides}
-    for j in sorted(mech.joints, key=lambda j: (j.kind != "prismatic", not _on_ground(mech, j))):
+    for j in sorted(mech.joints, key=lambda j: (not j.guided, not _on_ground(mech, j))):
         a, b = mech.joint_points(j)
-        if j.kind != "prismatic" and all(p.body is None or p.body.name not in parts for p in (a, b)):
+        if not j.guided and j.shares_point and all(p.body is None or p.body.name not in parts for p in (a, b)):
             continue                                     # flexible links and the ground: shared DOFs (model.py)
-        rot = j.kind != "revolute" or mech.condition(j) in ("locked", "clamp")
+        if not j.guided and not j.shares_point:
+            _check_fixed_centres(mech, j)
+        rot = j.ties_rotation or (not j.guided and mech.condition(j) in j.holding)   # a guide holds its slide
         atts.append(Attachment(j, a, b, rot, by_joint.get(j.name)))
     if not atts:
         return parts, slides, None, ndof, fixed, names
     sl = Slaving(parts, slides, atts, node_dofs, fixed)
     sl.build(drawn_rig(mech), _probe_rig(mech))
     return parts, slides, sl, ndof, sl.fixed, names
+
+
+def _check_fixed_centres(mech, j) -> None:
+    """A joint whose two points do not coincide (a kind with its own rows) is a relation of the elastic
+    rotations alone: exact when neither point moves elastically, i.e. each is the ground or a ground
+    pivot of its body.  CaseError naming the joint otherwise."""
+    pivots = set()
+    for other in mech.joints:
+        pa, pb = mech.joint_points(other)
+        if other.shares_point and (pa.body is None) != (pb.body is None):
+            p = pb if pa.body is None else pa
+            pivots.add((p.body.name, tuple(np.round(np.asarray(p.position, float), 12))))
+    for p in mech.joint_points(j):
+        if p.body is not None and (p.body.name, tuple(np.round(np.asarray(p.position, float), 12))) not in pivots:
+            raise CaseError(f"joints.{j.name}.connects",
+                            f"the superposition models hold a {j.kind} joint only between points at ground pivots "
+                            f"('{p.body.name}.{p.point}' is not one: the line between its points would move "
+                            "elastically); run it with model = 'coupled' or 'nonlinear'")
 
 
 def _on_ground(mech, j) -> bool:

@@ -27,6 +27,7 @@ from . import coupled_outputs as cpl_out
 from .case import Case, integrator_coefficients, integrator_of, load_case
 from .coupled import CoupledModel
 from .errors import CaseError
+from .families import SUPERPOSITION_MODELS, family
 from .mechanism import Mechanism, MotionSource
 from .mechanism.motion import RigidMotion
 from .mechanism.packing import force_constant_positions
@@ -148,8 +149,8 @@ class Simulation:
         self.base = {d.joint: float(d.params.get("constant", 0.0)) for d in mech.drives if not d.kinematic}
         self.kinematic = {d.joint for d in mech.drives if d.kinematic}
         self.efforts = dict.fromkeys(self.base, 0.0)
-        family = SuperpositionStepper if self.model in ("hac", "classic", "classic-translational") else CoupledStepper
-        self.stepper = family(self.prep, self.model, self.rigid)
+        stepper = SuperpositionStepper if self.model in SUPERPOSITION_MODELS else CoupledStepper
+        self.stepper = stepper(self.prep, self.model, self.rigid)
         self.record = record
         self.step = 0
         self._current = None
@@ -382,7 +383,7 @@ class CoupledStepper(RecordedFrames):
     def __init__(self, prep: Prepared, model: str, rigid: RigidBuffer):
         self.prep, self.model, self.rigid = prep, model, rigid
         check_mesh(prep.case, model)
-        self.cm = CoupledModel.from_case(prep.case, split=(model == "nonlinear"))
+        self.cm = CoupledModel.from_case(prep.case, split=family(model).element_frames)
         sol = self.sol = prep.case["solver"]
         integ = integrator_of(sol, model)
         self.coef = integrator_coefficients(integ["integrator"], integ)

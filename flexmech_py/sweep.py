@@ -22,11 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .case import _parse_value, apply_overrides, read_case_file, validate_case
+from .case import parse_value, apply_overrides, read_case_file, validate_case
 from .errors import CaseError, FlexmechError
 from .names import safe_name
 from .outdir import ResultFolder
 from .sizes import check_points, format_count
+from .fileio import atomic_write, csv_cell, json_default
+from .version import versions
 
 __all__ = ["parse_param", "grid_points", "sweep", "sweep_point", "point_overrides", "load_base", "check_first_point",
            "run_points", "write_table", "failure_reasons", "TIMING_COLUMNS", "VARYING_COLUMNS"]
@@ -53,7 +55,7 @@ def parse_param(text: str) -> tuple[str, list, str]:
         try:
             if len(parts) != 3:
                 raise ValueError
-            a, b, n = _parse_value(parts[0]), _parse_value(parts[1]), int(parts[2])
+            a, b, n = parse_value(parts[0]), parse_value(parts[1]), int(parts[2])
             if isinstance(a, bool) or isinstance(b, bool) or not isinstance(a, (int, float)) or \
                     not isinstance(b, (int, float)) or n < 1:
                 raise ValueError
@@ -68,7 +70,7 @@ def parse_param(text: str) -> tuple[str, list, str]:
         else:
             values = [float(v) for v in vals]
     else:
-        values = [_parse_value(v.strip()) for v in spec.split(",") if v.strip()]
+        values = [parse_value(v.strip()) for v in spec.split(",") if v.strip()]
     if not values:
         raise CaseError(f"--param {key}", f"{spec!r} gives no values")
     return key, values, spec
@@ -160,14 +162,13 @@ def run_points(path: Path, base: dict, points: list[dict], *, model, out: Path, 
 
 def write_table(path: Path, rows: list[dict], keys: list[str], header: str) -> list[str]:
     """Write the rows as CSV (the point's ``keys`` first, ``error`` last); returns the column names."""
-    from .results import _atomic_write
 
     names = list(keys) + ["status", "model", "steps", "dt", "kernel_s", "run_s", "task_s", "worker"]
     for r in rows:
         names += [k for k in r if k not in names and k != "error"]
     names.append("error")
-    lines = [f"# {header}", ",".join(names)] + [",".join(_cell(r.get(n, "")) for n in names) for r in rows]
-    _atomic_write(path, "\n".join(lines) + "\n")
+    lines = [f"# {header}", ",".join(names)] + [",".join(csv_cell(r.get(n, "")) for n in names) for r in rows]
+    atomic_write(path, "\n".join(lines) + "\n")
     return names
 
 
@@ -184,7 +185,6 @@ def sweep(case_path, params: list[str], *, model: str | None = None, overrides=(
     address or ``local:N`` (:func:`~flexmech_py.parallel.open_executor`).
     Returns {"rows", "batch", "paths", "grid", "failures"}."""
     from .parallel import using_executor
-    from .results import _atomic_write, _json_default, versions
 
     path, base = load_base(case_path, overrides)
     axes = [parse_param(p) for p in params]
@@ -204,16 +204,7 @@ def sweep(case_path, params: list[str], *, model: str | None = None, overrides=(
                 "cached": batch.cached, "retries": batch.retries, "failed": batch.failed, "wall_s": batch.wall_s,
                 "versions": versions()}
         js = rf.stage / "sweep.json"
-        _atomic_write(js, json.dumps(info, indent=2, default=_json_default) + "\n")
+        atomic_write(js, json.dumps(info, indent=2, default=json_default) + "\n")
         rf.commit()
     return {"rows": rows, "batch": batch, "paths": [rf.where(csv), rf.where(js)], "grid": points,
             "failures": failure_reasons(rows)}
-
-
-def _cell(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return "nan" if math.isnan(v) else f"{v:.10g}"
-    s = str(v)
-    return '"' + s.replace('"', "'") + '"' if ("," in s or '"' in s or "\n" in s) else s

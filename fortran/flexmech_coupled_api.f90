@@ -15,6 +15,7 @@ module flexmech_coupled_api
   use flexmech_coupled_storage, only: link_mats
   use flexmech_coupled_post, only: coupled_post
   use flexmech_control, only: ctl_setup, ctl_save, ctl_places, CTL_NCI, CTL_NCP, CTL_NST
+  use flexmech_markers, only: con_valid
   implicit none
   private
   public :: cpl_run, cpl_dense, cpl_post, cpl_set_solver, cpl_set_newton, cpl_set_start, cpl_set_inertia, cpl_residuals, cpl_rows
@@ -199,11 +200,12 @@ contains
     real(dp), intent(out) :: mks(9, nmk, nf), mv(3, nm, nf), dvals(nd1, nf), rend(4, nseg, nf)
     integer, intent(out) :: status
     type(coupled_system) :: sys
+    integer :: i
     mks = 0.0_dp; mv = 0.0_dp; dvals = 0.0_dp; rend = 0.0_dp
     call build_checked(ispec, rspec, ndof, nc1, sys, status)
     if (status /= STATUS_OK) return
     if (sys%nmk /= nmk .or. sys%nseg /= nseg .or. nd1 < sys%nd .or. any(meas(2:3, :) < 1) .or. &
-        any(meas(2:3, :) > nmk) .or. any(meas(1, :) < 1) .or. any(meas(1, :) > 3)) then
+        any(meas(2:3, :) > nmk) .or. .not. all([(con_valid(meas(1, i), meas(4, i)), i = 1, nm)])) then
       status = STATUS_BAD_INPUT
       return
     end if

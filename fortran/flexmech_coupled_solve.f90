@@ -19,8 +19,8 @@ module flexmech_coupled_solve
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: dgbtrf, dgbtrs, dgetrf, dgetrs, lapack_status, STATUS_OK, STATUS_NONFINITE, &
                              STATUS_BAD_INPUT
-  use flexmech_markers, only: marker_state, CON_ANGLE, MAXCOL
-  use flexmech_coupled_system, only: coupled_system, set_mode, wrap
+  use flexmech_markers, only: marker_state, MAXCOL, con_residual
+  use flexmech_coupled_system, only: coupled_system, set_mode
   use flexmech_coupled_rows, only: eval_row, row_patterns
   use flexmech_coupled_storage, only: link_mats, lm_setup, lm_band_setup, lm_bordered_setup, lm_band_finish, &
                                       lm_factor, lm_solve
@@ -187,8 +187,7 @@ contains
     do ic = 1, ns%nc
       call eval_row(sys, sys%con(1, ic), sys%con(4, ic), sys%con_dir(:, ic), sys%con(2, ic), sys%con(3, ic), &
                     q, v, gv, gd, ns%acc0(ic), ncl, cols, grad, ma, mb)
-      ns%gval(ic) = gv - cv(ic)
-      if (sys%con(1, ic) == CON_ANGLE) ns%gval(ic) = wrap(ns%gval(ic))
+      ns%gval(ic) = con_residual(sys%con(1, ic), sys%con_dir(:, ic), gv - cv(ic))
       ns%gc(1:ns%ngnz(ic), ic) = 0.0_dp
       do j = 1, ncl
         res(cols(j)) = res(cols(j)) + lam(ic)*grad(j)

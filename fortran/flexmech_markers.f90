@@ -22,6 +22,8 @@
 !>   1      CON_POINT       row_point        m           (r_a - r_b)_i, i = aux (1: x, 2: y)
 !>   2      CON_ANGLE       row_angle        rad         psi_b - psi_a
 !>   3      CON_PROJECTION  row_projection   m           e . (r_b - r_a), e = R(psi_a) d, d fixed in a's frame
+!>   4      CON_GEAR        row_gear         m           d1 psi_a + d2 psi_b - (d1 + d2) theta, theta the angle
+!>                                                       of r_b - r_a (aux: its branch, 0..3; d = (r_a, s r_b))
 !> A joint kind is a list of rows of these kinds on its two markers (revolute: two CON_POINT rows;
 !> weld: two CON_POINT and a CON_ANGLE; prismatic: CON_PROJECTION on the guide normal and a CON_ANGLE)
 !> and a coordinate row (CON_ANGLE, or CON_PROJECTION on the guide direction) that drives act on.
@@ -35,11 +37,11 @@ module flexmech_markers
   implicit none
   private
   public :: marker_state, segment_marker, body_marker, ground_marker, constraint_row
-  public :: row_point, row_angle, row_projection, con_valid, con_in_radians
-  public :: CON_POINT, CON_ANGLE, CON_PROJECTION, NCON, MAXCOL
+  public :: row_point, row_angle, row_projection, row_gear, con_valid, con_residual, con_in_radians
+  public :: CON_POINT, CON_ANGLE, CON_PROJECTION, CON_GEAR, NCON, MAXCOL
 
-  integer, parameter :: CON_POINT = 1, CON_ANGLE = 2, CON_PROJECTION = 3
-  integer, parameter :: NCON = 3          !< row kinds: the valid indices are 1..NCON
+  integer, parameter :: CON_POINT = 1, CON_ANGLE = 2, CON_PROJECTION = 3, CON_GEAR = 4
+  integer, parameter :: NCON = 4          !< row kinds: the valid indices are 1..NCON
   integer, parameter :: MAXCOL = 7        !< columns of one marker (an interior segment node)
 
   !> Set by segment_marker, body_marker or ground_marker; the column arrays hold n valid entries (no
@@ -144,11 +146,12 @@ contains
   end subroutine ground_marker
 
   !> The row kind index is one of the table's (1..NCON) and its integer parameter aux fits it (the
-  !> component 1 or 2 of CON_POINT; the other kinds take any aux).
+  !> component 1 or 2 of CON_POINT, the branch 0..3 of CON_GEAR; the other kinds take any aux).
   pure logical function con_valid(kind, aux)
     integer, intent(in) :: kind, aux
     con_valid = kind >= 1 .and. kind <= NCON
     if (kind == CON_POINT) con_valid = aux == 1 .or. aux == 2
+    if (kind == CON_GEAR) con_valid = aux >= 0 .and. aux <= 3
   end function con_valid
 
   !> The row's value is an angle [rad] (else a length [m]): scaled by the mechanism's length where
@@ -157,6 +160,29 @@ contains
     integer, intent(in) :: kind
     con_in_radians = kind == CON_ANGLE
   end function con_in_radians
+
+  !> The residual r = g - value of a row reduced to the representative the solvers drive to zero:
+  !> CON_ANGLE wrapped to (-pi, pi]; CON_GEAR less the nearest of 2 pi (n_a d1 + n_b d2), n in
+  !> {-1, 0, 1} (a frame angle psi taken on the other side of its +-pi cut than the value's: a segment
+  !> node's angle is the chord's atan2 plus the node's rotation); other kinds unchanged.
+  pure real(dp) function con_residual(kind, d, r)
+    integer, intent(in) :: kind
+    real(dp), intent(in) :: d(2), r
+    real(dp), parameter :: TWO_PI = 6.283185307179586_dp
+    real(dp) :: x
+    integer :: na, nb
+    con_residual = r
+    if (kind == CON_ANGLE) then
+      con_residual = r - TWO_PI*anint(r/TWO_PI)
+    else if (kind == CON_GEAR) then
+      do na = -1, 1
+        do nb = -1, 1
+          x = r - TWO_PI*(na*d(1) + nb*d(2))
+          if (abs(x) < abs(con_residual)) con_residual = x
+        end do
+      end do
+    end if
+  end function con_residual
 
   !> Row of kind CON_* between markers a and b (aux: the component of CON_POINT; d: the direction of
   !> CON_PROJECTION in a's frame).  Columns: a's then b's (nc = ma%n + mb%n).  An index outside the
@@ -177,6 +203,8 @@ contains
       call row_angle(ma, mb, g, gd, acc0, grad)
     case (CON_PROJECTION)
       call row_projection(d, ma, mb, g, gd, acc0, grad)
+    case (CON_GEAR)
+      call row_gear(aux, d, ma, mb, g, gd, acc0, grad)
     case default
       g = ieee_value(g, ieee_quiet_nan); gd = g; acc0 = g; grad = g
     end select
@@ -229,5 +257,47 @@ contains
       grad(ma%n + j) = dot_product(e, mb%dr(:, j))
     end do
   end subroutine row_projection
+
+  !> Gear mesh (rolling of two pitch circles without slip) between the centres a and b of two gears
+  !> of pitch radii r_a, r_b, d = (r_a, s r_b), s = +1 for an external mesh, -1 for an internal one:
+  !>   g = r_a psi_a + s r_b psi_b - (r_a + s r_b) theta,   theta = angle of c = r_b - r_a [m]
+  !> (the arc rolled on each pitch circle relative to the line of centres; with fixed centres
+  !> r_a psi_a' = -s r_b psi_b', the gear ratio).  theta is taken on the branch around aux pi/2
+  !> (aux 0..3, the quadrant of the assembled line of centres: no jump while it turns less than
+  !> 3 pi/4 from there).  With k = r_a + s r_b, h = Omega c / |c|^2 (d theta / d c):
+  !>   g' = r_a psi_a' + s r_b psi_b' - k h . c',   acc0 = r_a psi_a0'' + s r_b psi_b0'' - k (h . c0''
+  !>        - 2 (c . c') (h . c') / |c|^2)
+  !> Its multiplier is the tangential tooth force [N]: a force of magnitude |lambda| (k/|c| = 1 at the
+  !> nominal centre distance) along the common tangent at the pitch point.
+  pure subroutine row_gear(aux, d, ma, mb, g, gd, acc0, grad)
+    integer, intent(in) :: aux
+    real(dp), intent(in) :: d(2)
+    type(marker_state), intent(in) :: ma, mb
+    real(dp), intent(out) :: g, gd, acc0, grad(:)
+    real(dp), parameter :: HALF_PI = 1.5707963267948966_dp
+    real(dp) :: c(2), cd(2), cr(2), h(2), l2, k, th, thd
+    integer :: j
+    c = mb%r - ma%r; cd = mb%rd - ma%rd
+    select case (aux)          ! c turned back by aux quarter turns: its angle near 0
+    case (1); cr = [c(2), -c(1)]
+    case (2); cr = -c
+    case (3); cr = [-c(2), c(1)]
+    case default; cr = c
+    end select
+    th = atan2(cr(2), cr(1)) + aux*HALF_PI
+    l2 = dot_product(c, c)
+    h = [-c(2), c(1)] / l2
+    thd = dot_product(h, cd)
+    k = d(1) + d(2)
+    g = d(1)*ma%psi + d(2)*mb%psi - k*th
+    gd = d(1)*ma%psid + d(2)*mb%psid - k*thd
+    acc0 = d(1)*ma%psia0 + d(2)*mb%psia0 - k*(dot_product(h, mb%ra0 - ma%ra0) - 2.0_dp*dot_product(c, cd)*thd/l2)
+    do j = 1, ma%n
+      grad(j) = d(1)*ma%dpsi(j) + k*dot_product(h, ma%dr(:, j))
+    end do
+    do j = 1, mb%n
+      grad(ma%n + j) = d(2)*mb%dpsi(j) - k*dot_product(h, mb%dr(:, j))
+    end do
+  end subroutine row_gear
 
 end module flexmech_markers

@@ -14,7 +14,7 @@ from flexmech_py.case import read_case_file
 from flexmech_py.mechanism import MotionSource, prepare_motion
 from flexmech_py import kernels
 from flexmech_py.mechanism.analysis import constraint_matrices
-from flexmech_py.mechanism.packing import marker_position
+from flexmech_py.mechanism.packing import joint_pose, marker_position
 from flexmech_py.mechanism.rows import CON_POINT, ROW_KINDS
 from flexmech_py.simulate import motion_source
 
@@ -356,7 +356,7 @@ def test_rigid_rows_are_the_one_vocabulary_and_an_unknown_kind_is_refused(cases_
     phi, *_ = constraint_matrices(packed, z + 1e-3 * np.arange(z.size))   # off the assembled position
     zz = z + 1e-3 * np.arange(z.size)
     for i, (j, (r0, nr)) in enumerate(zip(case.mechanism.joints, packed.joint_rows)):
-        assert packed.row_kinds[r0:r0 + nr] == [r[0] for r in j.rigid_rows((1.0, 0.0), 0.0)]
+        assert packed.row_kinds[r0:r0 + nr] == [r[0] for r in j.rigid_rows(joint_pose(case.mechanism, j, z))]
         if j.kind == "revolute":
             gap = marker_position(zz, packed.markers[2 * i]) - marker_position(zz, packed.markers[2 * i + 1])
             assert packed.row_kinds[r0:r0 + 2] == [CON_POINT, CON_POINT]

@@ -163,7 +163,7 @@ def _assemble(mech: Mechanism, gravity, z_drawn: np.ndarray) -> tuple[np.ndarray
 
 def _coordinate_rows(mech: Mechanism, z0: np.ndarray, starts: dict):
     """Jacobian rows of every joint coordinate (weld joints excluded) at z0: {joint: row}."""
-    names = [j.name for j in mech.joints if j.kind != "weld"]
+    names = [j.name for j in mech.joints if j.has_coordinate]
     extra = pack(mech, (0.0, 0.0), starts, kinematic_only=True,
                  extra_drives=[coordinate_drive(n, starts[n]) for n in names])
     _, jac, _, _, _ = constraint_matrices(extra, z0)

@@ -1,5 +1,5 @@
 """Drives on joint coordinates: kinematic laws (the coordinate as a function of time) and force laws
-(a torque on a revolute joint, a force on a prismatic one).  Each law packs itself into the flat
+(a torque on a joint whose coordinate is an angle, a force on one whose coordinate is a slide).  Each law packs itself into the flat
 layout of the Fortran flexmech_drivelaw module (its ``code`` and up to four parameters).
 
 Kinematic laws (absolute joint coordinate f(t) [rad or m]; ``start`` defaults to the coordinate in

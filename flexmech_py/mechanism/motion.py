@@ -112,20 +112,34 @@ class RigidMotion:
 
     def reaction(self, name: str) -> np.ndarray:
         """(N, 3) [F_x, F_y, M] that body a exerts on body b at the joint (global components [N],
-        moment [N m]; for a prismatic joint the force is normal to the guide)."""
+        moment [N m]; for a guided joint the force is normal to the guide)."""
         mech, packed = self.setup.mech, self.setup.packed
         j = mech.joint(name)
         r0, _ = packed.joint_rows[mech.joints.index(j)]
         out = np.zeros((self.t.size, 3))
-        if j.kind in ("revolute", "weld"):
+        ends = [self.point_positions(p) for p in mech.joint_points(j)]
+        own = j.reaction_from(self.lam[:, r0:r0 + j.rows], *ends)
+        if own is not None:
+            return own
+        if j.shares_point:
             out[:, :2] = self.lam[:, r0:r0 + 2]
-            if j.kind == "weld":
+            if j.ties_rotation:
                 out[:, 2] = -self.lam[:, r0 + 2]
         else:
             n = _guide_normal(self, j)
             out[:, :2] = -self.lam[:, [r0]] * n
-            out[:, 2] = -self.lam[:, r0 + 1]
+            if j.ties_rotation:
+                out[:, 2] = -self.lam[:, r0 + 1]
         return out
+
+    def point_positions(self, ref) -> np.ndarray:
+        """(N, 2) global positions of a resolved point (PointRef) over the samples [m]."""
+        if ref.body is None:
+            return np.tile(np.asarray(ref.position, float), (self.t.size, 1))
+        bi = self.setup.mech.body_index(ref.body)
+        s = ref.body.marker(ref.point)
+        c, sn = np.cos(self.z[:, 3 * bi + 2]), np.sin(self.z[:, 3 * bi + 2])
+        return self.z[:, 3 * bi:3 * bi + 2] + np.stack([c * s[0] - sn * s[1], sn * s[0] + c * s[1]], axis=1)
 
     def drive_force(self, name: str) -> np.ndarray:
         """(N,) torque [N m] or force [N] the drive of joint ``name`` applies on its coordinate (a force
@@ -135,7 +149,7 @@ class RigidMotion:
 
 
 def _guide_normal(rm: RigidMotion, joint) -> np.ndarray:
-    """(N, 2) the normal of a prismatic joint's guide (turning with body a)."""
+    """(N, 2) the normal of a guided joint's guide (turning with body a)."""
     mech = rm.setup.mech
     a, _ = mech.joint_points(joint)
     u0 = joint.unit_axis()

@@ -16,8 +16,8 @@ from .drives import Drive
 from .rows import in_radians
 from .system import Mechanism
 
-__all__ = ["Packed", "pack", "drawn_coordinates", "joint_coordinates", "marker_position", "row_scales",
-           "coordinate_drive", "force_constant_positions"]
+__all__ = ["Packed", "Pose", "pack", "drawn_coordinates", "joint_coordinates", "joint_pose", "marker_position",
+           "row_scales", "coordinate_drive", "force_constant_positions"]
 
 
 @dataclass
@@ -62,8 +62,37 @@ def marker_position(z: np.ndarray, marker: tuple) -> np.ndarray:
     return z[3 * bi:3 * bi + 2] + np.array([c * s[0] - sn * s[1], sn * s[0] + c * s[1]])
 
 
+@dataclass(frozen=True)
+class Pose:
+    """A joint's two markers at one configuration: frame angles ``ang_a``, ``ang_b`` [rad], positions
+    ``pa``, ``pb`` [m] (global), and a guided joint's guide direction ``axis`` in body a's frame (the
+    drawn direction turned back by a's drawn angle; zeros for other kinds)."""
+
+    ang_a: float
+    ang_b: float
+    pa: np.ndarray
+    pb: np.ndarray
+    axis: np.ndarray
+
+    @property
+    def ref(self) -> float:
+        """phi_b - phi_a [rad]."""
+        return self.ang_b - self.ang_a
+
+
+def joint_pose(mech: Mechanism, j, z: np.ndarray) -> Pose:
+    """The Pose of joint ``j`` at body coordinates z (its guide axis from the drawn configuration)."""
+    a, b = mech.joint_points(j)
+    ma, mb = _marker(mech, a), _marker(mech, b)
+    ang = [0.0 if m[0] is None else float(z[3 * m[0] + 2]) for m in (ma, mb)]
+    axis = np.zeros(2)
+    if j.guided:
+        axis = _rotate(j.unit_axis(), -(0.0 if a.body is None else a.body.angle))
+    return Pose(ang[0], ang[1], marker_position(z, ma), marker_position(z, mb), axis)
+
+
 def joint_coordinates(mech: Mechanism, z: np.ndarray, names=None) -> dict:
-    """{joint: coordinate} at z: phi_b - phi_a [rad], or the slide u . (r_b - r_a) [m] of a prismatic
+    """{joint: coordinate} at z: phi_b - phi_a [rad], or the slide u . (r_b - r_a) [m] of a guided
     joint (u its guide direction turning with body a)."""
     out = {}
     z0 = drawn_coordinates(mech)
@@ -73,7 +102,7 @@ def joint_coordinates(mech: Mechanism, z: np.ndarray, names=None) -> dict:
         a, b = mech.joint_points(j)
         ma, mb = _marker(mech, a), _marker(mech, b)
         phi = lambda m: 0.0 if m[0] is None else z[3 * m[0] + 2]
-        if j.kind != "prismatic":
+        if not j.guided:
             out[j.name] = phi(mb) - phi(ma)
             continue
         rot = phi(ma) - (0.0 if ma[0] is None else z0[3 * ma[0] + 2])
@@ -100,16 +129,13 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
     markers, jt_mk, jt_coord, jt_dir, joint_rows, cr, cr_dir, cr_ref = [], [], [], [], [], [], [], []
     for ij, j in enumerate(mech.joints):
         a, b = mech.joint_points(j)
-        ma, mb = _marker(mech, a), _marker(mech, b)
-        markers += [ma, mb]
+        markers += [_marker(mech, a), _marker(mech, b)]
         jt_mk.append([len(markers) - 1, len(markers)])
-        ang_a = 0.0 if ma[0] is None else z0[3 * ma[0] + 2]
-        ang_b = 0.0 if mb[0] is None else z0[3 * mb[0] + 2]
-        axis = _rotate(j.unit_axis(), -ang_a) if hasattr(j, "unit_axis") else np.zeros(2)
-        kind, aux, d = j.coordinate_row(axis)
+        pose = joint_pose(mech, j, z0)
+        kind, aux, d = j.coordinate_row(pose.axis)
         jt_coord.append([kind, aux])
         jt_dir.append(d)
-        rows = j.rigid_rows(axis, ang_b - ang_a)
+        rows = j.rigid_rows(pose)
         joint_rows.append((len(cr), len(rows)))
         for kind, aux, d, value in rows:
             cr.append([ij + 1, kind, aux])

@@ -18,7 +18,7 @@ from ..errors import CaseError
 from ..materials import material_values
 from ..sections import section_properties
 from .drives import LAW_CODES, LAW_PARAMS, Drive
-from .joints import JOINT_KINDS
+from .joints import JOINT_KINDS, case_fields
 from .system import Mechanism
 
 __all__ = ["mechanism_from_spec", "mechanism_spec", "link_section", "derived_keys", "table_samples", "LINK_KEYS",
@@ -243,25 +243,20 @@ def _joints(mech: Mechanism, raw) -> None:
         raise CaseError("joints", "must be an array of tables [[joints]] (name, type, connects)")
     for i, j in enumerate(raw):
         w = f"joints[{i}]"
-        v.keys(j, {"name", "type", "connects", "elastic", "axis"}, w)
+        v.keys(j, {"name", "type", "connects", "elastic"} | set(case_fields()), w)
         name = v.identifier(j, "name", w, {jt.name for jt in mech.joints})
         kind = v.text(j, "type", w, required=True, choices=tuple(JOINT_KINDS))
         con = j.get("connects")
         if not (isinstance(con, list) and len(con) == 2 and all(isinstance(c, str) for c in con)):
             raise CaseError(f"{w}.connects", "must be two point references [a, b], e.g. ['ground', 'crank.start']")
-        extra = {}
-        if kind == "prismatic":
-            extra["axis"] = tuple(v.vector(j, "axis", w, 2) or _missing(f"{w}.axis", "the guide direction, e.g. [1, 0]"))
-        elif "axis" in j:
-            raise CaseError(f"{w}.axis", f"applies to prismatic joints only, not to a {kind} joint")
         cls = JOINT_KINDS[kind]
+        for key, kinds in case_fields().items():
+            if key in j and key not in cls.case_fields:
+                raise CaseError(f"{w}.{key}", f"applies to {' and '.join(kinds)} joints only, not to a {kind} joint")
+        extra = cls.fields_from_case(j, w)
         elastic = v.text(j, "elastic", w, choices=cls.conditions)
         joint = mech.add_joint(kind, name, con[0], con[1], elastic=elastic, **extra)
         mech.joint_points(joint, f"{w}.connects")
-
-
-def _missing(where: str, what: str):
-    raise CaseError(where, f"is missing; give {what}")
 
 
 def _drives(mech: Mechanism, raw) -> None:

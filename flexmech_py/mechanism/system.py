@@ -90,7 +90,7 @@ class Mechanism:
         self.ground[name] = tuple(map(float, position))
 
     def add_joint(self, kind: str, name: str, a: str, b: str, elastic: str | None = None, **extra) -> Joint:
-        """A joint of ``kind`` (revolute, prismatic, weld) from point ``a`` to point ``b``."""
+        """A joint of ``kind`` (a key of mechanism.joints.JOINT_KINDS) from point ``a`` to point ``b``."""
         if kind not in JOINT_KINDS:
             raise CaseError(f"joints.{name}.type", f"must be one of {', '.join(map(repr, JOINT_KINDS))}, got {kind!r}")
         if any(j.name == name for j in self.joints):
@@ -132,8 +132,9 @@ class Mechanism:
         raise CaseError(where, f"unknown body {name!r}; bodies are {', '.join(self.body_names()) or 'none'}")
 
     def body_index(self, body) -> int:
-        """0-based body number (None for the ground)."""
-        return None if body is None else next(i for i, b in enumerate(self.bodies) if b is body)
+        """0-based body number (None for the ground), by name: ``body`` may be the same body of a copy of
+        this mechanism (a probe's remeshed case reads the rigid motion of the run's)."""
+        return None if body is None else next(i for i, b in enumerate(self.bodies) if b.name == body.name)
 
     def link_index(self, name: str) -> int:
         return next(i for i, ln in enumerate(self.links) if ln.name == name)
@@ -190,7 +191,7 @@ class Mechanism:
     # ------------------------------------------------------------------ checks
     def check(self) -> None:
         """Topology checks (each failure: one CaseError naming the field): points exist, a joint joins
-        two different bodies, prismatic guides have a direction, drives name joints (one each) with a
+        two different bodies, guides have a direction, drives name joints (one each) with a
         law that fits the coordinate, and every body is connected to the ground."""
         if not self.bodies:
             raise CaseError("links", "the mechanism has no bodies; add [[links]] or [[bodies]]")
@@ -205,19 +206,19 @@ class Mechanism:
             if cond not in j.conditions:
                 raise CaseError(f"joints.{j.name}.elastic", f"must be one of {', '.join(map(repr, j.conditions))} "
                                                            f"for a {j.kind} joint, got {cond!r}")
-            if j.kind == "prismatic" and not np.linalg.norm(np.asarray(j.axis, float)) > 0:
-                raise CaseError(f"joints.{j.name}.axis", "the guide direction has zero length; give e.g. axis = [1, 0]")
+            j.check()
+            j.check_placed(a, b)
         seen = set()
         for i, d in enumerate(self.drives):
             joint = self.joint(d.joint, f"drives[{i}].joint")
             if d.joint in seen:
                 raise CaseError(f"drives[{i}].joint", f"joint {d.joint!r} has two drives; give each joint at most one")
             seen.add(d.joint)
-            if joint.kind == "weld":
-                raise CaseError(f"drives[{i}].joint", f"{d.joint!r} is a weld: it has no free coordinate to drive")
+            if not joint.has_coordinate:
+                raise CaseError(f"drives[{i}].joint", f"{d.joint!r} is a {joint.kind}: it has no free coordinate to drive")
             if d.law == "force" and not joint.angular and (d.params.get("sin") or d.params.get("cos")):
                 raise CaseError(f"drives[{i}].sin", f"harmonics of the joint coordinate need an angle; {d.joint!r} "
-                                                    "is prismatic: use time_harmonics or a table")
+                                                    f"is {joint.kind}: use time_harmonics or a table")
         for j in self.joints:
             if self.condition(j) in ("torque", "force") and (self.drive_of(j.name) is None
                                                               or self.drive_of(j.name).kinematic):

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .. import __version__
+from ..version import __version__
 from ..glyphs import table
 from .chart_data import stability_payload
 from .modes_data import modes_payload

@@ -13,7 +13,7 @@ import numpy as np
 from ..case import Case
 from ..drawing import largest_drawn, magnification, mechanism_size
 from ..errors import FlexmechError
-from ..glyphs import joint_marks
+from ..glyphs import joint_marks, legend_words
 from ..plots import decimate, display_unit, panel_groups
 from ..results import read_timeseries
 from ..shapes import ShapeFrames, read_shape_csv
@@ -70,6 +70,7 @@ def _read_curves(path: Path):
 def mechanism_payload(case: Case, sf: ShapeFrames) -> dict:
     """The drawn bodies and the joints' glyph places (flexmech_py.glyphs) of a mechanism in sf's layout."""
     links = {ln["name"]: ln for ln in case["links"]}
+    marks = joint_marks(case.mechanism, sf)
     bodies = []
     for b in sf.bodies:
         ln = links.get(b.name, {})
@@ -77,8 +78,8 @@ def mechanism_payload(case: Case, sf: ShapeFrames) -> dict:
                        "half_depth": finite(ln.get("half_depth")), "E": finite(ln.get("youngs_modulus"))})
     joints = [{"name": m.name, "kind": m.kind, "point": m.point, "driven": m.driven,
                "ground": None if m.ground is None else [float(v) for v in m.ground],
-               "axis": None if m.axis is None else [float(v) for v in m.axis]} for m in joint_marks(case.mechanism, sf)]
-    return {"bodies": bodies, "joints": joints, "size": mechanism_size(sf)}
+               "axis": None if m.axis is None else [float(v) for v in m.axis]} for m in marks]
+    return {"bodies": bodies, "joints": joints, "legend": legend_words(marks), "size": mechanism_size(sf)}
 
 
 def shape_payload(sf: ShapeFrames) -> dict:

@@ -112,7 +112,7 @@ class Mechanism {
     });
     for (const j of this.d.joints) {
       if (j.point === null) continue;
-      const p = this.pt(i, j.point, amp), gl = G.joints[j.kind] || G.joints.revolute;
+      const p = this.pt(i, j.point, amp), gl = G.joints[j.kind] || G.joints.revolute;   // every kind is in the table (flexmech_py.glyphs)
       glyph(g, gl.marker, T.sx(p[0]), T.sy(p[1]), gl.size * PT, j.driven ? gl.driven_fill : gl.fill, gl.edge);
     }
     state.draws++;

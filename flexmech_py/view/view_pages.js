@@ -31,13 +31,8 @@ function runPage() {
     return (v) => divColour(v / m);
   };
   function legendText() {
-    const words = [];
-    const J = d.glyphs.joints;
-    words.push(J.revolute.legend);
-    if (d.joints.some((j) => j.driven)) words.push("● driven joint");
-    if (d.joints.some((j) => j.ground && !j.axis)) words.push(d.glyphs.ground_pivot.legend);
-    if (d.joints.some((j) => j.kind === "prismatic")) words.push(J.prismatic.legend + (d.joints.some((j) => j.axis) ? " " + d.glyphs.ground_guide.legend : ""));
-    legend.textContent = "rigid configuration dashed (the ghost); " + words.join(", ") + "; wheel: zoom, drag: pan, double click: fit";
+    // the joints' words: flexmech_py.glyphs.legend_words, the same as the PNG drawings' legend
+    legend.textContent = "rigid configuration dashed (the ghost); " + d.legend.join(", ") + "; wheel: zoom, drag: pan, double click: fit";
   }
   legendText();
   function setField() {
