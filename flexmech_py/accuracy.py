@@ -159,7 +159,7 @@ def _write(study: Study, out_dir: Path, plots: bool, points, keys, ladders) -> l
     _atomic_write(p, report_markdown(study))
     paths.append(p)
     if plots:
-        from .plots import work_precision_figure
+        from .study_plots import work_precision_figure
 
         png = work_precision_figure(out_dir / "accuracy.png", _plot_panels(study, points, keys, ladders),
                                     title=f"{Path(study.settings['case']).stem}: error against kernel time "
