@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .bundled import cases_dir
 from .case import load_case
 from .errors import FlexmechError
 from .modal import superposition_frequencies
@@ -35,11 +36,10 @@ def integrator_overrides(label: str) -> list[str]:
 
 def case_path(name: str) -> Path:
     """Path of a stability-suite case file ``cases/extreme/NAME.toml`` (source tree or installed copy)."""
-    here = Path(__file__).resolve().parent
-    for cand in (here.parent / "cases" / "extreme", here / "cases" / "extreme"):
-        if (cand / f"{name}.toml").is_file():
-            return cand / f"{name}.toml"
-    raise FileNotFoundError(f"cases/extreme/{name}.toml is not installed")
+    path = cases_dir() / "extreme" / f"{name}.toml"
+    if not path.is_file():
+        raise FileNotFoundError(f"cases/extreme/{name}.toml is not installed")
+    return path
 
 
 def load(name: str, overrides=()) -> dict:
