@@ -317,7 +317,7 @@ def _write_chart(rows, case, model, geometric, folder: Path, plots: bool):
     write_stability_csv(rows, paths[0], head)
     write_regions_csv(regions, paths[1], head)
     if plots:
-        from .plots import plot_stability  # start-up: only this command loads it
+        from .study_plots import plot_stability  # start-up: only this command loads it
 
         p = plot_stability(rows, folder / "stability.png", regions=regions, stable_rate=STABLE_RATE,
                            title=f"{case['case']['title']}\nmodel {model}, geometric stiffness {geometric}, "

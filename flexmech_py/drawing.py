@@ -17,7 +17,7 @@ import numpy as np
 
 from .glyphs import (BODY_COLOURS, BODY_STYLES, GROUND_GUIDE, GROUND_PIVOT, RIGID_GHOST, glyph_of, joint_marks,
                      legend_words)
-from .plots import PNG, have_matplotlib, save_figure
+from .plots import PNG_OPTIONS, have_matplotlib, save_figure
 
 __all__ = ["magnification", "deformed_lines", "draw_frames", "animate_frames", "draw_modes", "plot_along",
            "TARGET_FRACTION"]
@@ -217,7 +217,7 @@ def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str =
     _legend_line(fig, (legend or f"elastic deflection {factor_text(scale)} (magnified)")
                  + ", rigid configuration dashed; " + _symbols(marks))
     fig.tight_layout(rect=(0, 0.035, 1, 1))
-    save_figure(fig, path, dpi=100, pil_kwargs=PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=PNG_OPTIONS)
     return Path(path), scale
 
 
@@ -320,5 +320,5 @@ def plot_along(path, al, *, title: str | None = None):
     fig.suptitle(title or f"{al.case['case']['title']}\nfrozen natural frequencies along the motion, model {al.model}"
                  + (", geometric stiffness" if al.geometric else ""), fontsize=9.5)
     fig.tight_layout()
-    save_figure(fig, path, dpi=100, pil_kwargs=PNG)
+    save_figure(fig, path, dpi=100, pil_kwargs=PNG_OPTIONS)
     return Path(path)

@@ -27,108 +27,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .case import load_case
 from .errors import FlexmechError
-from .families import family
-from .notices import silenced
+from .extreme_plots import plots
+from .extreme_runs import (LABEL, SPINUP_CONFIGS, SPINUP_REFERENCE, attempt, case_path, integrator_overrides, load,
+                           lowest_frequencies, run_case, run_command, run_warnings, sawtooth, table_row,
+                           validity_peaks)
 from .floquet import PeriodicCase, floquet
+from .notices import silenced
 from .simulate import Prepared
 
 __all__ = ["STUDIES", "case_path", "load", "integrator_overrides", "sawtooth", "run_case", "stiff_study",
            "flexible_study", "critical_study", "toggle_study", "spinup_study", "long_run_study",
-           "torque_step_study", "lowest_frequencies", "run_all", "main"]
+           "torque_step_study", "lowest_frequencies", "run_all", "main", "LABEL", "SPINUP_CONFIGS",
+           "SPINUP_REFERENCE"]
 
 # integrator label -> solver overrides
-INTEGRATORS = {
-    "newmark": ["solver.integrator=newmark"],   # average acceleration (the superposition models' default)
-    "hht-0.05": ["solver.integrator=hht", "solver.hht_alpha=0.05"],
-    "hht-0.3": ["solver.integrator=hht", "solver.hht_alpha=0.3"],
-    **{f"galpha-{r}": ["solver.integrator=generalized-alpha", f"solver.rho_inf={r}"]
-       for r in ("0.0", "0.5", "0.7", "0.8", "0.9", "0.95")},
-}
-LABEL = {"newmark": "average acceleration", "hht-0.05": "HHT α = 0.05", "hht-0.3": "HHT α = 0.3",
-         **{f"galpha-{r}": f"generalized-α ρ∞ = {r}" for r in ("0.0", "0.5", "0.7", "0.8", "0.9", "0.95")}}
-
-
-def integrator_overrides(label: str) -> list[str]:
-    """The ``--set`` overrides of an integrator label (``newmark``, ``hht-0.05``, ``galpha-0.8``, ...)."""
-    return list(INTEGRATORS[label])
-
-
-def case_path(name: str) -> Path:
-    """Path of a stability-suite case file ``cases/extreme/NAME.toml`` (source tree or installed copy)."""
-    here = Path(__file__).resolve().parent
-    for cand in (here.parent / "cases" / "extreme", here / "cases" / "extreme"):
-        if (cand / f"{name}.toml").is_file():
-            return cand / f"{name}.toml"
-    raise FileNotFoundError(f"cases/extreme/{name}.toml is not installed")
-
-
-def load(name: str, overrides=()) -> dict:
-    """The resolved case ``cases/extreme/NAME.toml`` with ``--set`` overrides."""
-    return load_case(case_path(name), overrides=list(overrides))
-
-
-def run_case(name: str, overrides=(), model=None, geometric=None, **prep_kw):
-    """Run one case; returns (Result or None, error message or "")."""
-    res, err, _ = _attempt(lambda: Prepared(load(name, overrides), **prep_kw).run(model, geometric=geometric))
-    return (res, err) if not err else (None, err)
-
-
-def _attempt(fn):
-    """(result, "", None) or, when the run stops, (its partial result or None, the error message, the
-    time it stopped [s] or None)."""
-    try:
-        return fn(), "", None
-    except FlexmechError as exc:
-        return getattr(exc, "partial", None), str(exc), getattr(exc, "time", None)
-
-
-def sawtooth(y: np.ndarray, start: float = 0.5) -> float:
-    """Amplitude of the period-2-step content of y after the fraction ``start`` of the record,
-    relative to max|y|: max |y[k+1] - 2 y[k] + y[k-1]| / 4 (a sawtooth of amplitude A gives A; a
-    smooth signal sampled at Omega dt gives (Omega dt)^2 |y| / 4).  Needs a frame at every step."""
-    y = np.asarray(y, float)
-    d2 = np.abs(y[2:] - 2 * y[1:-1] + y[:-2]) / 4
-    pk = np.max(np.abs(y))
-    return float(np.max(d2[int(start * d2.size):]) / pk) if pk > 0 else 0.0
-
-
-def lowest_frequencies(prep: Prepared, nmodes: int = 2, samples: int = 72, model: str = "hac") -> np.ndarray:
-    """(samples, nmodes) lowest natural frequencies [rad/s] of (K + K_c, M) along the run (frozen
-    coefficients; negative values: sign(lambda) sqrt|lambda|, an unstable frozen system;
-    flexmech_py.modal.superposition_frequencies)."""
-    from .modal import superposition_frequencies
-
-    idx = np.linspace(0, prep.nsteps, samples).round().astype(int)
-    return superposition_frequencies(prep.fe, prep.rig[:, :, idx], model, nmodes)
-
-
-def _warnings(res) -> list[str]:
-    return list(res.extra.get("warnings", [])) if res is not None else []
-
-
-def _validity(res) -> tuple[float, float]:
-    """(largest displacement over link length, largest compression over the Euler load) of a run."""
-    v = res.extra.get("validity", {})
-    links = v.get("links", v) if isinstance(v, dict) else {}
-    d = [x.get("max_displacement_over_length", 0.0) for x in links.values() if isinstance(x, dict)]
-    c = [x.get("max_compression_over_euler", 0.0) for x in links.values() if isinstance(x, dict)]
-    return (max(d) if d else float("nan")), (max(c) if c else float("nan"))
-
-
-def _row(case, model, integrator, dt, happened, why, command, **data):
-    return {"case": case, "model": model, "integrator": integrator, "dt": dt, "happened": happened,
-            "why": why, "command": command, **data}
-
-
-def _cmd(name, sets=(), model=None, extra=""):
-    s = f"flexmech run cases/extreme/{name}.toml"
-    if model:
-        s += f" --model {model}"
-    for o in sets:
-        s += f" --set {o}"
-    return s + extra
 
 
 # ----------------------------------------------------------------------------------------- 1
@@ -146,18 +59,18 @@ def stiff_study(integrators=("newmark", "galpha-0.95", "galpha-0.9", "galpha-0.8
     for lab in integrators:
         res, err = run_case("stiff_fourbar", sets + integrator_overrides(lab), **kw)
         if res is None:
-            rows.append(_row("1 stiff links", "hac", LABEL[lab], prep0.dt, f"stopped: {err[:90]}", "", ""))
+            rows.append(table_row("1 stiff links", "hac", LABEL[lab], prep0.dt, f"stopped: {err[:90]}", "", ""))
             continue
         y, n = res["strain_coupler_mid"], res["axial_coupler_mid"]
         series[lab] = (res.t, y)
         st, sn = sawtooth(y), sawtooth(n)
-        rows.append(_row(
+        rows.append(table_row(
             "1 stiff links (E×10⁴)", "hac", LABEL[lab], res.dt,
             f"peak coupler strain {np.max(np.abs(y)):.3g}; period-2·dt sawtooth in the 2nd half: strain "
             f"{100 * st:.3g} %, axial force {100 * sn:.3g} % of peak",
             "bounded; undamped unresolved modes alias to the step frequency" if st > 0.05 else
             "unresolved modes damped by the integrator",
-            _cmd("stiff_fourbar", sets + integrator_overrides(lab)),
+            run_command("stiff_fourbar", sets + integrator_overrides(lab)),
             sawtooth_strain=st, sawtooth_axial=sn, peak_strain=float(np.max(np.abs(y))),
             w1_min=float(w.min()), w1_max=float(w.max()), w_max=wmax))
     return rows, series
@@ -177,7 +90,7 @@ def flexible_study(models=("hac", "classic", "nonlinear"), t_end=0.01, windows=(
     prep = Prepared(load("flexible_fourbar", sets), **kw)
     runs, errs = {}, {}
     for m in models:
-        r, err, _ = _attempt(lambda: prep.run(m))
+        r, err, _ = attempt(lambda: prep.run(m))
         if r is not None:
             runs[m] = r
         errs[m] = err
@@ -189,10 +102,10 @@ def flexible_study(models=("hac", "classic", "nonlinear"), t_end=0.01, windows=(
     for m in models:
         r = runs.get(m)
         if r is None:
-            rows.append(_row("2 flexible links (E/100)", m, "average acceleration", prep.dt,
-                             f"stopped: {errs[m][:100]}", "", _cmd("flexible_fourbar", sets, m)))
+            rows.append(table_row("2 flexible links (E/100)", m, "average acceleration", prep.dt,
+                             f"stopped: {errs[m][:100]}", "", run_command("flexible_fourbar", sets, m)))
             continue
-        dl, ce = _validity(r)
+        dl, ce = validity_peaks(r)
         t_defl, t_euler = validity_time(r)
         y = r["strain_coupler_mid"]
         errs_w, diff = [], ""
@@ -203,16 +116,16 @@ def flexible_study(models=("hac", "classic", "nonlinear"), t_end=0.01, windows=(
                 errs_w.append(float(np.max(np.abs(y[sel] - yr[sel])) / np.max(np.abs(yr[sel]))))
             diff = "; coupler strain − nonlinear over " + ", ".join(
                 f"[0, {w * 1e3:g} ms] {100 * e:.3g} %" for w, e in zip(windows, errs_w)) + " of its peak"
-        rows.append(_row(
+        rows.append(table_row(
             "2 flexible links (E/100)", m, "average acceleration", r.dt,
             f"over {t_end * 1e3:g} ms: peak strain {np.max(np.abs(y)):.3g}, displacement/L {dl:.3g}, N/N_Euler {ce:.3g}; "
             f"bending deflection > 2 % L at t = {t_defl * 1e3:.3g} ms, compression > N_Euler at t = {t_euler * 1e3:.3g} ms; "
-            f"{len(_warnings(r))} validity warning(s)" + (f" ({errs[m][:60]})" if errs[m] else "") + diff,
+            f"{len(run_warnings(r))} validity warning(s)" + (f" ({errs[m][:60]})" if errs[m] else "") + diff,
             f"first frequency at rest {f0.min():.3g} rad/s (initial position), far below the crank speed 120 rad/s; with "
             f"the inertia stiffness K_c of the moving links {f.min():.3g}–{f.max():.3g} rad/s (negative: the frozen linear "
             "system is statically unstable): deflections outside the linear range within milliseconds",
-            _cmd("flexible_fourbar", sets, m),
-            deflection_over_length=dl, compression_over_euler=ce, warnings=_warnings(r), t_deflection_2pc=t_defl,
+            run_command("flexible_fourbar", sets, m),
+            deflection_over_length=dl, compression_over_euler=ce, warnings=run_warnings(r), t_deflection_2pc=t_defl,
             t_compression_euler=t_euler, peak_strain=float(np.max(np.abs(y))),
             strain_error_vs_nonlinear=dict(zip(windows, errs_w)) if errs_w else None))
     series = {m: (r.t, r["strain_coupler_mid"]) for m, r in runs.items()}
@@ -318,7 +231,7 @@ def _critical_rows(pts, cycles, dt, zeta):
         why = (("parametric resonance (|μ| > 1)" if kind.startswith("unstable") else
                 "forced resonance or beating (|μ| ≤ 1)") + "; frozen-frequency conditions met along the cycle: "
                + ("; ".join(bands) or "none of ω1–ω3 with k ≤ 2"))
-        rows.append(_row("3 critical speeds", "hac", "average acceleration", dt, what, why,
+        rows.append(table_row("3 critical speeds", "hac", "average acceleration", dt, what, why,
                          f"flexmech stability cases/extreme/critical_fourbar.toml --speed {lo:g}:{hi:g}:"
                          f"{max(2, len(g))} --set 'solver.rayleigh=[0,0]'",
                          speed_range=(lo, hi), kind=kind, worst_speed=worst["speed"], mu_undamped=u["mu"],
@@ -347,16 +260,16 @@ def toggle_study(deltas=(20.0, 3.0, 1.0, 0.3, 0.1), dt=None, elements=None, thro
         km = prep.rm.motion
         mu = np.degrees(np.abs(np.angle(np.exp(1j * (km.phi[:, 2] - km.phi[:, 1])))))
         f = lowest_frequencies(prep, 1, 181)
-        dl_, ce = _validity(r)
+        dl_, ce = validity_peaks(r)
         p = {"delta_deg": dl, "mu_max_deg": float(mu.max()), "alpha4_max": float(np.max(np.abs(km.alpha[:, 2]))),
              "omega4_max": float(np.max(np.abs(km.omega[:, 2]))),
              "axial_max": float(max(np.max(np.abs(r["axial_coupler_mid"])), np.max(np.abs(r["axial_follower_mid"])))),
              "strain_max": float(max(np.max(np.abs(r["strain_coupler_mid"])), np.max(np.abs(r["strain_follower_mid"])))),
              "b_transverse_max": float(np.max(np.abs(r["b_transverse"]))), "w1_min": float(f.min()),
              "w1_max": float(f.max()), "deflection_over_length": dl_, "compression_over_euler": ce,
-             "warnings": _warnings(r)}
+             "warnings": run_warnings(r)}
         pts.append(p)
-        rows.append(_row(
+        rows.append(table_row(
             "4 near toggle", "hac", "average acceleration", r.dt,
             f"δ = {dl:g}° (μ max {p['mu_max_deg']:.2f}°): rigid |α₄| max {p['alpha4_max']:.3g} rad/s², |ω₄| max "
             f"{p['omega4_max']:.3g} rad/s; axial force max {p['axial_max']:.3g} N (N/N_E {ce:.3g}), strain max "
@@ -365,24 +278,20 @@ def toggle_study(deltas=(20.0, 3.0, 1.0, 0.3, 0.1), dt=None, elements=None, thro
             "rigid follower acceleration ∝ 1/δ (it reverses within ~δ of crank angle); the load is a short "
             "finite impulse, so the elastic response saturates; B loses its stiffness across the nearly "
             "straight coupler-follower line",
-            _cmd("toggle_fourbar", sets), **p))
+            run_command("toggle_fourbar", sets), **p))
     for eps in through:
         d = toggle_ground_length(0.0) + eps
         sets = base + [f"mechanism.ground_length={d:.9f}"]
         res, err = run_case("toggle_fourbar", sets, **kw)
-        rows.append(_row(
+        rows.append(table_row(
             "4 through toggle", "hac", "–", "–",
             ("stopped with MechanismError: " + err) if res is None else "ran (unexpected)",
             f"ground {eps * 1000:g} mm longer than the change point: the crank cannot turn fully; the run stops "
-            "at the assembly limit and keeps its frames up to there", _cmd("toggle_fourbar", sets), error=err))
+            "at the assembly limit and keeps its frames up to there", run_command("toggle_fourbar", sets), error=err))
     return rows, pts
 
 
 # ----------------------------------------------------------------------------------------- 5
-SPINUP_CONFIGS = [("classic", "none", "newmark"), ("classic", "current", "newmark"), ("classic", "quasi_static", "newmark"),
-                  ("nonlinear", None, "newmark"), ("nonlinear", None, "galpha-0.8")]
-SPINUP_REFERENCE = "nonlinear/galpha-0.8"
-
 
 def spinup_first_frequency(case: dict) -> float:
     """Clamped-free first bending frequency 1.8751^2 sqrt(EI/(rho A L^4)) [rad/s] of the beam."""
@@ -418,10 +327,10 @@ def spinup_study(rates=(4.0, 6.0, 10.0), t_end=20.0, dt=None, elements=None, con
         for model, geo, integ in configs:
             key = f"{model}/{geo}" if geo else f"{model}/{integ}"
             if integ != "newmark":
-                r, err, t_stop = _attempt(lambda: Prepared(load("spinup_beam", sets + integrator_overrides(integ)),
+                r, err, t_stop = attempt(lambda: Prepared(load("spinup_beam", sets + integrator_overrides(integ)),
                                                            **kw).run(model))
             else:
-                r, err, t_stop = _attempt(lambda: prep.run(model, geometric=geo))
+                r, err, t_stop = attempt(lambda: prep.run(model, geometric=geo))
             runs[key] = (r, integ, err, t_stop)
             if r is not None:
                 series[ws][key] = (r.t, r["tip_transverse"])
@@ -432,12 +341,12 @@ def spinup_study(rates=(4.0, 6.0, 10.0), t_end=20.0, dt=None, elements=None, con
         for (model, geo, integ) in configs:
             key = f"{model}/{geo}" if geo else f"{model}/{integ}"
             r, integ, err, t_stop = runs[key]
-            cmd = _cmd("spinup_beam", [o for o in sets if "t_end" not in o]
+            cmd = run_command("spinup_beam", [o for o in sets if "t_end" not in o]
                        + ([f"solver.geometric_stiffness={geo}"] if geo else []) + integrator_overrides(integ),
                        model if model != "classic" else None)
             stop = f"stopped: {err[:200]}; " if err else ""
             if r is None:
-                rows.append(_row(f"5 spin-up ω_s = {ws:g}", key, LABEL[integ], prep.dt, stop,
+                rows.append(table_row(f"5 spin-up ω_s = {ws:g}", key, LABEL[integ], prep.dt, stop,
                                  _spinup_why(geo, err), cmd, rate=ws, error=err, t_last=t_stop, t_rate_w1=t_w1,
                                  peak=float("nan"), late=float("nan")))
                 continue
@@ -458,7 +367,7 @@ def spinup_study(rates=(4.0, 6.0, 10.0), t_end=20.0, dt=None, elements=None, con
                 d["t_past_L"], d["rate_past_L"] = tb, float(spinup_speed(tb, ws, T))
                 text += (f"; |tip| > L = {L:g} m at t = {tb:.3g} s (spin rate {d['rate_past_L']:.3g} rad/s; "
                          f"it passes ω₁ at t = {t_w1:.3g} s)")
-            rows.append(_row(f"5 spin-up ω_s = {ws:g}", key, LABEL[integ], r.dt, text, _spinup_why(geo, err), cmd, **d))
+            rows.append(table_row(f"5 spin-up ω_s = {ws:g}", key, LABEL[integ], r.dt, text, _spinup_why(geo, err), cmd, **d))
     return rows, series
 
 
@@ -494,7 +403,7 @@ def long_run_study(integrators=("newmark", "hht-0.05", "galpha-0.9", "galpha-0.8
         period = 2 * np.pi / 120.0
         res, err = run_case("long_run_fourbar", prep_sets + integrator_overrides(lab), **kw)
         if res is None:
-            rows.append(_row("6 long run", "hac", LABEL[lab], dt, f"stopped: {err[:100]}", "", ""))
+            rows.append(table_row("6 long run", "hac", LABEL[lab], dt, f"stopped: {err[:100]}", "", ""))
         else:
             amp = cycle_amplitudes(res.t, res["strain_coupler_mid"], period)
             series[lab] = amp
@@ -509,7 +418,7 @@ def long_run_study(integrators=("newmark", "hht-0.05", "galpha-0.9", "galpha-0.8
             c_last = len(amp) - 1
             d = {"amp_cycle2": float(amp[1]), "amp_last": float(amp[-1]), "amp_min": float(amp[1:].min()),
                  "amp_max": float(amp[1:].max()), "change_cycle2": chg(2), "change_last": chg(c_last)}
-            rows.append(_row(
+            rows.append(table_row(
                 f"6 long run ({len(amp)} cycles)", "hac", LABEL[lab], res.dt,
                 f"strain amplitude per cycle {d['amp_cycle2']:.4g} (cycle 2) → {d['amp_last']:.4g} (cycle {len(amp)}), "
                 f"range {d['amp_min']:.4g}–{d['amp_max']:.4g}; cycle-to-cycle change {d['change_cycle2']:.3g} → "
@@ -517,16 +426,16 @@ def long_run_study(integrators=("newmark", "hht-0.05", "galpha-0.9", "galpha-0.8
                 "free vibration of the undamped start-up transient beats with the forced response; numerical "
                 "dissipation at ω₁Δt = 0.03 is tiny" if lab != "newmark" else
                 "no numerical dissipation: the start-up transient's free vibration is kept",
-                _cmd("long_run_fourbar", integrator_overrides(lab) + ([f"solver.dt={dt}"] if dt else [])), **d))
+                run_command("long_run_fourbar", integrator_overrides(lab) + ([f"solver.dt={dt}"] if dt else [])), **d))
         cc = coupled_cycles or cycles
         csets = ([f"solver.t_end={cc * 2 * np.pi / 120:.9g}", "solver.output_every=1", "solver.error_estimate=none"]
                  + ([f"solver.dt={coupled_dt or dt}"] if (coupled_dt or dt) else []))
         res, err = run_case("long_run_fourbar", csets + integrator_overrides(lab), model="coupled", **kw)
         if res is None:
-            rows.append(_row(f"6 long run ({cc} cycles)", "coupled", LABEL[lab], coupled_dt or dt or 1e-4,
+            rows.append(table_row(f"6 long run ({cc} cycles)", "coupled", LABEL[lab], coupled_dt or dt or 1e-4,
                              f"stopped: {err[:220]}", "average acceleration leaves the period-2·dt mode of the drive "
                              "constraint's multiplier undamped: it grows until the run diverges" if lab == "newmark" else "",
-                             _cmd("long_run_fourbar", integrator_overrides(lab), "coupled"), error=err))
+                             run_command("long_run_fourbar", integrator_overrides(lab), "coupled"), error=err))
             continue
         e = res["energy_kinetic"] + res["energy_potential"] - res["work_inputs"]
         ek = float(np.max(res["energy_kinetic"]))
@@ -540,14 +449,14 @@ def long_run_study(integrators=("newmark", "hht-0.05", "galpha-0.9", "galpha-0.8
              "amp_cycle2": float(amp[1]), "amp_last": float(amp[-1]), "drive_saw_first": float(d2[:w].max()),
              "drive_saw_last": float(d2[-w:].max())}
         series[f"coupled/{lab}"] = amp
-        rows.append(_row(
+        rows.append(table_row(
             f"6 long run ({len(amp)} cycles)", "coupled", LABEL[lab], res.dt,
             f"energy balance E_k + E_p − W: max drift {d['energy_drift']:.3g}, final {d['energy_final']:.3g} of max E_k; "
             f"strain amplitude {d['amp_cycle2']:.4g} → {d['amp_last']:.4g}; drive-torque period-2·dt component "
             f"{100 * d['drive_saw_first']:.2g} % → {100 * d['drive_saw_last']:.2g} % of its peak (first → last tenth)",
             "average acceleration leaves the period-2·dt mode of the drive constraint's multiplier undamped: it grows"
             if lab == "newmark" else "numerical dissipation keeps the constraint multiplier's period-2·dt mode down",
-            _cmd("long_run_fourbar", integrator_overrides(lab) + ["solver.output_every=1"], "coupled"), **d))
+            run_command("long_run_fourbar", integrator_overrides(lab) + ["solver.output_every=1"], "coupled"), **d))
     return rows, series
 
 
@@ -575,8 +484,8 @@ def torque_step_study(integrators=("newmark", "galpha-0.9", "galpha-0.5", "galph
                 sets = [f"solver.dt={dt}"] + ([f"solver.t_end={t_end}"] if t_end else []) + integrator_overrides(lab)
                 res, err = run_case("manipulator_torque_step", sets, model=model)
                 if res is None:
-                    rows.append(_row("7 torque steps", model, LABEL[lab], dt, f"stopped: {err[:140]}", "",
-                                     _cmd("manipulator_torque_step", sets, model)))
+                    rows.append(table_row("7 torque steps", model, LABEL[lab], dt, f"stopped: {err[:140]}", "",
+                                     run_command("manipulator_torque_step", sets, model)))
                     continue
                 h = res.t >= 0.5 * res.t[-1]
                 n = res["axial_force_link2"]
@@ -588,12 +497,12 @@ def torque_step_study(integrators=("newmark", "galpha-0.9", "galpha-0.5", "galph
                 series[(model, dt, lab)] = (res.t, n)
                 d = {"hf_axial": fa, "peak_axial": float(np.max(np.abs(n))), "sawtooth_axial": sawtooth(n, 0.5),
                      "bending_change": bend, "peak_tip_dy": float(np.max(np.abs(tip)))}
-                rows.append(_row(
+                rows.append(table_row(
                     "7 torque steps", model, LABEL[lab], res.dt,
                     f"link-2 axial force: peak {d['peak_axial']:.3g} N, {100 * fa:.3g} % of its rms above {cutoff:g} rad/s "
                     f"(2nd half), period-2·dt sawtooth {100 * d['sawtooth_axial']:.3g} %; tip_dy_elastic peak "
                     f"{d['peak_tip_dy']:.3g} m, {100 * bend:.2g} % from the reference",
-                    _step_why(lab, dt), _cmd("manipulator_torque_step", sets, model if model != "hac" else None), **d))
+                    _step_why(lab, dt), run_command("manipulator_torque_step", sets, model if model != "hac" else None), **d))
     return rows, series
 
 
@@ -643,95 +552,6 @@ def table(results: dict) -> list[str]:
     return lines
 
 
-def plots(results: dict, out: Path) -> list[Path]:
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        return []
-    paths = []
-
-    def save(name: str, fig) -> None:
-        fig.tight_layout()
-        paths.append(out / name)
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
-
-    if "spinup" in results:
-        series = results["spinup"][1]
-        fig, axs = plt.subplots(len(series), 1, figsize=(8, 3 * len(series)), squeeze=False)
-        for ax, (ws, runs) in zip(axs[:, 0], series.items()):
-            stable = [np.max(np.abs(y)) for k, (t, y) in runs.items() if not k.endswith("/none")]
-            lim = 1.3 * max(stable) if stable else 1.0
-            for k, (t, y) in runs.items():
-                ax.plot(t, y, label=k, lw=1.4 if k == SPINUP_REFERENCE else 1.0,
-                        ls="--" if k.endswith("quasi_static") else "-")
-            ax.set_ylim(-lim, lim)
-            ax.axvline(15.0, color="0.6", lw=0.6)
-            ax.set_title(f"spin-up to ω_s = {ws:g} rad/s (T = 15 s)", fontsize=9)
-            ax.set_ylabel("tip transverse [m]")
-            ax.legend(fontsize=7, loc="lower left")
-        axs[-1, 0].set_xlabel("t [s]")
-        save("extreme_spinup_tip.png", fig)
-    if "stiff" in results:
-        series = results["stiff"][1]
-        fig, ax = plt.subplots(figsize=(8, 3.5))
-        for lab, (t, y) in series.items():
-            ax.plot(t * 1e3, y, lw=0.8, label=LABEL[lab])
-        ax.set_xlabel("t [ms]")
-        ax.set_ylabel("coupler midspan strain")
-        ax.set_title("E × 10⁴, dt = 1e-4 s (280 × the highest period)", fontsize=9)
-        ax.legend(fontsize=7)
-        save("extreme_stiff_strain.png", fig)
-    if "critical" in results:
-        pts = results["critical"][1]
-        sp = np.array([p["speed"] for p in pts])
-        fig, ax = plt.subplots(figsize=(8, 3.5))
-        ax.semilogy(sp, [p["undamped"]["mu"] for p in pts], "-", color="C0", label="max|μ| (Floquet), undamped")
-        ax.semilogy(sp, [p["damped"]["mu"] for p in pts], "-", color="C1", label="max|μ|, ζ = 1 % at 280 rad/s")
-        ax.semilogy(sp, [p["undamped"]["per_cycle"] for p in pts], "o", ms=3, color="C0",
-                    label="time runs: growth per cycle, undamped")
-        ax.semilogy(sp, [p["damped"]["per_cycle"] for p in pts], "s", ms=3, color="C1", label="time runs, damped")
-        ax.axhline(1.0, color="0.5", lw=0.6)
-        for p in pts:
-            tags = p["bands"].split(", ")
-            half = 0.5 * (sp[1] - sp[0]) if sp.size > 1 else 5.0
-            if any(t.startswith(("forced k=1 (ω1", "forced k=1 (ω2", "forced k=2 (ω1", "forced k=2 (ω2")) for t in tags):
-                ax.axvspan(p["speed"] - half, p["speed"] + half, color="C2", alpha=0.12, lw=0)
-            if any(t in ("parametric k=1 (ω1+ω1)", "combination k=1 (ω1+ω2)", "parametric k=1 (ω2+ω2)") for t in tags):
-                ax.axvspan(p["speed"] - half, p["speed"] + half, color="C3", alpha=0.12, lw=0)
-        ax.set_xlabel("crank speed Ω [rad/s]")
-        ax.set_ylabel("growth per crank cycle")
-        ax.set_title("shaded (frozen ω₁, ω₂ along the cycle): green k·Ω = ω_i, k = 1, 2; red ω_i + ω_j = Ω", fontsize=9)
-        ax.legend(fontsize=7)
-        save("extreme_critical_speeds.png", fig)
-    if "long_run" in results:
-        series = results["long_run"][1]
-        fig, ax = plt.subplots(figsize=(8, 3.5))
-        for lab, amp in series.items():
-            m, _, l = lab.rpartition("/")
-            ax.plot(np.arange(1, amp.size + 1), amp, lw=0.9, label=(m + ", " if m else "hac, ") + LABEL[l])
-        ax.set_xlabel("crank cycle")
-        ax.set_ylabel("coupler strain, peak-to-peak per cycle")
-        ax.legend(fontsize=7)
-        save("extreme_long_run_amplitude.png", fig)
-    if "torque_step" in results:
-        series = results["torque_step"][1]
-        keys = [k for k in series if family(k[0]).constrained] or list(series)
-        fig, ax = plt.subplots(figsize=(8, 3.5))
-        for (model, dt, lab) in keys:
-            t, y = series[(model, dt, lab)]
-            y = y - y.mean()
-            w = 2 * np.pi * np.fft.rfftfreq(y.size, t[1] - t[0])
-            ax.loglog(w[1:], np.abs(np.fft.rfft(y))[1:] / y.size, lw=0.8, label=f"{model}, dt {dt:g}, {LABEL[lab]}")
-        ax.set_xlabel("ω [rad/s]")
-        ax.set_ylabel("|FFT| link-2 axial force [N]")
-        ax.legend(fontsize=6)
-        save("extreme_torque_step_spectrum.png", fig)
-    return paths
-
-
 def _jsonable(o):
     if isinstance(o, dict):
         return {str(k): _jsonable(v) for k, v in o.items()}
@@ -760,7 +580,7 @@ def main(argv=None) -> int:
     (out / "extreme.md").write_text("\n".join(table(res)) + "\n", encoding="utf-8")
     (out / "extreme.json").write_text(json.dumps(_jsonable({k: v[0] for k, v in res.items()}), indent=1,
                                                  default=str) + "\n", encoding="utf-8")
-    paths = plots(res, out)
+    paths = plots(res, out, LABEL, SPINUP_REFERENCE)
     print(f"wrote {out / 'extreme.md'}, {out / 'extreme.json'}" + "".join(f", {p}" for p in paths))
     return 0
 

@@ -237,7 +237,7 @@ def _write_study(out: Path, path: Path, base: dict, dists, rows, batch, notes, p
     paths.append(out / "samples.json")
     atomic_write(paths[-1], json.dumps(info, indent=2, default=json_default) + "\n")
     if plots and ok:
-        from .plots import plot_samples
+        from .study_plots import plot_samples
 
         png = plot_samples(out / "samples.png", inputs, {c: outputs[c] for c in keys[:4]}, corr,
                            title=f"{path.name}: {len(ok)} of {n} {method} samples, seed {seed}")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import bench, compare, plots
+from flexmech_py import bench, compare, plots, study_plots
 
 
 def test_decimate_keeps_every_bucket_extreme():
@@ -81,7 +81,7 @@ def test_legend_goes_to_an_empty_corner_or_beside_the_axes():
 
 
 def test_label_spread_keeps_order_and_gap():
-    y = plots.spread([510.0, 500.0, 305.0, 498.0], 28.0)
+    y = study_plots.spread([510.0, 500.0, 305.0, 498.0], 28.0)
     assert y[2] == 305.0                                             # alone: unmoved
     close = sorted([y[0], y[1], y[3]])
     assert np.all(np.diff(close) >= 28.0 - 1e-9)

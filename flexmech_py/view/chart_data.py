@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import FlexmechError
 from ..floquet import STABLE_RATE
-from ..plots import part_spans, region_label
+from ..study_plots import part_spans, region_label
 from .pack import finite
 
 __all__ = ["read_csv_table", "stability_payload", "HARMONIC_LINES", "BANDS"]
