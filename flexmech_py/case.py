@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import numbers
 from pathlib import Path
 
 from . import validate as v
@@ -26,7 +27,7 @@ from .mechanism import mechanism_from_spec
 from .mechanism.control import check_controllers
 from .mechanism.schema import derived_keys, mechanism_spec
 from .mechanism.templates import expand_template
-from .sizes import check_mesh
+from .sizes import check_elements, check_mesh
 from .tomlfile import dumps_toml
 
 try:  # Python >= 3.11
@@ -36,7 +37,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
 
 __all__ = ["Case", "load_case", "validate_case", "apply_overrides", "MODELS", "MODEL_CHOICES", "SUPERPOSITION_MODELS",
            "STUDY_MODEL", "study_model", "OUTPUT_KINDS", "INTEGRATORS", "integrator_coefficients", "integrator_of",
-           "DEFAULT_INTEGRATORS", "DIVERGENCE_FACTOR"]
+           "DEFAULT_INTEGRATORS", "DIVERGENCE_FACTOR", "with_elements"]
 
 
 def study_model(model: str | None, case: dict) -> str:
@@ -541,3 +542,18 @@ def _list_item(lst: list, p: str, where: str):
             return item
     names = [str(item.get("name", item.get("joint"))) for item in lst if isinstance(item, dict)]
     raise CaseError(f"--set {where}", f"no entry named {p!r}; names are {', '.join(names)}")
+
+
+def with_elements(case: dict, n: int) -> dict:
+    """A copy of a resolved case with ``n`` elements on every flexible link (checked: a whole number >= 1,
+    a mesh that fits)."""
+    if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 1:
+        raise CaseError("elements_per_link", f"must be a whole number >= 1, got {n!r}")
+    links = sum(1 for ln in case["links"] if not ln.get("rigid"))
+    check_elements(int(n) * links, links, field="--elements-per-link")   # before the mesh is made
+    c = copy.deepcopy(case)
+    c["mesh"]["elements_per_link"] = int(n)
+    for ln in c["links"]:
+        if not ln.get("rigid"):
+            ln["elements"] = int(n)
+    return c

@@ -547,7 +547,7 @@ def _cmd_compare(args) -> int:
 
     if args.models:
         from .case import load_case  # start-up: only this command loads it
-        from .simulate import with_elements  # start-up: only this command loads it
+        from .case import with_elements  # start-up: only this command loads it
 
         if args.result or args.reference:
             raise FlexmechError("compare: give either RESULT_DIR --reference FILE, or --models CASE, not both")

@@ -16,7 +16,6 @@ import numpy as np
 
 from .definitions import definition_notes
 from .errors import CaseError, FlexmechError, MechanismError, SolverError
-from .families import family
 from .fileio import atomic_write
 from .inputs import read_text
 from .names import inside, safe_name

@@ -32,7 +32,8 @@ from .case import SUPERPOSITION_MODELS, Case, study_model
 from .errors import CaseError
 from .regions import default_resolution, multiplier_type, refinement_speeds
 from .sizes import check_points
-from .simulate import Prepared, check_elastic_problem
+from .simulate import Prepared
+from .superposition_loads import check_elastic_problem
 from .fileio import atomic_write
 
 __all__ = ["PeriodicCase", "FloquetResult", "floquet", "steady_state", "frozen_frequencies", "stability_point",

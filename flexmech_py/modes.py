@@ -175,7 +175,7 @@ class _Frozen:
     def eigen(self, rm, i: int, count: int | None) -> modal.Eigen:
         if self.cm is not None:
             return modal.coupled_eigen(self.cm, rm, i, self.gravity, count)
-        from .simulate import check_elastic_problem, elastic_torque_loads
+        from .superposition_loads import check_elastic_problem, elastic_torque_loads
 
         fe = self.fe
         rig = fe.rig_samples(rm, self.gravity, slice(i, i + 1))
@@ -229,7 +229,7 @@ def _model_and_geometric(case, model, geometric):
 
 
 def _prepared_case(case, elements_per_link):
-    from .simulate import with_elements
+    from .case import with_elements
 
     case = case if isinstance(case, Case) else Case(case)
     return with_elements(case, elements_per_link) if elements_per_link is not None else case

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from .case import Case, integrator_coefficients, integrator_of
+from .case import Case, integrator_coefficients, integrator_of, with_elements
 from .families import AUTO, MODELS, SUPERPOSITION_MODELS, family
 from .errors import CaseError, MechanismError, SolverError
 from . import guards, notices, step_doubling
@@ -20,12 +20,14 @@ from .mechanism import MotionSource, prepare_motion
 from .mechanism.motion import RigidMotion
 from .model import FEModel
 from .motion_tap import MotionTap
-from .outputs import DeflectionReference, evaluate_outputs, joint_at_joint, link_curvature, link_node_curvatures, \
-    output_unit
+from .outputs import DeflectionReference, evaluate_outputs, joint_at_joint, output_unit
 from .reactions import ModelReactions
-from .frames import continue_angles, select_frames
+from .blocks import (Accumulated, after_first, coupled_curvature, drive_column_joints, drive_columns,
+                     integrator_summary, last_values)
+from .superposition_loads import (axial_stretch, check_elastic_problem, elastic_torque_loads, superposition_curvature,
+                                  superposition_node_curvatures)
 from .results import Result
-from .sizes import check_elements, check_mesh, check_steps
+from .sizes import check_mesh, check_steps
 
 __all__ = ["simulate", "simulate_models", "Prepared", "motion_source", "rigid_motion", "time_grid", "RigidMotion"]
 
@@ -53,82 +55,6 @@ def time_grid(case: dict, dt: float | None = None, out_every: int | None = None)
     nsteps = out_every * math.ceil(nsteps / out_every)
     check_steps(nsteps, sol["t_end"], dt)
     return nsteps, sol["t_end"] / nsteps, out_every
-
-
-def elastic_torque_loads(case: dict, fe: FEModel, rm: RigidMotion, rig: np.ndarray | None = None):
-    """The force drives' torques and forces as generalized forces on the free elastic DOFs: (q_free,
-    q_val) or (None, None); ``rig`` the samples of rm (fe.rig_samples) when the model has slave relations.
-
-    A torque on a revolute joint acts on the elastic rotation of its body b at the joint, its reaction
-    on body a's; a force on a guided joint acts on the joint's along DOF (the elastic slide: the
-    force on b and its reaction on a at the contact point do the work F ds).  Assembled over all DOFs
-    (constrained ones included), projected onto the masters of slaved DOFs and restricted to the free
-    DOFs; rows that vanish identically (torques on clamped DOFs, or action and reaction on one locked
-    rotation) are dropped, so they cost nothing.
-    """
-    mech = case.mechanism
-    forced = [d.joint for d in mech.drives if not d.kinematic]
-    if not forced:
-        return None, None
-    q_all = drive_loads(fe, rm, forced)
-    if fe.slaving is not None:
-        q_all = fe.slaving.project(q_all, fe.rig_samples(rm, case["loads"]["gravity"]) if rig is None else rig)
-    qf = fe.restrict(q_all)
-    rows = np.flatnonzero(np.any(qf != 0.0, axis=1))
-    if rows.size == 0:
-        return None, None
-    return (rows + 1).astype(np.int32), np.asfortranarray(qf[rows])
-
-
-def drive_loads(fe: FEModel, rm: RigidMotion, joints) -> np.ndarray:
-    """(ndof, N) the generalized forces of the drives of ``joints`` over all DOFs: a torque on the
-    elastic rotations of its joint's bodies (+ on b, - on a), a force on its joint's along DOF."""
-    mech = fe.case.mechanism
-    slides = {sl.joint.name: sl for sl in fe.slides}
-    q_all = np.zeros((fe.ndof, rm.t.size))
-    for name in joints:
-        f = rm.drive_force(name)
-        if name in slides:
-            q_all[slides[name].dof] += f
-            continue
-        a, b = mech.joint_points(mech.joint(name))
-        db, da = fe.rotation_dof(b), fe.rotation_dof(a)
-        if db is not None:
-            q_all[db] += f
-        if da is not None:
-            q_all[da] -= f
-    return q_all
-
-
-def check_elastic_problem(fe: FEModel, rig0: np.ndarray, dof: int | None = None) -> None:
-    """Reject an elastic problem with zero-stiffness modes (an unconstrained mechanism motion);
-    ``dof`` the mechanism's degrees of freedom (at most that many joints can be left free with
-    'torque' on purpose)."""
-    if fe.nfree > 1500:  # a dense eigenvalue check would cost more than the run; skipped
-        return
-    # squared natural frequencies of M and the elastic K alone (the rigid sample's angle only): a
-    # zero-stiffness mode sits at round-off (~1e-16 of the largest), a real mode above (w_1/w_max)^2
-    # ~ 1e-10 even at 256 elements per link; K's own eigenvalues spread far more (axial vs bending)
-    try:
-        ev = fe.squared_frequencies(rig0[:, :, 0] * np.array([1, 0, 0, 0, 0])[:, None])
-    except np.linalg.LinAlgError:
-        turning = [p.name for p in fe.parts.values() if p.inertia == 0.0 and fe.free_of[p.dofs[2]] > 0]
-        if turning:
-            raise CaseError(f"bodies.{turning[0]}.inertia", "is 0 but the body can turn in the elastic problem of "
-                                                           "the superposition models (its joints leave its rotation "
-                                                           "free): give its rotary inertia about its centre of mass") from None
-        raise CaseError("links", "the mass matrix is not positive definite: every link needs density > 0 and area > 0") from None
-    scale = np.max(np.abs(ev))
-    nzero = int(np.sum(np.abs(ev) < 1e-13 * scale))
-    # a joint left free with 'torque' (a guided one with 'force') turns the mechanism's own degree of
-    # freedom into a zero-stiffness mode of the elastic problem, on purpose (theory.md section 14)
-    mech = fe.case.mechanism
-    released = sum(1 for j in mech.joints if mech.condition(j) in ("torque", "force"))
-    allowed = min(released, released if dof is None else dof)
-    if nzero > allowed:
-        raise CaseError("joints", f"the elastic problem has {nzero - allowed} unintended zero-stiffness mode(s): the joints leave the "
-                                  "mechanism free to move elastically; clamp the driven ground joint "
-                                  "(crank_pivot/base = 'clamp') or lock a joint")
 
 
 #: floats of frame data one chunk may hold (about 32 MB): bounds a chunk's frames on fine meshes
@@ -504,7 +430,7 @@ class Prepared:
             block = self.superposition_block(model, sol, rm, i0, out[:4], prev, acc, i1)
             lr = fe.last_run                    # the state at step i1: the next chunk continues from it
             state = {"u0": lr["u"], "v0": lr["v"], "a0": lr["a"], "p0": lr["p"]}
-            prev = _last_values(block, prev)
+            prev = last_values(block, prev)
             self.last_cpu = acc.cpu()
             yield block
 
@@ -523,7 +449,7 @@ class Prepared:
         rig_f = fe.rig_samples(rm, self.gravity, sel)
         u_all, v_all, a_all = fe.expand_state(uf, vf, af, rig_f)
         if sol["geometric_stiffness"] == "none":   # the axial forces of the linear solution, for outputs
-            nf = (fe.el_prop[3] / fe.el_prop[0])[:, None] * _axial_stretch(fe, u_all, motion_f)
+            nf = (fe.el_prop[3] / fe.el_prop[0])[:, None] * axial_stretch(fe, u_all, motion_f)
         reactions = ModelReactions(fe, model, rmf, rig_f, (u_all, v_all, a_all), sol, nf)
         z_ref = acc.deflection(rmf.t, lambda p: joint_at_joint(fe, rmf, p, 0, u_all))
         columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rmf, axial=nf,
@@ -539,10 +465,10 @@ class Prepared:
                      units={name: output_unit(sp, case) for name, sp in case["outputs"].items()}, fe=fe,
                      q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_all, v=v_all, a=a_all, rig=rig_f, nsteps=self.nsteps,
                      dt=self.dt, timing=acc.timing(), extra=extra, axial=nf, motion=motion_f, rigid=rmf,
-                     steps=i0 + oe * np.arange(uf.shape[1]), curvature_of=_superposition_curvature,
-                     node_curvatures_of=_superposition_node_curvatures,
+                     steps=i0 + oe * np.arange(uf.shape[1]), curvature_of=superposition_curvature,
+                     node_curvatures_of=superposition_node_curvatures,
                      reactions=reactions)
-        return _after(res, prev)
+        return after_first(res, prev)
 
     def _coupled_blocks(self, model: str):
         """The one-pass coupled model (one chord frame per flexible link) or the nonlinear co-rotational
@@ -585,7 +511,7 @@ class Prepared:
                 raise
             acc.add_time("kernel", t0, c0)
             block = self.coupled_block(cm, model, rm, cval, i0, (qf, vf, af, lf, ef), iters, prev, diag, acc, i1)
-            state, prev = cm.last_run, _last_values(block, prev)
+            state, prev = cm.last_run, last_values(block, prev)
             self.last_cpu = acc.cpu()
             yield block
 
@@ -611,7 +537,7 @@ class Prepared:
         for k, y in {"energy_kinetic": ef[0], "energy_potential": ef[1], "work_inputs": ef[2]}.items():
             columns[k], units[k] = y, "J"
         columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
-        columns.update(_drive_columns(cm, fr, units))
+        columns.update(drive_columns(cm, fr, units))
         for name, u in cm.control_outputs(qf.shape[1]).items():      # the feedback controllers' outputs
             joint = next(c["joint"] for c in case["controllers"] if c["name"] == name)
             columns[f"control_{name}"] = u
@@ -619,7 +545,7 @@ class Prepared:
         diag.add(fr, ef, rmf, iters, cval[:, :, idx])
         extra = {"integrator": integrator_summary(sol, model), "coupled": diag.summary(steps_done),
                  "step_alternation": cpl_out.multiplier_alternation(cm, alternating, lf,
-                                                                    rmf.t, _drive_column_joints(cm))}
+                                                                    rmf.t, drive_column_joints(cm))}
         rig_chord = np.asfortranarray(np.stack([fr.chord.phi, fr.chord.omega, fr.chord.alpha,
                                                 fr.chord.ax - self.gravity[0],
                                                 fr.chord.ay - self.gravity[1]]).transpose(0, 2, 1))
@@ -627,9 +553,9 @@ class Prepared:
                      q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_dev, v=np.zeros_like(u_dev), a=np.zeros_like(u_dev),
                      rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=acc.timing(), extra=extra, axial=axial,
                      motion=ref, rigid=rmf, steps=i0 + oe * np.arange(qf.shape[1]), state=qf,
-                     curvature_of=functools.partial(_coupled_curvature, cm),
+                     curvature_of=functools.partial(coupled_curvature, cm),
                      reactions=cpl_out.FrameReactions(cm, fr))
-        return _after(res, prev)
+        return after_first(res, prev)
 
     def report_mechanism(self, res: Result) -> None:
         """summary.json's ``mechanism`` entry (degrees of freedom, mode, the joints of q, how far the
@@ -647,104 +573,6 @@ class Prepared:
         res.extra["warning_kinds"] = {**notices.kinds_of(st.warnings, "mechanism"), **res.extra.get("warning_kinds", {})}
 
 
-class Accumulated:
-    """What a run's blocks carry accumulated: wall and CPU time of the rigid motion, the kernel's
-    samples and the kernel, geometric-stiffness iterations, the largest reaction residual."""
-
-    def __init__(self):
-        self.clock = dict.fromkeys(("rigid_s", "rigid_cpu_s", "samples_s", "samples_cpu_s", "kernel_s",
-                                    "kernel_cpu_s"), 0.0)
-        self.geo_iters = 0
-        self.reaction_residual = 0.0
-        self.deflection = None          # the run's DeflectionReference
-
-    def add_time(self, what: str, t0: float, c0: float) -> None:
-        self.clock[f"{what}_s"] += time.perf_counter() - t0
-        self.clock[f"{what}_cpu_s"] += time.thread_time() - c0
-
-    def timing(self) -> dict:
-        return {"rigid_s": self.clock["rigid_s"], "kernel_s": self.clock["kernel_s"]}
-
-    def cpu(self) -> dict:
-        return {"rigid_cpu_s": self.clock["rigid_cpu_s"], "kernel_cpu_s": self.clock["kernel_cpu_s"],
-                "rigid_samples_s": self.clock["samples_s"]}
-
-
-def _last_values(block: Result, prev: dict | None) -> dict | None:
-    """The last frame's value of every column (what the next block continues from)."""
-    if block.t.size == 0:
-        return prev
-    return {k: float(y[-1]) for k, y in block.columns.items()}
-
-
-def _after(res: Result, prev: dict | None) -> Result:
-    """A chunk's block without its first frame when a block came before (that frame is the previous
-    block's last, evaluated again: angle columns continue from it)."""
-    if prev is None:
-        return res
-    continue_angles(res.columns, prev)
-    return select_frames(res, slice(1, None))
-
-
-def _superposition_curvature(res: Result, li: int, frac: float) -> np.ndarray:
-    return link_curvature(res.fe, res.u, res.motion.phi[:, li], li, frac)
-
-
-def _superposition_node_curvatures(res: Result, li: int) -> np.ndarray:
-    return link_node_curvatures(res.fe, res.u, res.motion.phi[:, li], li)
-
-
-def _coupled_curvature(cm, res: Result, li: int, frac: float) -> np.ndarray:
-    return cpl_out.curvature(cm, res.state, li, frac)
-
-
-def _drive_column_joints(cm) -> dict:
-    """{column: joint} of the kinematic drives' extra columns: ``drive_torque`` (``drive_force`` on a
-    guided joint) for a single drive, ``drive_torque_<joint>`` for several; a name the case's
-    outputs already use is left to them."""
-    kin = [d for d in cm.case.mechanism.drives if d.kinematic]
-    out = {}
-    for d in kin:
-        angular = cm.case.mechanism.joint(d.joint).angular
-        name = ("drive_torque" if angular else "drive_force") + ("" if len(kin) == 1 else f"_{d.joint}")
-        if name not in cm.case["outputs"]:
-            out[name] = d.joint
-    return out
-
-
-def _drive_columns(cm, fr, units: dict) -> dict:
-    """The kinematic drives' torque (force on a guided joint) from the model's multipliers, as extra
-    columns (names: :func:`_drive_column_joints`)."""
-    out = {}
-    for name, joint in _drive_column_joints(cm).items():
-        out[name] = cpl_out.drive_force(cm, fr, joint)
-        units[name] = "N m" if cm.case.mechanism.joint(joint).angular else "N"
-    return out
-
-
-def integrator_summary(sol: dict, model: str) -> dict:
-    """summary.json's ``integrator`` entry: the name, its case parameter(s) and the kernel's
-    (am, af, beta, gamma), whether it is the model family's default (the case names none), and the
-    divergence limit [m]."""
-    integ = integrator_of(sol, model)
-    name = integ["integrator"]
-    am, af, beta, gamma = integrator_coefficients(name, integ)
-    params = {k: integ[k] for k in ("hht_alpha", "rho_inf") if k in integ}
-    return {"name": name, **params, "am": am, "af": af, "beta": beta, "gamma": gamma,
-            "default": "integrator" not in sol, "divergence_limit_m": sol.get("divergence_limit")}
-
-
-def _axial_stretch(fe, u_all, motion) -> np.ndarray:
-    """(nel, nf) elongation p2 - p1 [m] of every element in its link frame."""
-    out = np.empty((fe.nel, u_all.shape[1]))
-    for li in np.unique(fe.el_link) - 1:
-        els = fe.link_elements(li)
-        c, s = np.cos(motion.phi[:, li]), np.sin(motion.phi[:, li])
-        d = u_all[fe.el_dof[:, els] - 1]                   # (6, n, nf)
-        out[els] = (c * d[3] + s * d[4]) - (c * d[0] + s * d[1])
-    return out
-
-
 def simulate(case: dict, model: str | None = None, *, dt: float | None = None,
              elements_per_link: int | None = None, out_every: int | None = None) -> Result:
     """Run one case with one superposition model and return a :class:`Result`.
@@ -760,16 +588,3 @@ def simulate_models(case: dict, models=SUPERPOSITION_MODELS, **kw) -> dict:
     """Run several models of one case on one shared rigid motion: {model: Result}."""
     prep = Prepared(case, **kw)
     return {m: prep.run(m) for m in models}
-
-
-def with_elements(case: dict, n: int) -> dict:
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise CaseError("elements_per_link", f"must be a whole number >= 1, got {n!r}")
-    links = sum(1 for ln in case["links"] if not ln.get("rigid"))
-    check_elements(int(n) * links, links, field="--elements-per-link")   # before the mesh is made
-    c = copy.deepcopy(case)
-    c["mesh"]["elements_per_link"] = int(n)
-    for ln in c["links"]:
-        if not ln.get("rigid"):
-            ln["elements"] = int(n)
-    return c

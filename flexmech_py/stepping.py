@@ -34,7 +34,9 @@ from .mechanism.packing import force_constant_positions
 from .outputs import DeflectionReference
 from .results import Result
 from .mechanism.control import refuse_superposition
-from .simulate import Accumulated, Prepared, check_elastic_problem, elastic_torque_loads
+from .blocks import Accumulated
+from .simulate import Prepared
+from .superposition_loads import check_elastic_problem, elastic_torque_loads
 from .sizes import check_mesh
 
 __all__ = ["Simulation", "SimulationState", "RigidBuffer", "stepping_plan"]
