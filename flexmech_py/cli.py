@@ -32,11 +32,13 @@ Validity warnings go to stderr as ``flexmech: warning: ...`` lines.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
 from . import notices
+from .cli_accuracy import add_accuracy_parser, cmd_accuracy
+from .cli_args import (add_scheduler, batch_line, out_folder, positive_float, positive_int, report_failures,
+                       scheduler_of, warn, whole)
 from .cli_design import add_design_options, add_optimize_parser, design_analysis, print_design, write_design
 from .cli_fmu import add_fmu_parser, cmd_fmu
 from .cli_run import add_view_parser, cmd_draw, cmd_run, cmd_view
@@ -47,37 +49,11 @@ from .version import __version__
 __all__ = ["main"]
 
 
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
-    return v
-
-
-def _whole(lowest: int):
-    """argparse type: a whole number >= lowest."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-        if v < lowest:
-            raise argparse.ArgumentTypeError(f"must be >= {lowest}, got {text!r}")
-        return v
-    return parse
-
-
-_positive_int = _whole(1)
-
-
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="flexmech", description="Finite-element dynamics of flexible planar mechanisms.")
     p.add_argument("--version", action="version", version=f"flexmech {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_add_run_parsers, _add_compare_parsers, _add_draw_parsers, _add_sweep_parsers, _add_accuracy_parser,
+    for add in (_add_run_parsers, _add_compare_parsers, _add_draw_parsers, _add_sweep_parsers, add_accuracy_parser,
                 add_fmu_parser):
         add(sub)
     return p
@@ -92,8 +68,8 @@ def _add_run_parsers(sub) -> None:
     r.add_argument("--model", choices=MODEL_CHOICES,
                    help="model: a superposition load model, coupled, nonlinear, or auto (the cheapest one within "
                         "solver.tolerance; default: the case's solver.model, auto when it names none)")
-    r.add_argument("--dt", type=_positive_float, help="time step [s] (default: the case's solver.dt)")
-    r.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (default: the case's mesh)")
+    r.add_argument("--dt", type=positive_float, help="time step [s] (default: the case's solver.dt)")
+    r.add_argument("--elements-per-link", type=positive_int, help="beam elements per link (default: the case's mesh)")
     r.add_argument("--integrator", choices=INTEGRATORS,
                    help="time integrator (alias of --set solver.integrator=...; default: the case's, newmark)")
     r.add_argument("--rho-inf", type=float, metavar="X",
@@ -127,7 +103,7 @@ def _add_run_parsers(sub) -> None:
     rp.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
     rp.add_argument("--no-gap", action="store_true",
                     help="skip the comparison of the linear configurations with the nonlinear model (about a minute)")
-    rp.add_argument("--t-end", type=_positive_float, default=None,
+    rp.add_argument("--t-end", type=positive_float, default=None,
                     help="shorten every run to this many seconds (quick look; the seed's claims need the full runs)")
 
 
@@ -144,10 +120,10 @@ def _add_compare_parsers(sub) -> None:
     c.add_argument("--x", default="t", choices=("t", "crank_angle"), help="align by time or by (unwrapped) crank angle")
     c.add_argument("--columns", nargs="+", help="columns to compare (default: all in common)")
     c.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value (--models)")
-    c.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (--models)")
-    c.add_argument("--jobs", type=_positive_int, default=None,
+    c.add_argument("--elements-per-link", type=positive_int, help="beam elements per link (--models)")
+    c.add_argument("--jobs", type=positive_int, default=None,
                    help="worker processes for --models (default: every core)")
-    _add_scheduler(c)
+    add_scheduler(c)
     c.add_argument("--out", default=None, help="output folder (default: RESULT_DIR/compare, or ./compare)")
 
     st = sub.add_parser("stability", help="Floquet stability chart of a constant-speed case over crank speeds")
@@ -156,14 +132,14 @@ def _add_compare_parsers(sub) -> None:
     st.add_argument("--model", choices=MODELS, help="superposition model (default: the case's solver.model)")
     st.add_argument("--geometric", choices=("none", "quasi_static"),
                     help="geometric stiffness (default: the case's solver.geometric_stiffness)")
-    st.add_argument("--modes", type=_positive_int, default=4, help="frozen natural frequencies reported (default 4)")
-    st.add_argument("--jobs", type=_positive_int, default=None, help="worker processes (default: every core)")
+    st.add_argument("--modes", type=positive_int, default=4, help="frozen natural frequencies reported (default 4)")
+    st.add_argument("--jobs", type=positive_int, default=None, help="worker processes (default: every core)")
     st.add_argument("--resolution", type=float, default=None, metavar="R",
                     help="refine the speed grid down to R rad/s near region edges and peaks of |mu| (default: the "
                          "grid's median spacing / 16)")
-    st.add_argument("--refine-rounds", type=_whole(0), default=None, metavar="K",
+    st.add_argument("--refine-rounds", type=whole(0), default=None, metavar="K",
                     help="at most K refinement rounds after the grid (default 8; 0: the grid only)")
-    _add_scheduler(st)
+    add_scheduler(st)
     st.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
     st.add_argument("--out", default=None, help="output folder (default: results/<case name>-stability); "
                                                 "finished speeds are cached in OUT/cache")
@@ -184,9 +160,9 @@ def _add_draw_parsers(sub) -> None:
     """The "draw" and "modes" commands."""
     dr = sub.add_parser("draw", help="draw the mechanism at frames of a run written with `flexmech run --draw`")
     dr.add_argument("result", help="a folder written by `flexmech run --draw` (its shape.csv and summary.json)")
-    dr.add_argument("--frames", type=_positive_int, default=None,
+    dr.add_argument("--frames", type=positive_int, default=None,
                     help="panels (GIF: frames), spread over the frames kept (default 6; GIF: every frame kept)")
-    dr.add_argument("--scale", type=_positive_float, help="magnification of the elastic deflection "
+    dr.add_argument("--scale", type=positive_float, help="magnification of the elastic deflection "
                                                           "(default: its largest drawn as 10 %% of the mechanism)")
     dr.add_argument("--gif", action="store_true",
                     help="an animated GIF of the frames instead of a PNG of panels (default RESULT/drawing.gif)")
@@ -200,14 +176,14 @@ def _add_draw_parsers(sub) -> None:
     md.add_argument("--at", type=float, metavar="T", help="the instant [s] of the configuration (default 0)")
     md.add_argument("--crank-angle", type=float, metavar="A",
                     help="the configuration where the driven revolute joint first reaches A [deg] (mod 360)")
-    md.add_argument("--count", type=_positive_int, default=4, help="elastic modes to compute (default 4)")
+    md.add_argument("--count", type=positive_int, default=4, help="elastic modes to compute (default 4)")
     md.add_argument("--along-cycle", type=int, metavar="K",
                     help="also the frequencies at K positions over one cycle of the drive, with the crank "
                          "speed harmonics (CSV, JSON, PNG)")
     md.add_argument("--model", choices=MODELS, help="model (default: the case's solver.model)")
     md.add_argument("--geometric", choices=("none", "quasi_static"),
                     help="geometric stiffness of the superposition models (default: the case's)")
-    md.add_argument("--elements-per-link", type=_positive_int, help="beam elements per link (default: the case's mesh)")
+    md.add_argument("--elements-per-link", type=positive_int, help="beam elements per link (default: the case's mesh)")
     md.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
     md.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>-modes)")
     md.add_argument("--no-plots", action="store_true", help="do not write PNG drawings")
@@ -223,65 +199,22 @@ def _add_sweep_parsers(sub) -> None:
     sw.add_argument("--sample", action="append", default=[], metavar="KEY.PATH=DIST",
                     help="a sampled value instead of a grid: KEY.PATH=normal:MEAN:SD, uniform:LO:HI or "
                          "lognormal:MEAN:SD (repeat for several)")
-    sw.add_argument("--samples", type=_positive_int, default=None, metavar="N", help="number of samples (--sample)")
+    sw.add_argument("--samples", type=positive_int, default=None, metavar="N", help="number of samples (--sample)")
     sw.add_argument("--seed", type=int, default=0, metavar="S", help="random seed of the samples (default 0)")
     sw.add_argument("--method", choices=("lhs", "sobol", "random"), default="lhs",
                     help="sampling: Latin hypercube (default), scrambled Sobol' (N a power of 2) or plain random")
     sw.add_argument("--model", choices=MODELS, help="model (default: the case's solver.model)")
     sw.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value (all points)")
-    sw.add_argument("--jobs", type=_positive_int, default=None, help="worker processes (default: every core)")
-    _add_scheduler(sw)
+    sw.add_argument("--jobs", type=positive_int, default=None, help="worker processes (default: every core)")
+    add_scheduler(sw)
     sw.add_argument("--out", default=None, help="output folder (default: results/<case name>-sweep, or -samples); "
                                                 "finished runs are cached in OUT/cache")
     sw.add_argument("--no-plots", action="store_true", help="do not write samples.png (--sample)")
-    add_optimize_parser(sub, _add_scheduler, _positive_int)
+    add_optimize_parser(sub, add_scheduler, positive_int)
     b = sub.add_parser("bench", help="measure kernel, start-up, memory and solver costs (docs/performance.md)")
     b.add_argument("--quick", action="store_true", help="a reduced ladder (1..8 elements per link, fewer steps)")
     b.add_argument("--out", default="bench", help="output folder for the CSV files and bench.png (default: ./bench)")
     b.add_argument("--cases", default=None, help="folder holding the seed case files (default: the bundled ones)")
-
-
-def _add_scheduler(p) -> None:
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run on Dask: tcp://HOST:PORT of a running scheduler, or local:N for a LocalCluster of N "
-                        "processes (default: $FLEXMECH_SCHEDULER, else the local process pool; needs "
-                        "pip install 'flexmech[cluster]'; see docs/cluster.md)")
-
-
-def _scheduler(args):
-    """--scheduler, else $FLEXMECH_SCHEDULER unless --jobs asks for the local pool, else None (local pool)."""
-    if args.scheduler:
-        return args.scheduler
-    return None if args.jobs is not None else (os.environ.get("FLEXMECH_SCHEDULER") or None)
-
-
-def _batch_line(b, what: str = "runs") -> str:
-    return (f"{len(b.results)} {what} ({b.computed} computed, {b.cached} cached, {len(b.failed)} failed, "
-            f"{b.retries} retried) in {b.wall_s:.1f} s on {b.executor or f'{b.jobs} process(es)'}")
-
-
-def _report_failures(reasons, total: int, what: str = "runs") -> int:
-    """Each distinct failure reason with its count on stderr; the exit code (3 when any run failed)."""
-    if not reasons:
-        return 0
-    print(f"flexmech: error: {sum(n for _, n in reasons)} of {total} {what} failed (the others are kept):",
-          file=sys.stderr)
-    for reason, n in reasons:
-        print(f"  {n} x {reason}", file=sys.stderr)
-    return 3
-
-
-def _warn(messages) -> None:
-    for m in messages:
-        print(f"flexmech: warning: {m}", file=sys.stderr)
-
-
-def _out(args, suffix: str):
-    """--out as given (a string: an empty one is refused by the result folder), else
-    results/<case file stem>-<suffix> (the stem made a safe file name)."""
-    from .names import safe_name  # start-up: only this command loads it
-
-    return args.out if args.out is not None else Path("results") / f"{safe_name(Path(args.case).stem)}-{suffix}"
 
 
 def _cmd_stability(args) -> int:
@@ -291,14 +224,14 @@ def _cmd_stability(args) -> int:
 
     case = load_case(args.case, overrides=args.set)
     speeds = parse_range(args.speed, "--speed")
-    out = _out(args, "stability")
+    out = out_folder(args, "stability")
     model = study_model(args.model, case)
     geometric = args.geometric or case["solver"]["geometric_stiffness"]
     with ResultFolder(out, "stability") as rf:
         rows, runs = stability_chart(case, speeds, model=model, geometric=geometric, nmodes=args.modes, jobs=args.jobs,
                                      cache_dir=rf.out / "cache", resolution=args.resolution,
                                      refine_rounds=REFINE_ROUNDS if args.refine_rounds is None else args.refine_rounds,
-                                     scheduler=_scheduler(args))
+                                     scheduler=scheduler_of(args))
         paths, regions = _write_chart(rows, case, model, geometric, rf.stage, plots=not args.no_plots)
         rf.commit()
     return _report_chart(rows, runs, regions, [rf.where(p) for p in paths])
@@ -350,7 +283,7 @@ def _report_chart(rows, runs, regions, paths) -> int:
     for r in bad:
         speeds.setdefault(r["error"], []).append(f"{r['speed']:g}")
     reasons = sorted(((f"{e} (speeds {', '.join(v)} rad/s)", len(v)) for e, v in speeds.items()), key=lambda x: -x[1])
-    return _report_failures(reasons, len(rows), "speeds")
+    return report_failures(reasons, len(rows), "speeds")
 
 
 def _cmd_steady(args) -> int:
@@ -361,7 +294,7 @@ def _cmd_steady(args) -> int:
     case = load_case(args.case, overrides=args.set)
     pc = PeriodicCase(case, args.model, geometric=args.geometric)
     da = design_analysis(args, pc.case, pc.fe, steady=True)
-    with ResultFolder(_out(args, f"{pc.model}-steady"), "steady") as rf:
+    with ResultFolder(out_folder(args, f"{pc.model}-steady"), "steady") as rf:
         fr = floquet(pc)
         res = steady_state(pc, fr)
         if da is not None:
@@ -379,7 +312,7 @@ def _cmd_steady(args) -> int:
     print(f"period {pc.period:.6g} s in {pc.nsteps} steps; largest Floquet multiplier |mu| = {f['max_abs_multiplier']:.8g} "
           f"({'stable' if f['stable'] else 'UNSTABLE'}); cond(I - Phi) = {f['cond_I_minus_Phi']:.3g}; "
           f"periodicity residual {f['periodicity_residual']:.2g}")
-    _warn(res.extra.get("warnings", []))
+    warn(res.extra.get("warnings", []))
     print("wrote " + ", ".join(str(rf.where(p)) for p in paths))
     return 0
 
@@ -393,7 +326,7 @@ def _cmd_modes(args) -> int:
     kw = {"count": args.count, "model": args.model, "geometric": args.geometric,
           "elements_per_link": args.elements_per_link}
     ms = modes(case, at=args.at, crank_angle=args.crank_angle, **kw)
-    with ResultFolder(_out(args, f"{ms.model}-modes"), "modes") as rf:
+    with ResultFolder(out_folder(args, f"{ms.model}-modes"), "modes") as rf:
         al = frequencies_along(case, args.along_cycle, **kw) if args.along_cycle is not None else None
         paths = ms.write(rf.stage) + (al.write(rf.stage) if al is not None else [])
         if not args.no_plots:
@@ -421,12 +354,12 @@ def _cmd_sweep(args) -> int:
         raise FlexmechError("--samples: goes with --sample KEY.PATH=DIST, not with a --param grid")
     from .sweep import sweep  # start-up: only this command loads it
 
-    out = _out(args, "sweep")
+    out = out_folder(args, "sweep")
     sw = sweep(args.case, args.param, model=args.model, overrides=args.set, jobs=args.jobs, out_dir=out,
-               scheduler=_scheduler(args))
-    print(_batch_line(sw["batch"]))
+               scheduler=scheduler_of(args))
+    print(batch_line(sw["batch"]))
     print("wrote " + ", ".join(str(p) for p in sw["paths"]))
-    return _report_failures(sw["failures"], len(sw["rows"]))
+    return report_failures(sw["failures"], len(sw["rows"]))
 
 
 def _cmd_sample(args) -> int:
@@ -434,12 +367,12 @@ def _cmd_sample(args) -> int:
 
     if args.samples is None:
         raise FlexmechError("--samples: give the number of samples N with --sample, e.g. --samples 64")
-    out = _out(args, "samples")
+    out = out_folder(args, "samples")
     st = sample_study(args.case, args.sample, n=args.samples, seed=args.seed, method=args.method, model=args.model,
-                      overrides=args.set, jobs=args.jobs, out_dir=out, scheduler=_scheduler(args),
+                      overrides=args.set, jobs=args.jobs, out_dir=out, scheduler=scheduler_of(args),
                       plots=not args.no_plots)
-    _warn(st["warnings"])
-    print(_batch_line(st["batch"]))
+    warn(st["warnings"])
+    print(batch_line(st["batch"]))
     rank = {}
     for c in st["correlations"]:
         rank.setdefault(c["output"], []).append(c)
@@ -449,88 +382,7 @@ def _cmd_sample(args) -> int:
             print(f"{s['column']}: mean {s['mean']:.4g}, sd {s['sd']:.3g}, 5-95 % [{s['p5']:.4g}, {s['p95']:.4g}]; "
                   f"rank correlation {top}")
     print("wrote " + ", ".join(str(p) for p in st["paths"]))
-    return _report_failures(st["failures"], len(st["rows"]))
-
-
-def _csv_list(kind):
-    def parse(text: str) -> list:
-        try:
-            vals = [kind(x) for x in text.split(",") if x.strip()]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be a comma-separated list of {kind.__name__}s, got {text!r}") from None
-        if not vals:
-            raise argparse.ArgumentTypeError("must not be empty")
-        return vals
-    return parse
-
-
-def _add_accuracy_parser(sub) -> None:
-    a = sub.add_parser("accuracy", help="error against run time over a ladder of steps and meshes (docs/accuracy.md)")
-    a.add_argument("case", help="TOML case file")
-    a.add_argument("--models", type=_csv_list(str), default=None, metavar="M,M",
-                   help=f"models to study, comma-separated, or 'all' ({', '.join(MODELS)}; default: the case's solver.model)")
-    a.add_argument("--integrators", type=_csv_list(str), default=None, metavar="I,I",
-                   help="time integrators: case (the case's own, default), newmark[:BETA,GAMMA], hht[:ALPHA], "
-                        "generalized-alpha[:RHO_INF]")
-    a.add_argument("--dt-levels", type=_positive_int, default=5, metavar="K",
-                   help="time steps dt_0 * 2^k, k = 0..K-1, dt_0 <= the case's solver.dt (default 5)")
-    a.add_argument("--elements", type=_csv_list(int), default=[1, 2, 4, 8], metavar="N,N",
-                   help="mesh ladder, elements per link (default 1,2,4,8)")
-    a.add_argument("--grid", action="store_true", help="also run every (step, mesh) pair")
-    a.add_argument("--ref-dt-factor", type=_positive_int, default=4, metavar="F",
-                   help="reference step dt_0 / F, F a power of 2 (default 4)")
-    a.add_argument("--ref-elements", type=_positive_int, default=None, metavar="N",
-                   help="reference mesh, a multiple of 8 (default: 2 x the finest mesh, rounded up to a multiple of 8)")
-    a.add_argument("--columns", nargs="+", default=None, help="outputs compared (default: the strain and displacement outputs)")
-    a.add_argument("--tolerances", type=_csv_list(float), default=[0.1, 0.01, 0.001], metavar="E,E",
-                   help="relative errors for the cheapest-run table (default 0.1,0.01,0.001)")
-    a.add_argument("--repeat", type=_positive_int, default=1, metavar="R",
-                   help="time each run R times and keep the minimum kernel time (default 1)")
-    a.add_argument("--jobs", type=_positive_int, default=None, metavar="J",
-                   help="worker processes (default: every core; 1 for the least disturbed timings)")
-    _add_scheduler(a)
-    a.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
-                   help="cost of a run: CPU time (default; robust on a shared machine) or wall time of the kernel")
-    a.add_argument("--consistency", type=float, default=0.3,
-                   help="largest difference of successive observed orders for Richardson extrapolation (default 0.3)")
-    a.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
-    a.add_argument("--out", default=None, help="output folder (default: results/<case name>-accuracy); holds the resumable cache")
-    a.add_argument("--no-plots", action="store_true", help="do not write accuracy.png")
-    a.add_argument("--quiet", action="store_true", help="no progress bar")
-
-
-def _cmd_accuracy(args) -> int:
-    from .accuracy import accuracy_study  # start-up: only this command loads it
-
-    models = args.models
-    if models and [m.strip() for m in models] == ["all"]:
-        models = list(MODELS)
-    out = _out(args, "accuracy")
-    st = accuracy_study(args.case, overrides=args.set, models=models, integrators=args.integrators,
-                        dt_levels=args.dt_levels, elements=args.elements, grid=args.grid, ref_dt_factor=args.ref_dt_factor,
-                        ref_elements=args.ref_elements, columns=args.columns, tolerances=args.tolerances,
-                        repeat=args.repeat, jobs=args.jobs, out_dir=out, progress=not args.quiet,
-                        scheduler=_scheduler(args),
-                        consistency=args.consistency, plots=not args.no_plots, clock=args.clock)
-    b = st.batch
-    print(f"{b['runs']} runs ({b['computed']} computed, {b['cached']} cached, {b['failed']} failed, "
-          f"{b['retries']} retried) in {b['wall_s']:.1f} s on {b['executor']}")
-    for m, ref in st.reference.items():
-        for c, e in ref["columns"].items():
-            if "time" in e:
-                print(f"reference {m} {c}: Richardson time {'applied' if e['time']['applied'] else 'not applied'}, "
-                      f"space {'applied' if e['space']['applied'] else 'not applied'}; uncertainty {e['uncertainty_rel']:.1e}")
-            else:
-                print(f"reference {m} {c}: none ({e.get('reason', '')})")
-    for e in st.cheapest:
-        if e["column"] != "worst" and len(st.columns) > 1:
-            continue
-        what = (f"{e['integrator']}, dt {e['dt']:.3g} s, {e['elements_per_link']} elements/link: kernel "
-                f"{e['kernel_cpu_s']:.3g} s CPU, {e['kernel_s']:.3g} s wall, error {e['error']:.2g}") \
-            if "integrator" in e else e.get("note", "")
-        print(f"cheapest {e['model']} to {e['tolerance']:g} ({e['column']}): {what}")
-    print("wrote " + ", ".join(str(p) for p in st.paths))
-    return 0
+    return report_failures(st["failures"], len(st["rows"]))
 
 
 def _cmd_bench(args) -> int:
@@ -560,7 +412,7 @@ def _cmd_compare(args) -> int:
             raise FlexmechError(f"--model-list: unknown model(s) {', '.join(bad)}; choose from {', '.join(MODELS)}")
         out, runs, paths = compare_models(case, models, args.reference_model, x=args.x, columns=args.columns,
                                           out_dir="compare" if args.out is None else args.out, jobs=args.jobs,
-                                          scheduler=_scheduler(args))
+                                          scheduler=scheduler_of(args))
         for m, metrics in out.items():
             print(f"{m} against {args.reference_model} (kernel {runs[m].timing['kernel_s']:.3f} s):")
             print(table(metrics))
@@ -588,8 +440,8 @@ def _commands() -> dict:
 
     return {"run": cmd_run, "reproduce": _cmd_reproduce, "compare": _cmd_compare, "stability": _cmd_stability,
             "steady": _cmd_steady, "modes": _cmd_modes, "draw": cmd_draw, "view": cmd_view, "sweep": _cmd_sweep,
-            "bench": _cmd_bench, "accuracy": _cmd_accuracy, "fmu": cmd_fmu,
-            "optimize": lambda args: cmd_optimize(args, _scheduler(args))}
+            "bench": _cmd_bench, "accuracy": cmd_accuracy, "fmu": cmd_fmu,
+            "optimize": lambda args: cmd_optimize(args, scheduler_of(args))}
 
 
 def main(argv: list[str] | None = None) -> int:

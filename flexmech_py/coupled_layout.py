@@ -28,7 +28,7 @@ from .errors import CaseError
 from .mechanism.packing import drawn_coordinates, joint_pose
 from .mechanism.rows import CON_ANGLE, CON_POINT, CON_PROJECTION
 from .mesh import mesh_fractions, uniform_mesh
-from .model import rcm_free_numbering
+from .numbering import rcm_free_numbering
 
 __all__ = ["Layout", "SharedAngles", "Row", "JointModel", "LinkMesh", "CON_POINT", "CON_ANGLE",
            "CON_PROJECTION", "MK_GROUND", "MK_NODE", "MK_BODY", "mesh_node", "node_segment", "marker_key",

@@ -25,7 +25,7 @@ from collections import deque
 
 import numpy as np
 
-from .model import rcm_free_numbering
+from .numbering import rcm_free_numbering
 
 __all__ = ["bordered_numbering"]
 

@@ -28,7 +28,7 @@ LAYERS = [
               "signals", "folderlock", "sizes", "notices", "bundled", "kernels", "scales", "sections", "materials", "shaping"]),
     ("mechanism", ["mechanism.*"]),
     ("case", ["case", "definitions"]),
-    ("models", ["mesh", "slaving", "model", "reference", "reactions", "coupled_ordering", "coupled_layout", "coupled",
+    ("models", ["numbering", "mesh", "slaving", "model", "reference", "reactions", "coupled_ordering", "coupled_layout", "coupled",
                 "modal", "outputs", "superposition_loads", "coupled_outputs", "shapes", "motion_tap"]),
     ("checks", ["alternation", "ringing", "guards", "step_doubling", "probes", "mesh_error", "model_error",
                 "budget_text", "budget", "auto_model"]),
@@ -41,7 +41,7 @@ LAYERS = [
                  "seed_cases", "budget_study", "design_study", "optimize_problem", "optimize", "shaping_study",
                  "shaping_plot", "fmu", "fmu_slave"]),
     ("view", ["view", "view.*"]),
-    ("cli", ["cli_design", "cli_fmu", "cli_optimize", "cli_run", "cli", "__main__", ""]),
+    ("cli", ["cli_args", "cli_accuracy", "cli_design", "cli_fmu", "cli_optimize", "cli_run", "cli", "__main__", ""]),
 ]
 MAX_LAYERS = 12
 
@@ -60,7 +60,7 @@ LOCAL_IMPORTS_LEFT = {
 #: may only shrink until it is split (issue 26)
 MAX_FUNCTION_LINES, MAX_FILE_LINES = 80, 600
 LONG_FUNCTIONS: dict = {}
-LONG_FILES = {"cli": 617, "model": 601}
+LONG_FILES: dict = {}
 
 
 # --------------------------------------------------------------------------------------- the graph

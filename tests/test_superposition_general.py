@@ -12,7 +12,8 @@ import flexmech_py as fm
 from flexmech_py import kernels
 from flexmech_py.reactions import joint_equations, least_squares
 from flexmech_py.reference import newmark, slave_transformation
-from flexmech_py.simulate import Prepared, drive_loads
+from flexmech_py.simulate import Prepared
+from flexmech_py.superposition_loads import drive_loads
 
 MODELS = fm.SUPERPOSITION_MODELS
 
