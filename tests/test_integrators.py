@@ -22,6 +22,7 @@ from flexmech_py.case import integrator_coefficients
 from flexmech_py.cli import main
 from flexmech_py.coupled import CoupledModel
 from flexmech_py.errors import CaseError, SolverError
+from flexmech_py.mechanism.control import ControlPack
 from flexmech_py import kernels
 from flexmech_py.kernels import api, check_status
 from flexmech_py.simulate import Prepared
@@ -112,9 +113,10 @@ def cpl_steps(h, coef, u, v, p, nsteps=1):
     q, vv, a, pp = CPL_Q0.copy(), np.zeros(6), np.zeros(6), np.zeros(6)
     q[4], vv[4], pp[4] = u, v, p
     zeros3 = np.zeros((3, 1, nsteps + 1), order="F")
-    qf, vf, af, lf, _, ef, status, _, _, nvalid, _ = kernels.cpl.cpl_run(
+    ctl = ControlPack([], [], set(), h, {})      # no controller (a padding one with drive 0)
+    qf, vf, af, lf, _, ef, _, status, _, _, nvalid, _ = kernels.cpl.cpl_run(
         *CPL_SDOF, zeros3, 0.0, h, *coef, 1, 1e-14, 25, 0, 1e300, np.array([1], np.int32), q, vv, a, pp,
-        np.zeros(3))
+        np.zeros(3), ctl.cint, ctl.cpar, ctl.ctab_t, ctl.ctab_c, ctl.cst)
     check_status(status, "cpl_run")
     assert nvalid == nsteps + 1
     return qf[4], vf[4], (q[4], vv[4], a[4], pp[4])
