@@ -13,7 +13,7 @@ A run's warnings (``res.extra["warnings"]``) are issued as Python warnings of th
 (all ``fm.FlexmechWarning``, a ``UserWarning``): filter them with :mod:`warnings`.
 
 The bundled cases: ``fm.case_names()``, ``fm.case_path("fourbar_hac")``.  The compiled kernels are
-in :mod:`flexmech_py.kernels`.
+in :mod:`flexmech_py.base.kernels`.
 """
 
 import sys as _sys
@@ -41,17 +41,18 @@ def _installed_instead():
 
 
 _installed_instead()   # after a handover the imports below find the installed modules, already loaded
-from .version import __version__  # noqa: E402
+from .base.version import __version__  # noqa: E402
 
-from .bundled import case_names, case_path  # noqa: E402
+from .base.bundled import case_names, case_path  # noqa: E402
 from .case import Case, apply_overrides, load_case, validate_case  # noqa: E402
-from .errors import (AccuracyWarning, CaseError, FlexmechError, FlexmechWarning, Interrupted,  # noqa: E402
-                     MechanismError, MechanismWarning, SolverError, StabilityWarning, ValidityWarning)
-from .families import FAMILIES, MODELS, SUPERPOSITION_MODELS, Family, family  # noqa: E402
+from .base.errors import (AccuracyWarning, CaseError, FlexmechError, FlexmechWarning, Interrupted, MechanismError,  # noqa: E402
+                          MechanismWarning, SolverError, StabilityWarning, ValidityWarning)
+from .base.families import FAMILIES, MODELS, SUPERPOSITION_MODELS, Family, family  # noqa: E402
 from .mechanism import Mechanism  # noqa: E402
-from .simulate import simulate  # noqa: E402
+from .run.simulate import simulate  # noqa: E402
+from .run.stepping import Simulation  # noqa: E402
 
-__all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "Case", "Mechanism", "MODELS",
+__all__ = ["load_case", "validate_case", "apply_overrides", "simulate", "Simulation", "Case", "Mechanism", "MODELS",
            "SUPERPOSITION_MODELS", "FAMILIES", "Family", "family", "FlexmechError", "CaseError", "MechanismError", "SolverError", "Interrupted", "case_path",
            "case_names", "FlexmechWarning", "ValidityWarning", "AccuracyWarning", "MechanismWarning", "StabilityWarning",
            "__version__"]

@@ -5,7 +5,7 @@ filled in, every value checked; what ``summary.json`` records) whose ``mechanism
 :class:`~flexmech_py.mechanism.Mechanism` it describes.  The schema is documented in
 ``docs/cases.md``: the mechanism's tables (links, bodies, joints, drives; or a template in its short
 form, expanded by :mod:`flexmech_py.mechanism.templates`), the mesh, lumped inertias, loads, the
-solver and the outputs.  Every error is a :class:`~flexmech_py.errors.CaseError` naming the field
+solver and the outputs.  Every error is a :class:`~flexmech_py.base.errors.CaseError` naming the field
 and the fix.
 """
 
@@ -17,18 +17,18 @@ import math
 import numbers
 from pathlib import Path
 
-from . import validate as v
-from .bundled import resolve_case_path
-from .errors import CaseError
-from .families import (AUTO, DEFAULT_INTEGRATORS, MODEL_CHOICES, MODELS, RHO_INF_DEFAULT, STUDY_MODEL,
-                       SUPERPOSITION_MODELS, family)
-from .inputs import read_text
+from .base import validate as v
+from .base.bundled import resolve_case_path
+from .base.errors import CaseError
+from .base.families import (AUTO, DEFAULT_INTEGRATORS, MODEL_CHOICES, MODELS, RHO_INF_DEFAULT, STUDY_MODEL,
+                            SUPERPOSITION_MODELS, family)
+from .base.inputs import read_text
 from .mechanism import mechanism_from_spec
 from .mechanism.control import check_controllers
 from .mechanism.schema import derived_keys, mechanism_spec
 from .mechanism.templates import expand_template
-from .sizes import check_elements, check_mesh
-from .tomlfile import dumps_toml
+from .base.sizes import check_elements, check_mesh
+from .base.tomlfile import dumps_toml
 
 try:  # Python >= 3.11
     import tomllib
@@ -456,7 +456,7 @@ def _shallow(value, where: str):
 
 def load_case(path, overrides: list[str] | None = None) -> dict:
     """Read, override (``KEY.PATH=VALUE`` strings) and validate a TOML case file (a path, or the name of
-    a bundled case when no such file exists here: :func:`flexmech_py.bundled.resolve_case_path`)."""
+    a bundled case when no such file exists here: :func:`flexmech_py.base.bundled.resolve_case_path`)."""
     path = resolve_case_path(path)
     raw = read_case_file(path)
     if overrides:

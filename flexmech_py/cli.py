@@ -35,16 +35,16 @@ import argparse
 import sys
 from pathlib import Path
 
-from . import notices
+from .base import notices
 from .cli_accuracy import add_accuracy_parser, cmd_accuracy
 from .cli_args import (add_scheduler, batch_line, out_folder, positive_float, positive_int, report_failures,
                        scheduler_of, warn, whole)
 from .cli_design import add_design_options, add_optimize_parser, design_analysis, print_design, write_design
 from .cli_fmu import add_fmu_parser, cmd_fmu
 from .cli_run import add_view_parser, cmd_draw, cmd_run, cmd_view
-from .errors import FlexmechError
-from .families import MODEL_CHOICES, MODELS, large_deflection_reference
-from .version import __version__
+from .base.errors import FlexmechError
+from .base.families import MODEL_CHOICES, MODELS, large_deflection_reference
+from .base.version import __version__
 
 __all__ = ["main"]
 
@@ -219,8 +219,8 @@ def _add_sweep_parsers(sub) -> None:
 
 def _cmd_stability(args) -> int:
     from .case import load_case, study_model  # start-up: only this command loads it
-    from .floquet import REFINE_ROUNDS, parse_range, stability_chart  # start-up: only this command loads it
-    from .outdir import ResultFolder  # start-up: only this command loads it
+    from .studies.floquet import REFINE_ROUNDS, parse_range, stability_chart  # start-up: only this command loads it
+    from .run.outdir import ResultFolder  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set)
     speeds = parse_range(args.speed, "--speed")
@@ -239,8 +239,8 @@ def _cmd_stability(args) -> int:
 
 def _write_chart(rows, case, model, geometric, folder: Path, plots: bool):
     """stability.csv, stability_regions.csv and stability.png of a chart; (paths, regions)."""
-    from .floquet import STABLE_RATE, write_stability_csv  # start-up: only this command loads it
-    from .regions import unstable_regions, write_regions_csv  # start-up: only this command loads it
+    from .studies.floquet import STABLE_RATE, write_stability_csv  # start-up: only this command loads it
+    from .studies.regions import unstable_regions, write_regions_csv  # start-up: only this command loads it
 
     head = (f"case {case['case']['title']!r}; model {model}; geometric_stiffness {geometric}; "
             f"rayleigh {list(case['solver']['rayleigh'])}; dt <= {case['solver']['dt']:g} s; average acceleration; "
@@ -250,7 +250,7 @@ def _write_chart(rows, case, model, geometric, folder: Path, plots: bool):
     write_stability_csv(rows, paths[0], head)
     write_regions_csv(regions, paths[1], head)
     if plots:
-        from .study_plots import plot_stability  # start-up: only this command loads it
+        from .figures.study_plots import plot_stability  # start-up: only this command loads it
 
         p = plot_stability(rows, folder / "stability.png", regions=regions, stable_rate=STABLE_RATE,
                            title=f"{case['case']['title']}\nmodel {model}, geometric stiffness {geometric}, "
@@ -264,8 +264,8 @@ def _report_chart(rows, runs, regions, paths) -> int:
     multiplier type, failed speeds (exit code 3), the files written."""
     import math
 
-    from .floquet import STABLE_RATE  # start-up: only this command loads it
-    from .regions import describe_region  # start-up: only this command loads it
+    from .studies.floquet import STABLE_RATE  # start-up: only this command loads it
+    from .studies.regions import describe_region  # start-up: only this command loads it
 
     bad = [r for r in rows if "error" in r]
     digits = max(0, math.ceil(0.5 - math.log10(runs.resolution))) if runs.resolution else 1
@@ -288,8 +288,8 @@ def _report_chart(rows, runs, regions, paths) -> int:
 
 def _cmd_steady(args) -> int:
     from .case import load_case  # start-up: only this command loads it
-    from .floquet import PeriodicCase, floquet, steady_state  # start-up: only this command loads it
-    from .outdir import ResultFolder  # start-up: only this command loads it
+    from .studies.floquet import PeriodicCase, floquet, steady_state  # start-up: only this command loads it
+    from .run.outdir import ResultFolder  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set)
     pc = PeriodicCase(case, args.model, geometric=args.geometric)
@@ -302,7 +302,7 @@ def _cmd_steady(args) -> int:
         design_paths = write_design(da, res, rf.stage, plots=not args.no_plots) if da is not None else []
         paths = res.write(rf.stage) + design_paths
         if not args.no_plots:
-            from .plots import plot_result  # start-up: only this command loads it
+            from .figures.plots import plot_result  # start-up: only this command loads it
 
             paths += plot_result(res, rf.stage)
         rf.commit()
@@ -319,8 +319,8 @@ def _cmd_steady(args) -> int:
 
 def _cmd_modes(args) -> int:
     from .case import load_case  # start-up: only this command loads it
-    from .modes import frequencies_along, modes  # start-up: only this command loads it
-    from .outdir import ResultFolder  # start-up: only this command loads it
+    from .studies.modes import frequencies_along, modes  # start-up: only this command loads it
+    from .run.outdir import ResultFolder  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set)
     kw = {"count": args.count, "model": args.model, "geometric": args.geometric,
@@ -330,7 +330,7 @@ def _cmd_modes(args) -> int:
         al = frequencies_along(case, args.along_cycle, **kw) if args.along_cycle is not None else None
         paths = ms.write(rf.stage) + (al.write(rf.stage) if al is not None else [])
         if not args.no_plots:
-            from .drawing import draw_modes, plot_along  # start-up: only this command loads it
+            from .figures.drawing import draw_modes, plot_along  # start-up: only this command loads it
 
             paths += [p for p in (draw_modes(rf.stage / "mode_shapes.png", ms),
                                   plot_along(rf.stage / "frequencies_along.png", al) if al is not None else None) if p]
@@ -352,7 +352,7 @@ def _cmd_sweep(args) -> int:
         return _cmd_sample(args)
     if args.samples is not None:
         raise FlexmechError("--samples: goes with --sample KEY.PATH=DIST, not with a --param grid")
-    from .sweep import sweep  # start-up: only this command loads it
+    from .studies.sweep import sweep  # start-up: only this command loads it
 
     out = out_folder(args, "sweep")
     sw = sweep(args.case, args.param, model=args.model, overrides=args.set, jobs=args.jobs, out_dir=out,
@@ -363,7 +363,7 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_sample(args) -> int:
-    from .sampling import sample_study  # start-up: only this command loads it
+    from .studies.sampling import sample_study  # start-up: only this command loads it
 
     if args.samples is None:
         raise FlexmechError("--samples: give the number of samples N with --sample, e.g. --samples 64")
@@ -386,7 +386,7 @@ def _cmd_sample(args) -> int:
 
 
 def _cmd_bench(args) -> int:
-    from .bench import report, run_bench  # start-up: only this command loads it
+    from .studies.bench import report, run_bench  # start-up: only this command loads it
 
     res = run_bench(args.out, quick=args.quick, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True))
     print(report(res))
@@ -395,7 +395,7 @@ def _cmd_bench(args) -> int:
 
 
 def _cmd_compare(args) -> int:
-    from .compare import compare_models, compare_result_dir, table  # start-up: only this command loads it
+    from .studies.compare import compare_models, compare_result_dir, table  # start-up: only this command loads it
 
     if args.models:
         from .case import load_case  # start-up: only this command loads it
@@ -427,7 +427,7 @@ def _cmd_compare(args) -> int:
 
 
 def _cmd_reproduce(args) -> int:
-    from .reproduce import reproduce  # start-up: only this command loads it
+    from .studies.reproduce import reproduce  # start-up: only this command loads it
 
     report = reproduce(args.out, cases_dir=args.cases, progress=lambda msg: print(msg, flush=True), t_end=args.t_end,
                        gap=not args.no_gap)
@@ -445,8 +445,8 @@ def _commands() -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .errors import one_line, signal_words  # start-up: only this command loads it
-    from .signals import exit_code, stop_on_signals  # start-up: only this command loads it
+    from .base.errors import one_line, signal_words  # start-up: only this command loads it
+    from .base.signals import exit_code, stop_on_signals  # start-up: only this command loads it
 
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from .cli_args import add_scheduler, csv_list, out_folder, positive_int, scheduler_of
-from .families import MODELS
+from .base.families import MODELS
 
 __all__ = ["add_accuracy_parser", "cmd_accuracy"]
 
@@ -44,7 +44,7 @@ def add_accuracy_parser(sub) -> None:
 
 
 def cmd_accuracy(args) -> int:
-    from .accuracy import accuracy_study  # start-up: only this command loads it
+    from .studies.accuracy import accuracy_study  # start-up: only this command loads it
 
     models = args.models
     if models and [m.strip() for m in models] == ["all"]:

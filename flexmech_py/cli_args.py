@@ -9,7 +9,7 @@ import os
 import sys
 from pathlib import Path
 
-from .names import safe_name
+from .base.names import safe_name
 
 __all__ = ["positive_float", "whole", "positive_int", "csv_list", "add_scheduler", "scheduler_of", "batch_line",
            "report_failures", "warn", "out_folder"]

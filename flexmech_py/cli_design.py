@@ -12,14 +12,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .design import DesignAnalysis, design_lines, parse_window
-from .design_plots import plot_stress_envelope
-from .fatigue import CORRECTIONS
+from .strength.analysis import DesignAnalysis, design_lines, parse_window
+from .figures.design_plots import plot_stress_envelope
+from .strength.fatigue import CORRECTIONS
 
 __all__ = ["add_design_options", "add_optimize_parser", "design_analysis", "write_design", "print_design",
            "OPTIMIZE_METHODS"]
 
-#: the optimizers of ``flexmech optimize`` (flexmech_py.optimize.METHODS; here without importing SciPy's)
+#: the optimizers of ``flexmech optimize`` (flexmech_py.studies.optimize.METHODS; here without importing SciPy's)
 OPTIMIZE_METHODS = ("slsqp", "differential-evolution")
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from .case import load_case
-from .families import MODELS
+from .base.families import MODELS
 from .fmu import export_fmu
 
 

@@ -1,6 +1,6 @@
 """The ``flexmech optimize`` command (its options: :func:`flexmech_py.cli_design.add_optimize_parser`;
-the optimizer: :mod:`flexmech_py.optimize`).  Exit codes: 0 a feasible optimum, 4
-(:data:`~flexmech_py.optimize.EXIT_INFEASIBLE`) no feasible design within the bounds (the least
+the optimizer: :mod:`flexmech_py.studies.optimize`).  Exit codes: 0 a feasible optimum, 4
+(:data:`~flexmech_py.studies.optimize.EXIT_INFEASIBLE`) no feasible design within the bounds (the least
 infeasible one is written, marked), 2 bad input, 3 when a design's run failed at the start."""
 
 from __future__ import annotations
@@ -10,14 +10,14 @@ import sys
 from pathlib import Path
 
 from .case import SUPERPOSITION_MODELS, validate_case
-from .design import crank_period
-from .design_plots import plot_convergence
-from .errors import CaseError
-from .optimize import EXIT_INFEASIBLE, optimize, optimum_case_text, write_outputs
-from .optimize_problem import Problem, parse_constraint, parse_vary
-from .outdir import ResultFolder
-from .parallel import using_executor
-from .sweep import load_base
+from .strength.analysis import crank_period
+from .figures.design_plots import plot_convergence
+from .base.errors import CaseError
+from .studies.optimize import EXIT_INFEASIBLE, optimize, optimum_case_text, write_outputs
+from .studies.optimize_problem import Problem, parse_constraint, parse_vary
+from .run.outdir import ResultFolder
+from .run.parallel import using_executor
+from .studies.sweep import load_base
 
 __all__ = ["cmd_optimize"]
 

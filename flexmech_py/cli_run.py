@@ -1,7 +1,7 @@
 """The ``flexmech run`` and ``flexmech draw`` commands (their options: :mod:`flexmech_py.cli`).
 
-A run streams its frames into the staging folder of a :class:`~flexmech_py.outdir.ResultFolder`
-(:class:`~flexmech_py.runner.FileSink`), writes its drawing and plots there, and puts them all in
+A run streams its frames into the staging folder of a :class:`~flexmech_py.run.outdir.ResultFolder`
+(:class:`~flexmech_py.run.runner.FileSink`), writes its drawing and plots there, and puts them all in
 place of the folder's earlier run only when it completed.  A run that stops (a solver failure, a
 singular position, Ctrl-C, SIGTERM, SIGHUP, a full disk) writes the frames so far, marked, and
 leaves the earlier run untouched (docs/cli.md, "What is left on disk").
@@ -13,10 +13,10 @@ import sys
 from pathlib import Path
 
 from .cli_design import design_analysis, print_design, write_design
-from .errors import FlexmechError, Interrupted, MechanismError, OutputError, SolverError
-from .names import safe_name
-from .outdir import ResultFolder, claim
-from .signals import exit_code
+from .base.errors import FlexmechError, Interrupted, MechanismError, OutputError, SolverError
+from .base.names import safe_name
+from .run.outdir import ResultFolder, claim
+from .base.signals import exit_code
 
 __all__ = ["cmd_run", "cmd_draw", "cmd_view", "add_view_parser", "integrator_overrides", "MAX_PANELS"]
 
@@ -46,8 +46,8 @@ def integrator_overrides(args) -> list[str]:
 def _shapes(args, prep):
     """The ShapeCollector of ``--draw N`` and ``--view`` (None without either); its frames' memory
     checked first.  ``--view`` keeps as many frames as the page holds (flexmech_py.view.decimate)."""
-    from .shapes import ShapeCollector, body_points  # start-up: only this command loads it
-    from .sizes import check_count, format_count  # start-up: only this command loads it
+    from .models.shapes import ShapeCollector, body_points  # start-up: only this command loads it
+    from .base.sizes import check_count, format_count  # start-up: only this command loads it
     from .view.decimate import frames_for, kept_points  # start-up: only this command loads it
 
     if args.draw is not None and args.draw < 2:
@@ -66,9 +66,9 @@ def _shapes(args, prep):
 
 def cmd_run(args) -> int:
     from .case import load_case  # start-up: only this command loads it
-    from .progress import RunProgress  # start-up: only this command loads it
-    from .runner import FileSink, execute  # start-up: only this command loads it
-    from .simulate import Prepared  # start-up: only this command loads it
+    from .base.progress import RunProgress  # start-up: only this command loads it
+    from .run.runner import FileSink, execute  # start-up: only this command loads it
+    from .run.simulate import Prepared  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set + integrator_overrides(args))
     prep = Prepared(case, dt=args.dt, elements_per_link=args.elements_per_link)
@@ -114,7 +114,7 @@ def _extras(res, shapes, sink, stage: Path, plots: bool, design=None, draw: bool
     if shapes is not None:
         paths += _write_drawing(res, shapes.result(), stage, plots=plots and draw)
     if plots:
-        from .plots import plot_result  # start-up: only this command loads it
+        from .figures.plots import plot_result  # start-up: only this command loads it
 
         paths += plot_result(res.plot_view(), stage)
     page = [stage / "view.html"] if view else []
@@ -130,7 +130,7 @@ def _extras(res, shapes, sink, stage: Path, plots: bool, design=None, draw: bool
 
 def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
     """shape.csv (the points kept by ``run --draw``) and, with plots, drawing.png."""
-    from .shapes import spread, write_shape_csv  # start-up: only this command loads it
+    from .models.shapes import spread, write_shape_csv  # start-up: only this command loads it
 
     head = [f"flexmech run --draw/--view; case {res.case['case']['title']!r}; model {res.model}",
             "per frame (index, t [s]) every drawn point: x, y its rigid position [m]; dx, dy its elastic "
@@ -138,7 +138,7 @@ def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
             "curvature at its nodes [1/m]"]
     paths = [write_shape_csv(out / "shape.csv", sf, head, key="t")]
     if plots:
-        from .drawing import draw_frames  # start-up: only this command loads it
+        from .figures.drawing import draw_frames  # start-up: only this command loads it
 
         p, _ = draw_frames(out / "drawing.png", sf, res.case.mechanism, spread(sf.key.size, MAX_PANELS),
                            title=f"{res.case['case']['title']} - model {res.model}")
@@ -148,7 +148,7 @@ def _write_drawing(res, sf, out: Path, plots: bool) -> list[Path]:
 
 def _run_cost(prep, model: str, sink) -> str:
     """The words of a run's cost line: steps, DOFs, the size of timeseries.csv."""
-    from .sizes import format_bytes  # start-up: only this command loads it
+    from .base.sizes import format_bytes  # start-up: only this command loads it
 
     dofs = prep.coupled[model].ndof if model in prep.coupled else prep.fe.nfree
     return (f"{prep.nsteps:,} steps of {dofs} DOFs, {prep.frames:,} frames, about "
@@ -197,7 +197,7 @@ def _draw_input(folder: Path):
     import json
 
     from .case import Case  # start-up: only this command loads it
-    from .shapes import read_shape_csv  # start-up: only this command loads it
+    from .models.shapes import read_shape_csv  # start-up: only this command loads it
 
     if not (folder / "shape.csv").is_file():
         raise FlexmechError(f"{folder}: no shape.csv there; write one with `flexmech run CASE --draw --out {folder}`")
@@ -211,8 +211,8 @@ def _draw_input(folder: Path):
 
 
 def cmd_draw(args) -> int:
-    from .drawing import animate_frames, draw_frames  # start-up: only this command loads it
-    from .shapes import spread  # start-up: only this command loads it
+    from .figures.drawing import animate_frames, draw_frames  # start-up: only this command loads it
+    from .models.shapes import spread  # start-up: only this command loads it
 
     folder = Path(args.result)
     sf, case, summary = _draw_input(folder)
@@ -242,7 +242,7 @@ def add_view_parser(sub) -> None:
 
 
 def cmd_view(args) -> int:
-    from .sizes import format_bytes  # start-up: only this command loads it
+    from .base.sizes import format_bytes  # start-up: only this command loads it
     from .view import write_view  # start-up: only this command loads it
 
     info = write_view(args.result, args.out)

@@ -1,12 +1,12 @@
 """Which outputs mean the same quantity in two models (docs/theory.md section 8.1): every output kind
 has one definition in every model family, except where the families' premises make two values of it
 different things.  Used by ``flexmech compare --models`` (its marks) and by the error budget's model
-part (:mod:`flexmech_py.model_error`: a difference of unlike quantities is no model error).
+part (:mod:`flexmech_py.checks.model_error`: a difference of unlike quantities is no model error).
 """
 
 from __future__ import annotations
 
-from .families import family
+from .base.families import family
 
 __all__ = ["definition_notes", "rigid_in_superposition", "JOINT_OUTPUT_KINDS"]
 

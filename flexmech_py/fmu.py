@@ -1,6 +1,6 @@
 """A case exported as an FMI 2.0 co-simulation unit (``flexmech fmu``; docs/cli.md, docs/api.md).
 
-:func:`export_fmu` checks the unit's inputs and outputs on a :class:`~flexmech_py.stepping.Simulation`
+:func:`export_fmu` checks the unit's inputs and outputs on a :class:`~flexmech_py.run.stepping.Simulation`
 of the case, then packs with PythonFMU (the optional extra ``flexmech[fmi]``) the slave
 (:mod:`flexmech_py.fmu_slave`), the resolved case and a description of the unit into one ``.fmu``
 file, written whole or not at all.  The unit runs wherever Python and flexmech are installed: its
@@ -16,12 +16,12 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from .version import __version__
+from .base.version import __version__
 from .case import Case
-from .errors import CaseError, FlexmechError
-from .families import MODELS
-from .outdir import ResultFolder
-from .stepping import Simulation
+from .base.errors import CaseError, FlexmechError
+from .base.families import MODELS
+from .run.outdir import ResultFolder
+from .run.stepping import Simulation
 
 __all__ = ["export_fmu", "FmuInfo", "MISSING_EXTRA"]
 

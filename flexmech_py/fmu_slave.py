@@ -6,7 +6,7 @@ Python and flexmech must be installed.  Its resources also hold the case (``case
 case written by :meth:`~flexmech_py.case.Case.write`) and ``flexmech_fmu.json`` (the model, the
 inputs, the outputs and their units).
 
-The unit is a :class:`~flexmech_py.stepping.Simulation` of the case: its inputs ``effort.<joint>``
+The unit is a :class:`~flexmech_py.run.stepping.Simulation` of the case: its inputs ``effort.<joint>``
 are the efforts of force-driven joints [N m or N], held over each communication step (zero-order
 hold); its outputs are the case's outputs at the end of the step.  A communication step must be a
 whole number of the case's steps ``solver.dt`` and must start where the last one ended; time runs
@@ -29,10 +29,10 @@ from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 
-from flexmech_py.version import __version__
+from flexmech_py.base.version import __version__
 from flexmech_py.case import load_case
-from flexmech_py.errors import FlexmechError
-from flexmech_py.stepping import Simulation
+from flexmech_py.base.errors import FlexmechError
+from flexmech_py.run.stepping import Simulation
 
 #: the unit's description of itself, beside the case in its resources
 SPEC_NAME = "flexmech_fmu.json"

@@ -70,7 +70,7 @@ class Outcome:
 
 # ----------------------------------------------------------------------------- input files
 def _bundled(name: str) -> str:
-    from flexmech_py.bundled import case_path
+    from flexmech_py.base.bundled import case_path
 
     return case_path(name).read_text(encoding="utf-8")
 
@@ -521,7 +521,7 @@ def preload(folder: Path) -> None:
     forked (each then starts at once)."""
     global RUN_TEMPLATE
     import flexmech_py.cli  # noqa: F401
-    import flexmech_py.simulate  # noqa: F401
+    import flexmech_py.run.simulate  # noqa: F401
 
     (folder / "template").mkdir()
     _run_folder(folder / "template")

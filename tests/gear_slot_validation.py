@@ -10,7 +10,7 @@ import numpy as np
 
 import flexmech_py as fm
 from flexmech_py.mechanism import MotionSource, prepare_motion
-from flexmech_py.modes import modes
+from flexmech_py.studies.modes import modes
 
 import test_gear_slot as t
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 import flexmech_py as fm
-from flexmech_py.simulate import simulate_models
+from flexmech_py.run.simulate import simulate_models
 
 ROOT = Path(__file__).resolve().parents[1]
 COLUMNS = {"fourbar_hac": ["crank_angle", "crank_speed", "strain_coupler_mid", "strain_follower_mid", "load_norm"],

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from flexmech_py.accuracy import accuracy_study, parse_integrators, richardson, successive_orders
+from flexmech_py.studies.accuracy import accuracy_study, parse_integrators, richardson, successive_orders
 from flexmech_py.case import CaseError
 from flexmech_py.cli import main
 

@@ -11,8 +11,8 @@ from numpy.polynomial import Polynomial
 from scipy.optimize import brentq
 
 import flexmech_py as fm
-from flexmech_py import kernels
-from flexmech_py.model import FEModel
+from flexmech_py.base import kernels
+from flexmech_py.models.superposition.model import FEModel
 
 OMEGA = np.array([[0.0, -1.0], [1.0, 0.0]])
 RNG_SEED = 20240611

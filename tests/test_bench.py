@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import bench, bench_exudyn, reference
+from flexmech_py.studies import bench, bench_exudyn
+from flexmech_py.models.superposition import reference
 from flexmech_py.cli import main
-from flexmech_py.simulate import Prepared
+from flexmech_py.run.simulate import Prepared
 
 
 def _runnable_cases(src, dst):

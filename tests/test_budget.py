@@ -1,8 +1,8 @@
-"""The error budget of every run and ``model = "auto"`` (flexmech_py/budget.py, auto_model.py; docs/theory.md
+"""The error budget of every run and ``model = "auto"`` (flexmech_py/checks/budget.py, auto_model.py; docs/theory.md
 section 21, docs/validation.md "Error budget"), at reduced size: the estimates track the true errors, the
 worst column is never a negligible one, the warning names the part that dominates and the setting that cuts
 it, auto escalates on a fast mechanism and stays cheap on a slow one, and streaming stays bounded.
-Full-size validation: python -m flexmech_py.budget_study."""
+Full-size validation: python -m flexmech_py.studies.budget_study."""
 
 from pathlib import Path
 
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import budget, mesh_error, scales
-from flexmech_py.budget_text import quote, significant_digits
+from flexmech_py.checks import budget, mesh_error, scales
+from flexmech_py.checks.budget_text import quote, significant_digits
 from flexmech_py.cli import main
-from flexmech_py.probes import Probe
-from flexmech_py.simulate import Prepared
-from flexmech_py.step_doubling import error_estimate
+from flexmech_py.checks.probes import Probe
+from flexmech_py.run.simulate import Prepared
+from flexmech_py.checks.step_doubling import error_estimate
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 

@@ -83,8 +83,8 @@ def test_zero_stiffness_check_on_fine_meshes(cases_dir, n):
     """The check compares squared natural frequencies (K x = w^2 M x), not K's own eigenvalues, whose
     axial-to-bending spread on short elements once made it reject the seed four-bar at 32 elements
     per link; a free crank pivot is still caught."""
-    from flexmech_py.simulate import Prepared
-    from flexmech_py.superposition_loads import check_elastic_problem
+    from flexmech_py.run.simulate import Prepared
+    from flexmech_py.models.superposition.loads import check_elastic_problem
 
     ok = Prepared(fm.load_case(cases_dir / "fourbar_hac.toml", overrides=["solver.t_end=1e-4"]), elements_per_link=n)
     check_elastic_problem(ok.fe, ok.rig)
@@ -146,7 +146,7 @@ def test_rotary_inertia_at_any_node_fraction(cases_dir, at, turns_with):
     """A rotary inertia at a fraction of a link that is a mesh node (0.25 with 4 elements) sits on that
     node's rotation of the link it turns with (it was refused: "link 'coupler' does not pass through
     'coupler.0.25'"), as at a named point; its J counts in the link's rigid inertia."""
-    from flexmech_py.model import FEModel
+    from flexmech_py.models.superposition.model import FEModel
 
     spec = f'{{at = "{at}", inertia = 2e-5' + (f', turns_with = "{turns_with}"}}' if turns_with else "}")
     case = fm.load_case(cases_dir / "fourbar_hac.toml",

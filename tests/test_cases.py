@@ -11,7 +11,7 @@ import pytest
 
 import flexmech_py as fm
 from flexmech_py.case import SUPERPOSITION_MODELS
-from flexmech_py.simulate import Prepared, simulate_models
+from flexmech_py.run.simulate import Prepared, simulate_models
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE_FILES = sorted((ROOT / "cases").glob("**/*.toml"))

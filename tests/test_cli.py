@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from flexmech_py.cli import main
-from flexmech_py.results import read_timeseries
+from flexmech_py.run.results import read_timeseries
 
 
 def test_run_writes_files(cases_dir, tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""Batches on a real Dask cluster (flexmech_py/cluster.py): a ``distributed.LocalCluster`` of 2
+"""Batches on a real Dask cluster (flexmech_py/run/cluster.py): a ``distributed.LocalCluster`` of 2
 worker processes started here.  The same table as the local pool, bit for bit; a worker killed
 during a batch loses no result; a scheduler that does not answer is one line and exit 2.
 
@@ -19,11 +19,11 @@ import pytest
 
 from flexmech_py import load_case, validate_case
 from flexmech_py.cli import main
-from flexmech_py.cluster import DaskExecutor
-from flexmech_py.compare import compare_models
-from flexmech_py.sampling import sample_study
-from flexmech_py.parallel import run_tasks
-from flexmech_py.sweep import VARYING_COLUMNS, sweep, sweep_point
+from flexmech_py.run.cluster import DaskExecutor
+from flexmech_py.studies.compare import compare_models
+from flexmech_py.studies.sampling import sample_study
+from flexmech_py.run.parallel import run_tasks
+from flexmech_py.studies.sweep import VARYING_COLUMNS, sweep, sweep_point
 
 from conftest import CASES, interrupt_after_first_result
 
@@ -41,7 +41,7 @@ SHORT = ["solver.t_end=0.005"]
 def cluster():
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as lc:
         with distributed.Client(lc.scheduler_address) as client:
-            client.run(lambda: __import__("flexmech_py.sweep"))   # workers import flexmech once, here
+            client.run(lambda: __import__("flexmech_py.studies.sweep"))   # workers import flexmech once, here
             yield lc, client
 
 

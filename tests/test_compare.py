@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from flexmech_py.cli import main
-from flexmech_py.compare import compare_columns, read_reference
+from flexmech_py.studies.compare import compare_columns, read_reference
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +43,7 @@ def test_metrics_on_known_curves():
 
 
 def test_self_comparison_by_time_and_by_crank_angle_in_degrees(run_dir, tmp_path):
-    from flexmech_py.results import read_timeseries
+    from flexmech_py.run.results import read_timeseries
     cols, _ = read_timeseries(run_dir / "timeseries.csv")
     ref = tmp_path / "ref.csv"
     _write_ref(ref, "crank_angle,strain_coupler_mid", "deg,1",
@@ -52,7 +52,7 @@ def test_self_comparison_by_time_and_by_crank_angle_in_degrees(run_dir, tmp_path
     assert rc == 0
     m = json.loads((tmp_path / "c" / "compare.json").read_text())["columns"]["strain_coupler_mid"]
     assert m["max_error"] < 1e-6 and m["correlation"] > 0.999999
-    from flexmech_py.plots import have_matplotlib
+    from flexmech_py.figures.plots import have_matplotlib
     if have_matplotlib():
         assert (tmp_path / "c" / "compare_strain_coupler_mid.png").exists()
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py.alternation import ALT_WARN, ROUNDOFF_ULPS, _ColumnWatch, roundoff_floors
-from flexmech_py.simulate import Prepared
+from flexmech_py.checks.alternation import ALT_WARN, ROUNDOFF_ULPS, _ColumnWatch, roundoff_floors
+from flexmech_py.run.simulate import Prepared
 
 CRANE = {
     "case": {"title": "trolley crane, flexible arm"},

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py.control_study import TIP, closed_loop, cycloid, link_case, run, saturated_pid, settles
-from flexmech_py.errors import CaseError, SolverError, ValidityWarning
-from flexmech_py.stepping import Simulation
+from flexmech_py.studies.control_study import TIP, closed_loop, cycloid, link_case, run, saturated_pid, settles
+from flexmech_py.base.errors import CaseError, SolverError, ValidityWarning
+from flexmech_py.run.stepping import Simulation
 
 
 @pytest.mark.parametrize("model", ["coupled", "nonlinear"])

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py.simulate import Prepared
+from flexmech_py.run.simulate import Prepared
 
 T_END = 0.1        # s: the first 0.1 s of each seed run (the four-bar crank reaches 90 rad/s)
 OUT_DT = 4e-5      # s: the common output grid

@@ -9,8 +9,8 @@ from conftest import assert_free_pendulum_conserves_energy
 
 import flexmech_py as fm
 from flexmech_py.cli import main
-from flexmech_py.coupled import CoupledModel
-from flexmech_py.simulate import Prepared, simulate_models
+from flexmech_py.models.constrained.coupled import CoupledModel
+from flexmech_py.run.simulate import Prepared, simulate_models
 
 
 def _beam(J=None, tau=10.0, n=4, t_end=0.05, dt=1e-5, out=250, **extra):
@@ -205,7 +205,7 @@ def test_weld_keeps_the_relative_angle(cases_dir):
     assert beta_ref == pytest.approx(0.5)
     # tangents welded: the joint angle at the tangents equals the initial one (drift from the rigid
     # solution, whose elbow is a free revolute, is large; the weld itself is exact)
-    from flexmech_py.coupled_outputs import joint_angles
+    from flexmech_py.models.constrained.outputs import joint_angles
     p = Prepared(case)
     cm = CoupledModel.from_case(case)
     q0, v0 = cm.initial_state(p.rm.select(slice(0, 1)))

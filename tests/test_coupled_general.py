@@ -9,8 +9,8 @@ import pytest
 
 import flexmech_py as fm
 from flexmech_py.case import read_case_file
-from flexmech_py.coupled import CoupledModel
-from flexmech_py.simulate import Prepared
+from flexmech_py.models.constrained.coupled import CoupledModel
+from flexmech_py.run.simulate import Prepared
 
 GENERALIZED_ALPHA = ['solver.integrator="generalized-alpha"', "solver.rho_inf=0.0"]
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import kernels
+from flexmech_py.base import kernels
 from flexmech_py.mechanism.rows import ROW_KINDS
 
 BAND, CONDENSED, AUTO = 0, 1, -1
@@ -114,8 +114,8 @@ def test_kernel_rejects_a_corrupted_flat_description(cases_dir):
     """coupled_build checks the flat description before it builds anything: a wrong length of
     either array, an element count out of range, a marker or a DOF index out of range each give
     status 4 (bad input) and no residual; the intact description builds (status 0)."""
-    from flexmech_py import kernels
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.base import kernels
+    from flexmech_py.run.simulate import Prepared
 
     case = fm.load_case(cases_dir / "slider_crank.toml", overrides=["solver.t_end=0.001"])
     p = Prepared(case, elements_per_link=2)

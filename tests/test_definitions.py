@@ -11,7 +11,7 @@ import pytest
 import flexmech_py as fm
 from flexmech_py.cli import main
 from flexmech_py.definitions import definition_notes
-from flexmech_py.simulate import Prepared
+from flexmech_py.run.simulate import Prepared
 
 SLOW = ["drive.speed=20.0", "solver.t_end=0.1", "mesh.elements_per_link=4", "solver.output_every=10",
         "solver.rayleigh=[0.0, 2e-5]", "solver.error_estimate=none",

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 from flexmech_py.case import load_case, validate_case
-from flexmech_py.design import DesignAnalysis
-from flexmech_py.errors import CaseError
-from flexmech_py.fatigue import cycle_damage, equivalent_amplitude, rainflow_cycles
-from flexmech_py.materials import MATERIALS, material_values
-from flexmech_py.runner import MemorySink, execute
-from flexmech_py.sections import section_properties
-from flexmech_py.simulate import Prepared
-from flexmech_py.stress import link_stations, station_values
+from flexmech_py.strength.analysis import DesignAnalysis
+from flexmech_py.base.errors import CaseError
+from flexmech_py.strength.fatigue import cycle_damage, equivalent_amplitude, rainflow_cycles
+from flexmech_py.mechanism.materials import MATERIALS, material_values
+from flexmech_py.run.runner import MemorySink, execute
+from flexmech_py.mechanism.sections import section_properties
+from flexmech_py.run.simulate import Prepared
+from flexmech_py.strength.stress import link_stations, station_values
 
 DATA = Path(__file__).parent / "data"
 BEAM = Path(__file__).parent / "data" / "rotating_beam.toml"

@@ -21,7 +21,7 @@ import pytest
 import flexmech_py as fm
 from flexmech_py.case import MODELS, OUTPUT_KINDS
 from flexmech_py.cli import main
-from flexmech_py.results import read_timeseries
+from flexmech_py.run.results import read_timeseries
 
 try:  # Python >= 3.11
     import tomllib
@@ -132,7 +132,7 @@ def test_api_example_runs(name, code, in_tmp_with_cases):
 
 def test_api_md_names_every_raw_routine():
     text = (DOCS / "api.md").read_text(encoding="utf-8")
-    from flexmech_py import kernels
+    from flexmech_py.base import kernels
 
     for routine in ("element_matrices", "element_curvatures", "ked_run", "ked_matrices", "ked_loads",
                     "ked_bandwidth"):

@@ -1,5 +1,5 @@
 """The stability suite (cases/extreme/, docs/stability.md "Extreme cases") at reduced size: each test
-checks the physics claim its row of the table makes.  Full size: python -m flexmech_py.extreme."""
+checks the physics claim its row of the table makes.  Full size: python -m flexmech_py.studies.extreme."""
 
 import math
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import extreme as ex
+from flexmech_py.studies import extreme as ex
 
 
 def by(rows, key, value):

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import guards
+from flexmech_py.checks import guards
 from flexmech_py.case import integrator_of
-from flexmech_py.families import FAMILIES, MODELS, SUPERPOSITION_MODELS, family, large_deflection_reference, names
+from flexmech_py.base.families import FAMILIES, MODELS, SUPERPOSITION_MODELS, family, large_deflection_reference, names
 from flexmech_py.mechanism.joints import JOINT_KINDS
 from flexmech_py.mechanism.packing import drawn_coordinates, joint_pose
 from flexmech_py.mechanism.rows import ROW_KINDS
-from flexmech_py.simulate import Prepared
+from flexmech_py.run.simulate import Prepared
 
 
 def test_the_registry_is_the_one_list_of_models():

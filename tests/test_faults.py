@@ -23,9 +23,9 @@ from pathlib import Path
 
 import pytest
 
-from flexmech_py.folderlock import LOCK_NAME
-from flexmech_py.outdir import MARKER, PARTIAL_DIR
-from flexmech_py.results import read_timeseries
+from flexmech_py.base.folderlock import LOCK_NAME
+from flexmech_py.run.outdir import MARKER, PARTIAL_DIR
+from flexmech_py.run.results import read_timeseries
 
 PY = sys.executable
 FLEXMECH = str(Path(sys.executable).with_name("flexmech"))
@@ -211,7 +211,7 @@ class SmallDisk:
 
     def run(self, args, reserve: int | None = None) -> subprocess.CompletedProcess:
         """``flexmech args`` in a process on this disk; ``reserve``: the result folder's reserve [bytes]."""
-        code = ("import sys; import flexmech_py.outdir as o; o.RESERVE_BYTES = int(sys.argv[1]) or o.RESERVE_BYTES; "
+        code = ("import sys; import flexmech_py.run.outdir as o; o.RESERVE_BYTES = int(sys.argv[1]) or o.RESERVE_BYTES; "
                 "from flexmech_py.cli import main; raise SystemExit(main(sys.argv[2:]))")
         limit = self.limit
 

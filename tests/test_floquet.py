@@ -1,4 +1,4 @@
-"""Floquet multipliers and the periodic steady state of constant-speed drives (flexmech_py/floquet.py).
+"""Floquet multipliers and the periodic steady state of constant-speed drives (flexmech_py/studies/floquet.py).
 
 Reduced size: the seed four-bar (2 elements per link, 18 free DOFs) at speeds whose period
 is short.  Physics checked: the multipliers of a time-invariant problem are those of the FE
@@ -18,10 +18,10 @@ import pytest
 
 from flexmech_py import load_case
 from flexmech_py.cli import main
-from flexmech_py.errors import CaseError
-from flexmech_py.floquet import (PeriodicCase, floquet, frozen_frequencies, stability_chart, stability_point,
+from flexmech_py.base.errors import CaseError
+from flexmech_py.studies.floquet import (PeriodicCase, floquet, frozen_frequencies, stability_chart, stability_point,
                                  steady_state)
-from flexmech_py.simulate import simulate
+from flexmech_py.run.simulate import simulate
 
 from conftest import CASES
 
@@ -180,7 +180,7 @@ def test_cli_stability_and_steady(tmp_path, capsys):
         rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
     assert [float(r["speed"]) for r in rows] == [560.0, 600.0]
     assert all(float(r["max_abs_mu"]) > 1.0 for r in rows)
-    from flexmech_py.plots import have_matplotlib
+    from flexmech_py.figures.plots import have_matplotlib
     if have_matplotlib():
         assert (out / "stability.png").stat().st_size > 10000
     sd = tmp_path / "sd"
@@ -209,7 +209,7 @@ def test_principal_parametric_resonance_has_a_real_negative_multiplier(seed):
     w1 = frozen_frequencies(pc, fr, nmodes=1)[:, 0]
     assert 2 * w1.min() < 480.0 < 2 * w1.max()
     assert fr.mu[0].real < -1.5 and fr.mu[0].imag == 0.0
-    from flexmech_py.regions import multiplier_type
+    from flexmech_py.studies.regions import multiplier_type
     assert multiplier_type(fr.mu[0].real, fr.mu[0].imag) == "real-"
 
 
@@ -221,7 +221,7 @@ def test_refinement_finds_the_damped_pocket_a_coarse_grid_misses(seed):
     grid = [220.0, 230.0, 240.0, 250.0]
     rows, runs = stability_chart(c, grid, model="hac", jobs=1, progress=False, resolution=1.0, refine_rounds=0)
     assert runs.rounds == 0 and all(r["stable"] for r in rows)
-    from flexmech_py.regions import unstable_regions
+    from flexmech_py.studies.regions import unstable_regions
     rows, runs = stability_chart(c, grid, model="hac", jobs=1, progress=False, resolution=1.0)
     assert 0 < runs.rounds <= 8 and runs.added == len(rows) - 4 and runs.added < 20
     assert [r["round"] for r in rows if r["speed"] in grid] == [0, 0, 0, 0]
@@ -258,7 +258,7 @@ def test_damped_pocket_grows_in_a_time_run():
 
 
 def _point_failing_at_600(task):
-    from flexmech_py.errors import SolverError
+    from flexmech_py.base.errors import SolverError
 
     if task["speed"] == 600.0:
         raise SolverError("made to fail for the test", time=0.0, code=2)
@@ -286,7 +286,7 @@ def test_cli_stability_names_regions_exits_3_on_failed_speeds_and_writes_nothing
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and err.startswith("flexmech: error: ") and not bad.exists()
     # a speed that fails: listed, the chart written, exit 3
-    import flexmech_py.floquet as fq
+    import flexmech_py.studies.floquet as fq
     monkeypatch.setattr(fq, "stability_point", _point_failing_at_600)
     assert main(["stability", str(SEED), "--speed", "560,600", "--jobs", "1", "--refine-rounds", "0",
                  "--out", str(tmp_path / "f"), "--no-plots"]) == 3

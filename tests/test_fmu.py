@@ -20,7 +20,7 @@ import pytest
 import flexmech_py as fm
 from flexmech_py.cli import main
 from flexmech_py.fmu import MISSING_EXTRA, export_fmu
-from flexmech_py.stepping import Simulation
+from flexmech_py.run.stepping import Simulation
 
 DATA = Path(__file__).parent / "data"
 

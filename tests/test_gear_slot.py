@@ -16,9 +16,9 @@ import pytest
 from scipy.optimize import brentq
 
 import flexmech_py as fm
-from flexmech_py.families import SUPERPOSITION_MODELS
+from flexmech_py.base.families import SUPERPOSITION_MODELS
 from flexmech_py.mechanism import MotionSource, prepare_motion
-from flexmech_py.modes import modes
+from flexmech_py.studies.modes import modes
 
 E, I_BEAM, A_BEAM, RHO, L_SHAFT = 2.0e11, 3.4133333333333335e-10, 6.4e-5, 7870.0, 0.5
 R_A, R_B, J1, J2 = 0.05, 0.10, 1.0e-3, 4.0e-3

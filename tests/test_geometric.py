@@ -5,7 +5,7 @@ import pytest
 import scipy.linalg as sl
 
 import flexmech_py as fm
-from flexmech_py import kernels
+from flexmech_py.base import kernels
 
 
 def _pinned_pinned(n, L=1.0, EI=10.0, EA=1e6, rho_a=1.0):
@@ -91,7 +91,7 @@ def test_torque_joint_mode_carries_no_net_rigid_body_load(cases_dir, model, bala
     """With the crank pivot left free ('torque'), the mechanism's own motion is a zero-stiffness mode of
     the elastic problem; the applied torque and the rigid-inertia load balance on it (the rigid-body
     equations of motion), so the net load on the mode vanishes to round-off for the exact loads."""
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.run.simulate import Prepared
     case = fm.load_case(cases_dir / "fourbar_hac.toml", overrides=['joints.crank_pivot="torque"', "solver.t_end=0.05"])
     p = Prepared(case)
     fe = p.fe

@@ -1,4 +1,4 @@
-"""Guards in every run (flexmech_py/guards.py, docs/stability.md): failures stop with a diagnosis and
+"""Guards in every run (flexmech_py/checks/guards.py, docs/stability.md): failures stop with a diagnosis and
 keep their partial results, validity limits warn, and the step-doubling error estimate is honest.
 
 Run as a script to print the estimate-vs-actual table of docs/stability.md:
@@ -13,12 +13,12 @@ import pytest
 
 import flexmech_py as fm
 from flexmech_py.cli import main
-from flexmech_py.errors import SolverError
-from flexmech_py.gap import validity_time
-from flexmech_py.guards import frames_before
-from flexmech_py.results import read_timeseries
-from flexmech_py.simulate import Prepared
-from flexmech_py.step_doubling import FRAMES_FULL
+from flexmech_py.base.errors import SolverError
+from flexmech_py.studies.gap import validity_time
+from flexmech_py.checks.guards import frames_before
+from flexmech_py.run.results import read_timeseries
+from flexmech_py.run.simulate import Prepared
+from flexmech_py.checks.step_doubling import FRAMES_FULL
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 
@@ -108,7 +108,7 @@ def test_cli_writes_marked_partial_results_and_exits_3(tmp_path, capsys):
 
 
 def test_kernel_status_6_has_a_message():
-    from flexmech_py import kernels
+    from flexmech_py.base import kernels
 
     with pytest.raises(SolverError, match="divergence_limit") as info:
         kernels.check_status(6, "Newmark integration", time=0.1, step=5, data={"u": None})
@@ -261,7 +261,7 @@ def _spun_cantilever(dt, final_speed=6.0, t_end=0.8):
 
 
 def test_error_estimate_warns_past_the_threshold_with_the_step_that_meets_it():
-    from flexmech_py.step_doubling import ERROR_WARN
+    from flexmech_py.checks.step_doubling import ERROR_WARN
 
     res = fm.simulate(_spun_cantilever(0.016), model="classic")
     est = res.extra["error_estimate"]
@@ -290,7 +290,7 @@ def test_observed_order_from_the_kept_frames_equals_the_run_made_again(monkeypat
     """The 2 dt run's frames on the 4 dt grid are kept while it runs beside the dt run, so the observed
     order needs only the run at 4 dt: the same order and message as when the 2 dt run is made again
     (KEEP_FRAMES_MAX = 0 forces that)."""
-    from flexmech_py import step_doubling
+    from flexmech_py.checks import step_doubling
 
     seen = []
     original = step_doubling.StepComparison.kept_block

@@ -20,12 +20,12 @@ import pytest
 import flexmech_py as fm
 from flexmech_py.case import integrator_coefficients
 from flexmech_py.cli import main
-from flexmech_py.coupled import CoupledModel
-from flexmech_py.errors import CaseError, SolverError
+from flexmech_py.models.constrained.coupled import CoupledModel
+from flexmech_py.base.errors import CaseError, SolverError
 from flexmech_py.mechanism.control import ControlPack
-from flexmech_py import kernels
-from flexmech_py.kernels import api, check_status
-from flexmech_py.simulate import Prepared
+from flexmech_py.base import kernels
+from flexmech_py.base.kernels import api, check_status
+from flexmech_py.run.simulate import Prepared
 
 from conftest import beam_case
 

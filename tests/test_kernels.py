@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
-from flexmech_py.reference import newmark, system
+from flexmech_py.models.superposition.reference import newmark, system
 
 import flexmech_py as fm
-from flexmech_py.simulate import Prepared
+from flexmech_py.run.simulate import Prepared
 
 
 def _prep(cases_dir, name, t_end, dt, extra=()):

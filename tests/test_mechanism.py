@@ -12,11 +12,11 @@ from closed_forms import fourbar_angles, fourbar_rates, slider_crank
 import flexmech_py as fm
 from flexmech_py.case import read_case_file
 from flexmech_py.mechanism import MotionSource, prepare_motion
-from flexmech_py import kernels
+from flexmech_py.base import kernels
 from flexmech_py.mechanism.analysis import constraint_matrices
 from flexmech_py.mechanism.packing import joint_pose, marker_position
 from flexmech_py.mechanism.rows import CON_POINT, ROW_KINDS
-from flexmech_py.simulate import motion_source
+from flexmech_py.run.simulate import motion_source
 
 TM = (0.10795, 0.2794, 0.27051, 0.254)        # Turcic-Midha crank-rocker [m]
 

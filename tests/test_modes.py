@@ -1,4 +1,4 @@
-"""Natural frequencies and mode shapes of the frozen mechanism (flexmech_py.modal, flexmech_py.modes,
+"""Natural frequencies and mode shapes of the frozen mechanism (flexmech_py.models.modal, flexmech_py.studies.modes,
 `flexmech modes`; docs/theory.md section 20) against closed forms and the frequencies the other
 analyses use."""
 
@@ -11,7 +11,7 @@ from conftest import beam_case
 
 import flexmech_py as fm
 from flexmech_py.cli import main
-from flexmech_py.modes import frequencies_along, modes
+from flexmech_py.studies.modes import frequencies_along, modes
 
 E, I, A, RHO, L = 2e11, 1e-9, 1e-4, 7800.0, 1.0
 #: roots beta_n L of 1 + cos(bL) cosh(bL) = 0 (clamped-free Euler-Bernoulli beam)
@@ -143,8 +143,8 @@ def test_spinning_cantilever_stiffens_by_the_southwell_coefficient():
 
 def test_frequencies_are_those_the_stability_guards_use(cases_dir):
     """modes() at the samples of extreme.lowest_frequencies gives the same frequencies."""
-    from flexmech_py.extreme import lowest_frequencies
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.studies.extreme import lowest_frequencies
+    from flexmech_py.run.simulate import Prepared
 
     case = fm.load_case(cases_dir / "fourbar_constant_speed.toml", overrides=["solver.t_end=0.02"])
     prep = Prepared(case)
@@ -183,7 +183,7 @@ def test_cli_modes_writes_its_files_and_refuses_bad_input(cases_dir, tmp_path, c
 
 
 def test_mode_shapes_file_reads_back(cases_dir, tmp_path):
-    from flexmech_py.shapes import read_shape_csv
+    from flexmech_py.models.shapes import read_shape_csv
 
     ms = modes(fm.load_case(cases_dir / "sixbar_plate.toml"), count=3, elements_per_link=4)
     ms.write(tmp_path)
@@ -215,7 +215,7 @@ def test_every_case_file_has_modes_in_every_model(name):
 def test_run_draw_keeps_frames_and_draw_redraws_them(cases_dir, tmp_path, capsys):
     """`run --draw N` keeps the points of N frames spread over the run, streamed block by block; their
     displacements are the run's own (the coupler's midpoint against the displacement output)."""
-    from flexmech_py.shapes import read_shape_csv
+    from flexmech_py.models.shapes import read_shape_csv
 
     out = tmp_path / "r"
     assert main(["run", str(cases_dir / "fourbar_hac.toml"), "--set", "solver.t_end=0.05", "--draw", "5",
@@ -249,7 +249,7 @@ def test_modes_at_any_instant_of_a_spin_up_run(t):
     """A Watt six-bar whose crank is spun up from rest (issue 24): the configuration at any instant the run
     passes through is found when asked for alone (the kinematic substeps follow the drive law from rest),
     and it is the run's own: the rigid motion sampled at t alone equals the one sampled along the run."""
-    from flexmech_py.simulate import motion_source
+    from flexmech_py.run.simulate import motion_source
 
     case = fm.load_case(WATT)
     ms = modes(case, at=t, count=2)
@@ -263,7 +263,7 @@ def test_modes_at_any_instant_of_a_spin_up_run(t):
 def test_crank_angle_on_a_whole_turn_is_0_deg_not_360():
     """A crank drawn a hair below the x axis: the loop closure leaves its angle at -1e-11 rad, which is
     0 deg on the turn (the table said 'crank_pivot at 360 deg')."""
-    from flexmech_py.modes import turn_angle
+    from flexmech_py.studies.modes import turn_angle
 
     case = fm.load_case(WATT, overrides=["links.crank.end=[0.08, -1e-12]"])
     ms = modes(case, count=1)

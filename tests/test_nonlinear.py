@@ -8,9 +8,9 @@ from scipy.integrate import solve_bvp
 from conftest import assert_free_pendulum_conserves_energy
 
 import flexmech_py as fm
-from flexmech_py.coupled import CoupledModel
-from flexmech_py.coupled_outputs import node_state
-from flexmech_py.simulate import simulate_models
+from flexmech_py.models.constrained.coupled import CoupledModel
+from flexmech_py.models.constrained.outputs import node_state
+from flexmech_py.run.simulate import simulate_models
 
 # Mattiasson (1981), tip-loaded cantilever: (PL^2/EI, vertical tip deflection / L, shortening / L);
 # the test computes the elastica itself (solve_bvp) and checks it against these published values first.
@@ -145,7 +145,7 @@ def test_energy_conserved_in_free_motion():
 
 def test_time_step_convergence_manipulator(cases_dir):
     case = fm.load_case(cases_dir / "manipulator_bricout.toml", overrides=["solver.t_end=0.05"])
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.run.simulate import Prepared
     ys = [Prepared(case, dt=dt, out_every=int(round(2e-5 / dt))).run("nonlinear")["tip_dy_elastic"]
           for dt in (2e-5, 1e-5, 5e-6, 2.5e-6)]
     d = [np.max(np.abs(ys[i] - ys[i + 1])) for i in range(3)]
@@ -155,7 +155,7 @@ def test_time_step_convergence_manipulator(cases_dir):
 def test_gap_study_reduced(cases_dir):
     """The model-gap study at reduced size: rows, validity times, and on the manipulator the torque-free
     driven joints with K_sigma far closer to the nonlinear model than the seed's clamped joints."""
-    from flexmech_py.gap import gap_study, gap_table
+    from flexmech_py.studies.gap import gap_study, gap_table
     case = fm.load_case(cases_dir / "manipulator_bricout.toml", overrides=["solver.t_end=0.02"])
     study = gap_study(case, "tip_dy_elastic", (0.01, 0.02), elements=2, ref_elements=4,
                       configs=[("classic", "none", "seed"), ("classic", "quasi_static", "torque"), ("coupled", "none", "seed")])
@@ -169,7 +169,7 @@ def test_gap_study_reduced(cases_dir):
 # ----------------------------------------------------------------------------- shared node angles (theory.md 12.1-12.2)
 def _seed_state(cases_dir, epl, dt, t_end):
     """The nonlinear seed four-bar run to t_end; (prepared, model, kernel state q, v, a)."""
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.run.simulate import Prepared
 
     case = fm.load_case(cases_dir / "fourbar_hac.toml",
                         overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'",
@@ -196,7 +196,7 @@ def test_iteration_matrix_is_the_derivative_of_the_residual(cases_dir):
     residual at a state of the seed four-bar (16 el/link, the issue's step; with Rayleigh damping, so
     that C_v holds its angle-column terms of absolute angles): M to 1e-8, C_v to 1e-6, the
     contraction rho(S^-1 (S_fd - S)) of a Newton iteration below 1e-3."""
-    from flexmech_py import kernels
+    from flexmech_py.base import kernels
 
     dt, t = 1.25e-5, 2.5e-4
     p, cm, q, v, a = _seed_state(cases_dir, 16, dt, t)
@@ -230,7 +230,7 @@ def test_shallow_arch_stiffness_is_the_derivative_of_its_residual(cases_dir):
     without it (the same state, its flags switched off in the flat description) against central
     differences of the residual with and without it, to 1e-6 of its largest entry; the part is not
     small (above 1e-6 of the whole stiffness) and the whole static stiffness stays symmetric."""
-    from flexmech_py import kernels
+    from flexmech_py.base import kernels
 
     _, cm, q, v, a = _seed_state(cases_dir, 4, 1e-5, 0.02)        # bent links: th of 1e-3..1e-2
     v, a = np.zeros_like(v), np.zeros_like(a)                      # the static stiffness
@@ -265,7 +265,7 @@ def test_damping_matrices_are_the_derivatives_of_its_residual(cases_dir):
     with absolute node angles): its part of C_v and of K_t (damped minus undamped, the same state)
     against central differences of its residual in v and in q, to 1e-6 of their largest entries (the
     part is exact: linear in th', whose chord term omega depends on the end positions and rates)."""
-    from flexmech_py import kernels
+    from flexmech_py.base import kernels
 
     _, cm, q, v, a = _seed_state(cases_dir, 4, 1e-5, 0.02)        # moving: omega of the chords nonzero
     free = np.flatnonzero(cm.shared.free_of > 0)
@@ -295,8 +295,8 @@ def test_damping_matrices_are_the_derivatives_of_its_residual(cases_dir):
 
 
 def _seed_newton(cases_dir, epl, dt, t_end, start, mode):
-    from flexmech_py import kernels
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.base import kernels
+    from flexmech_py.run.simulate import Prepared
 
     case = fm.load_case(cases_dir / "fourbar_hac.toml",       # the iteration counts of theory.md 12.2: Newmark
                         overrides=[f"solver.dt={dt}", f"solver.t_end={t_end}", "solver.error_estimate='none'",
@@ -322,7 +322,7 @@ def test_newton_start_and_matrix_refresh(cases_dir):
         assert nw["mean_per_step"] <= 2.0 + 1e-9
         if m != 1:
             assert nw["factorizations_per_step"] < 1.01
-    from flexmech_py import kernels
+    from flexmech_py.base import kernels
     assert kernels.cpl.cpl_set_newton(5) != 0 and kernels.cpl.cpl_set_start(3) != 0
 
 
@@ -330,7 +330,7 @@ def test_newton_converges_at_64_elements_per_link(cases_dir):
     """At 64 el/link and dt = 1e-5 s Newton started at the last acceleration fails at the first step
     (the first iterate turns the crank's node angle by radians); started at q_n + dt v_n it takes 2
     iterations per step."""
-    from flexmech_py.errors import SolverError
+    from flexmech_py.base.errors import SolverError
 
     with pytest.raises(SolverError) as info:
         _seed_newton(cases_dir, 64, 1e-5, 2e-4, 0, 2)
@@ -343,7 +343,7 @@ def test_restart_at_the_last_position_keeps_the_factorized_matrix(cases_dir):
     again at q_n (3 iterations there: more than 2.2 per step on average); those steps converge with
     the matrix factorized at q_n + dt v_n, so one factorization per step (1.6 when every restart
     rebuilt it; theory.md 12.2)."""
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.run.simulate import Prepared
 
     case = fm.load_case(cases_dir / "fourbar_hac.toml",
                         overrides=["solver.dt=1e-5", "solver.t_end=3e-3", "solver.error_estimate='none'"])
@@ -356,8 +356,8 @@ def test_newton_converges_at_256_elements_per_link_with_generalized_alpha(cases_
     """At 256 el/link (dt = 1.25e-5 s, generalized-alpha) the crank's node angle rings at ~1e12
     rad/s^2 and its velocity makes q_n + dt v_n a far start: the step starts again at q_n (theory.md
     12.2) and converges, in at most 4 iterations per step on average (3.35 measured)."""
-    from flexmech_py import kernels
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.base import kernels
+    from flexmech_py.run.simulate import Prepared
 
     case = fm.load_case(cases_dir / "fourbar_hac.toml",
                         overrides=["solver.dt=1.25e-5", "solver.t_end=1e-3", "solver.error_estimate='none'",
@@ -374,8 +374,8 @@ def test_closed_form_inertia_of_longer_segments_equals_the_gauss_points(cases_di
     (payload, hub), the slider-crank, the plate six-bar and the quick-return: the residual equal to
     1e-13 of the inertia terms M a, the matrices to 1e-13 of their largest entries (K_t: of its inertial
     part, K_t less the elastic stiffness, which both evaluations share)."""
-    from flexmech_py import kernels
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.base import kernels
+    from flexmech_py.run.simulate import Prepared
 
     for name, epl in (("fourbar_hac", 4), ("manipulator_bricout", 3), ("slider_crank", 2), ("sixbar_plate", 2),
                       ("quick_return", 4)):
@@ -418,8 +418,8 @@ def test_closed_form_inertia_equals_the_gauss_points(cases_dir, angles):
     energies equal to 1e-13, the residual to 1e-13 of its inertia terms M a (its own size is a
     cancellation of larger terms), and the residual alone (cpl_residuals, the Newton iterations'
     path) equal to it."""
-    from flexmech_py import kernels
-    from flexmech_py.simulate import Prepared
+    from flexmech_py.base import kernels
+    from flexmech_py.run.simulate import Prepared
 
     for name, epl, ray in (("fourbar_hac", 4, (0.0, 0.0)), ("manipulator_bricout", 3, (2.0, 1e-4)),
                            ("slider_crank", 2, (0.0, 0.0))):

@@ -13,9 +13,9 @@ import pytest
 from scipy.optimize import brentq
 
 from flexmech_py.case import apply_overrides, read_case_file
-from flexmech_py.materials import MATERIALS
-from flexmech_py.optimize import EXIT_INFEASIBLE, optimize
-from flexmech_py.optimize_problem import Problem, design_point, parse_constraint, parse_vary, task_of
+from flexmech_py.mechanism.materials import MATERIALS
+from flexmech_py.studies.optimize import EXIT_INFEASIBLE, optimize
+from flexmech_py.studies.optimize_problem import Problem, design_point, parse_constraint, parse_vary, task_of
 
 BEAM = Path(__file__).parent / "data" / "rotating_beam.toml"
 FLEXMECH = [sys.executable, "-m", "flexmech_py"]

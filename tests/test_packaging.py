@@ -27,7 +27,7 @@ def test_installed_package_is_used_and_complete():
 
 def test_real_kind_is_double():
     """f2py must wrap real(dp) as float64 (real(real64) would silently become float32)."""
-    from flexmech_py import kernels
+    from flexmech_py.base import kernels
 
     m = kernels.element_matrices(1.0, 1.0, 1.0, 1.0)[0]
     assert m.dtype.name == "float64"

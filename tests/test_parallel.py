@@ -14,8 +14,8 @@ import pytest
 
 from flexmech_py.case import validate_case
 from flexmech_py.cli import main
-from flexmech_py.parallel import MAX_WORKER_DEATHS, default_jobs, run_tasks, task_key
-from flexmech_py.sweep import sweep
+from flexmech_py.run.parallel import MAX_WORKER_DEATHS, default_jobs, run_tasks, task_key
+from flexmech_py.studies.sweep import sweep
 
 from conftest import CASES, interrupt_after_first_result
 

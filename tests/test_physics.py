@@ -4,12 +4,12 @@ FE mass = rigid mass, and the relations between the three rigid-inertia load mod
 import numpy as np
 import pytest
 from conftest import beam_case
-from flexmech_py.reference import OMEGA, element_matrices, shape_n
+from flexmech_py.models.superposition.reference import OMEGA, element_matrices, shape_n
 
 import flexmech_py as fm
-from flexmech_py import kernels
+from flexmech_py.base import kernels
 from flexmech_py.mechanism.drives import spinup
-from flexmech_py.simulate import Prepared
+from flexmech_py.run.simulate import Prepared
 
 
 # ----------------------------------------------------------------------------- frame invariance

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import bench, compare, plots, study_plots
+from flexmech_py.studies import bench, compare
+from flexmech_py.figures import plots, study_plots
 
 
 def test_decimate_keeps_every_bucket_extreme():

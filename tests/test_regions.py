@@ -1,4 +1,4 @@
-"""Unstable regions of a stability chart (flexmech_py/regions.py): the multiplier type of known
+"""Unstable regions of a stability chart (flexmech_py/studies/regions.py): the multiplier type of known
 parametric resonances (Mathieu equations integrated here with SciPy, independent of flexmech's
 kernels), and the adaptive refinement of the speed grid on a synthetic chart."""
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from flexmech_py.floquet import STABLE_RATE
-from flexmech_py.regions import (PEAK_PROMINENCE, default_resolution, describe_region, multiplier_type,
+from flexmech_py.studies.floquet import STABLE_RATE
+from flexmech_py.studies.regions import (PEAK_PROMINENCE, default_resolution, describe_region, multiplier_type,
                                  refinement_speeds, unstable_regions)
 
 

@@ -7,11 +7,11 @@ import re
 import numpy as np
 import pytest
 
-from flexmech_py import reproduce as rp
-from flexmech_py import seed_report
+from flexmech_py.studies import reproduce as rp
+from flexmech_py.studies import seed_report
 from flexmech_py.cli import main
-from flexmech_py.gap import gap_table
-from flexmech_py.plots import have_matplotlib
+from flexmech_py.studies.gap import gap_table
+from flexmech_py.figures.plots import have_matplotlib
 
 T_END = 0.02   # s: no validity limit is passed this early
 
@@ -81,7 +81,7 @@ def test_report_states_no_infinite_times_and_no_false_limits(reduced):
 
 def test_report_numbers_are_the_runs(reduced):
     out, text, _ = reduced
-    from flexmech_py.results import read_timeseries
+    from flexmech_py.run.results import read_timeseries
 
     c, _ = read_timeseries(out / "runs" / "fourbar_hac-coupled" / "timeseries.csv")
     assert f"W = {c['work_inputs'][-1]:.4g} J" in text and f"V = {c['energy_potential'][-1]:.4g} J" in text

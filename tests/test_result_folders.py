@@ -1,4 +1,4 @@
-"""Every command's result folder (flexmech_py.outdir): whole or absent, one writer at a time, names
+"""Every command's result folder (flexmech_py.run.outdir): whole or absent, one writer at a time, names
 that cannot leave it.  Per command: a real SIGTERM arriving before the result is put in place, and a
 disk too full to start; the bad folders of every command are in the catalogue (tests/fault_catalogue.py).
 Then the folder's own rules: the commit journal finished after a crash, an earlier attempt's files
@@ -16,12 +16,12 @@ from pathlib import Path
 
 import pytest
 
-from flexmech_py import outdir
+from flexmech_py.run import outdir
 from flexmech_py.cli import main
-from flexmech_py.errors import CaseError
-from flexmech_py.folderlock import LOCK_NAME, Busy, FolderLock
-from flexmech_py.names import inside, safe_name
-from flexmech_py.outdir import MANIFEST, MARKER, PARTIAL_DIR, ResultFolder
+from flexmech_py.base.errors import CaseError
+from flexmech_py.base.folderlock import LOCK_NAME, Busy, FolderLock
+from flexmech_py.base.names import inside, safe_name
+from flexmech_py.run.outdir import MANIFEST, MARKER, PARTIAL_DIR, ResultFolder
 
 from test_faults import SmallDisk
 
@@ -71,8 +71,8 @@ COMMANDS = ["run", "steady", "modes", "sweep", "samples", "stability", "accuracy
 
 def _fake_slow_parts(monkeypatch):
     """reproduce and bench as their folders see them, without their minutes of runs."""
-    import flexmech_py.bench as bench
-    import flexmech_py.reproduce as reproduce
+    import flexmech_py.studies.bench as bench
+    import flexmech_py.studies.reproduce as reproduce
 
     def reproduce_into(out, *a):
         (out / "report.md").write_text("new report\n")

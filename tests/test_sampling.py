@@ -1,4 +1,4 @@
-"""Monte-Carlo sampling (flexmech_py/sampling.py, ``flexmech sweep --sample``): the distributions'
+"""Monte-Carlo sampling (flexmech_py/studies/sampling.py, ``flexmech sweep --sample``): the distributions'
 inverse CDFs, Latin-hypercube and Sobol' stratification, reproducibility from the seed, the
 statistics and correlations, and the command's files and exit codes."""
 
@@ -12,9 +12,9 @@ import pytest
 from scipy import stats
 
 from flexmech_py.cli import main
-from flexmech_py.errors import CaseError
-from flexmech_py.sampling import correlations, draw, parse_sample, statistics, unit_points
-from flexmech_py.sweep import VARYING_COLUMNS
+from flexmech_py.base.errors import CaseError
+from flexmech_py.studies.sampling import correlations, draw, parse_sample, statistics, unit_points
+from flexmech_py.studies.sweep import VARYING_COLUMNS
 
 from conftest import CASES
 

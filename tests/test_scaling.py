@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import kernels
-from flexmech_py.coupled import CoupledModel
-from flexmech_py.coupled_ordering import bordered_numbering
-from flexmech_py.simulate import Prepared
+from flexmech_py.base import kernels
+from flexmech_py.models.constrained.coupled import CoupledModel
+from flexmech_py.models.constrained.ordering import bordered_numbering
+from flexmech_py.run.simulate import Prepared
 
 HERE = Path(__file__).resolve().parent
 #: the bundled mechanisms and the tests' own: a ring of flexible links meeting no junction (rows to

@@ -1,13 +1,13 @@
-"""Input shapers (flexmech_py.shaping) against their defining properties, and shaping at work on the
-manipulator under PD joint control closed through the stepping API (flexmech_py.shaping_study)."""
+"""Input shapers (flexmech_py.base.shaping) against their defining properties, and shaping at work on the
+manipulator under PD joint control closed through the stepping API (flexmech_py.studies.shaping_study)."""
 
 import numpy as np
 import pytest
 
-from flexmech_py.errors import CaseError
-from flexmech_py.shaping import RestToRest, design, residual_vibration
-from flexmech_py.shaping_study import manipulator, pd_move, residual
-from flexmech_py.modes import modes
+from flexmech_py.base.errors import CaseError
+from flexmech_py.base.shaping import RestToRest, design, residual_vibration
+from flexmech_py.studies.shaping_study import manipulator, pd_move, residual
+from flexmech_py.studies.modes import modes
 
 
 @pytest.mark.parametrize("zeta", [0.0, 0.05])

@@ -1,4 +1,4 @@
-"""The Python stepping API (flexmech_py.stepping.Simulation): a run advanced step by step is the
+"""The Python stepping API (flexmech_py.run.stepping.Simulation): a run advanced step by step is the
 batch run frame for frame, efforts act as the case's force laws do, and a saved state replays."""
 
 import warnings
@@ -8,9 +8,9 @@ import pytest
 
 import flexmech_py as fm
 from flexmech_py.case import Case
-from flexmech_py.errors import CaseError
-from flexmech_py.simulate import Prepared
-from flexmech_py.stepping import Simulation, stepping_plan
+from flexmech_py.base.errors import CaseError
+from flexmech_py.run.simulate import Prepared
+from flexmech_py.run.stepping import Simulation, stepping_plan
 
 
 def _short(name, steps, **solver):

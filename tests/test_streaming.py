@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py import runner
+from flexmech_py.run import runner
 from flexmech_py.cli import main
-from flexmech_py.frames import ColumnStats, Envelope
-from flexmech_py.progress import RunProgress
-from flexmech_py.results import STATUS_BYTES, read_timeseries
-from flexmech_py.simulate import Prepared
+from flexmech_py.run.frames import ColumnStats, Envelope
+from flexmech_py.base.progress import RunProgress
+from flexmech_py.run.results import STATUS_BYTES, read_timeseries
+from flexmech_py.run.simulate import Prepared
 
 
 def _case(cases_dir, name, *sets):

@@ -9,11 +9,11 @@ import pytest
 from scipy.optimize import brentq
 
 import flexmech_py as fm
-from flexmech_py import kernels
-from flexmech_py.reactions import joint_equations, least_squares
-from flexmech_py.reference import newmark, slave_transformation
-from flexmech_py.simulate import Prepared
-from flexmech_py.superposition_loads import drive_loads
+from flexmech_py.base import kernels
+from flexmech_py.models.superposition.reactions import joint_equations, least_squares
+from flexmech_py.models.superposition.reference import newmark, slave_transformation
+from flexmech_py.run.simulate import Prepared
+from flexmech_py.models.superposition.loads import drive_loads
 
 MODELS = fm.SUPERPOSITION_MODELS
 
@@ -449,7 +449,7 @@ def test_periodic_steady_state_with_turning_relations(cases_dir):
     """The quick-return at constant crank speed (slave rows turning with its rigid rocker and its moving
     contact point): the periodic steady state from the monodromy matrix equals the end of a damped
     transient from rest run over six periods on the same grid."""
-    from flexmech_py.floquet import PeriodicCase, floquet, steady_state
+    from flexmech_py.studies.floquet import PeriodicCase, floquet, steady_state
 
     damped = ["solver.rayleigh=[60.0, 1e-6]", "mesh.elements_per_link=2", "solver.output_every=1"]
     pc = PeriodicCase(_load(cases_dir, "quick_return", *damped), "classic", dt=2e-4)

@@ -1,4 +1,4 @@
-"""``flexmech sweep`` (flexmech_py/sweep.py): grid, summary table, resumability, reproducibility.
+"""``flexmech sweep`` (flexmech_py/studies/sweep.py): grid, summary table, resumability, reproducibility.
 
 Reduced size: the seed four-bar at constant speed over 0.01 s (1000 steps) per point.
 """
@@ -13,9 +13,9 @@ import pytest
 
 from flexmech_py import load_case
 from flexmech_py.cli import main
-from flexmech_py.errors import CaseError
-from flexmech_py.simulate import simulate
-from flexmech_py.sweep import VARYING_COLUMNS, grid_points, parse_param, sweep
+from flexmech_py.base.errors import CaseError
+from flexmech_py.run.simulate import simulate
+from flexmech_py.studies.sweep import VARYING_COLUMNS, grid_points, parse_param, sweep
 
 from conftest import CASES
 

@@ -17,9 +17,9 @@ import pytest
 
 from flexmech_py.case import Case
 from flexmech_py.cli import main
-from flexmech_py.plots import decimate
-from flexmech_py.results import read_timeseries
-from flexmech_py.shapes import Body, ShapeFrames, read_shape_csv
+from flexmech_py.figures.plots import decimate
+from flexmech_py.run.results import read_timeseries
+from flexmech_py.models.shapes import Body, ShapeFrames, read_shape_csv
 from flexmech_py.view import page_of, write_view
 from flexmech_py.view import decimate as thin
 from flexmech_py.view.page import PARTS, SCRIPTS

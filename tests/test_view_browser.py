@@ -16,7 +16,7 @@ from browser import Browser, missing  # noqa: E402
 
 from flexmech_py.case import Case  # noqa: E402
 from flexmech_py.cli import main  # noqa: E402
-from flexmech_py.shapes import read_shape_csv  # noqa: E402
+from flexmech_py.models.shapes import read_shape_csv  # noqa: E402
 
 pytestmark = pytest.mark.skipif(missing() is not None, reason=f"no browser to test the view in: {missing()}")
 CASES = Path(__file__).resolve().parents[1] / "cases"

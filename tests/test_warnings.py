@@ -1,5 +1,5 @@
 """A run's warnings reach Python users as Python warnings of flexmech's classes (issue 24,
-flexmech_py.notices): one per message of ``res.extra["warnings"]``, of its kind's class, attributed to
+flexmech_py.base.notices): one per message of ``res.extra["warnings"]``, of its kind's class, attributed to
 the caller's line, filterable; the command line prints each once in its own format."""
 
 import warnings
@@ -9,7 +9,7 @@ import pytest
 
 import flexmech_py as fm
 from flexmech_py.cli import main
-from flexmech_py.simulate import Prepared
+from flexmech_py.run.simulate import Prepared
 
 WATT = Path(__file__).parent / "data" / "watt_sixbar_spinup.toml"
 PAST_VALIDITY = ["solver.t_end=0.1", "solver.error_estimate=none"]   # the coupler bends past 2 % at 0.055 s

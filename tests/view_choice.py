@@ -36,14 +36,14 @@ def plotly_page(folder: Path, path: Path) -> Path:
     from plotly.subplots import make_subplots
 
     from flexmech_py.case import Case
-    from flexmech_py.drawing import deformed_lines
-    from flexmech_py.glyphs import joint_marks
-    from flexmech_py.results import read_timeseries
-    from flexmech_py.shapes import read_shape_csv
+    from flexmech_py.figures.drawing import deformed_lines
+    from flexmech_py.figures.glyphs import joint_marks
+    from flexmech_py.run.results import read_timeseries
+    from flexmech_py.models.shapes import read_shape_csv
     from flexmech_py.view import page_of
     from flexmech_py.view.decimate import CURVE_POINTS, thin_frames, thin_stations
     from flexmech_py.view.source import read_json
-    from flexmech_py.plots import decimate
+    from flexmech_py.figures.plots import decimate
 
     _, data = page_of(folder)
     summary = read_json(folder / "summary.json", "a summary")

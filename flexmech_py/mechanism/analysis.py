@@ -13,10 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import kernels
-from ..errors import CaseError, MechanismError
-from .packing import (Packed, coordinate_drive, drawn_coordinates, joint_coordinates, marker_position, pack,
-                      row_scales)
+from ..base import kernels
+from ..base.errors import CaseError, MechanismError
+from .packing import Packed, coordinate_drive, drawn_coordinates, joint_coordinates, marker_position, pack, row_scales
 from .system import Mechanism
 
 __all__ = ["MotionSetup", "prepare_motion", "constraint_matrices", "scaled_jacobian", "RANK_TOL"]

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import CaseError
+from ..base.errors import CaseError
 
 __all__ = ["Link", "RigidBody", "LINK_POINTS"]
 
@@ -49,8 +49,8 @@ class Link:
     inertia: float | None = None
     centre: float = 0.5
     yield_strain: float | None = None
-    section: dict | None = None       # the section table it was given by (flexmech_py.sections), if any
-    material: dict | None = None      # its resolved material (flexmech_py.materials), if given
+    section: dict | None = None       # the section table it was given by (flexmech_py.mechanism.sections), if any
+    material: dict | None = None      # its resolved material (flexmech_py.mechanism.materials), if given
     points: dict = field(default_factory=dict)
     lumped: list = field(default_factory=list)
     hubs: list = field(default_factory=list)

@@ -19,9 +19,9 @@ import warnings
 
 import numpy as np
 
-from .. import validate as v
-from ..errors import CaseError, ValidityWarning
-from ..shaping import SHAPERS, design
+from ..base import validate as v
+from ..base.errors import CaseError, ValidityWarning
+from ..base.shaping import SHAPERS, design
 from .drives import KINEMATIC_LAWS, LAW_PARAMS, Drive, cubic_spline
 from .schema import table_samples
 
@@ -159,7 +159,7 @@ def _feedforward(ff, w: str):
 
 def _shaper(c: dict, w: str) -> dict:
     """``shaper = {kind = "zv" | "zvd" | "ei", frequency_hz, damping = 0, tolerance = 0.05}``: the
-    reference convolved with its impulses (flexmech_py.shaping: the design)."""
+    reference convolved with its impulses (flexmech_py.base.shaping: the design)."""
     sh = c.get("shaper")
     if sh is None:
         return {}

@@ -13,7 +13,7 @@ the assembly configuration, so the mechanism starts where it was drawn):
 - ``rest_to_rest``: ``travel``, ``duration`` T, ``profile`` (``"cycloidal"`` (default) or
   ``"quintic"``), ``start_time`` t0 (default 0); with s = (t - t0)/T clipped to [0, 1],
   f = start + travel (s - sin(2 pi s)/(2 pi)) or start + travel (10 s^3 - 15 s^4 + 6 s^5)
-  (flexmech_py.shaping.rest_to_rest is the same profile in Python).
+  (flexmech_py.base.shaping.rest_to_rest is the same profile in Python).
 - ``table``: samples ``t`` [s] (increasing, from 0 at the latest) and ``value``, joined by a
   not-a-knot cubic spline (continuous accelerations).
 

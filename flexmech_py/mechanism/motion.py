@@ -16,8 +16,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .. import kernels
-from ..errors import MechanismError
+from ..base import kernels
+from ..base.errors import MechanismError
 from .analysis import MotionSetup, constraint_matrices, scaled_jacobian
 from .system import Mechanism
 
@@ -203,7 +203,7 @@ class MotionSource:
 
     def restart_at(self, t: float, z, zd) -> None:
         """Continue the motion from the state (z, zd) at time t [s] with the description as it is now
-        (a force drive's law changed at t, flexmech_py.stepping): the dynamic mode starts its
+        (a force drive's law changed at t, flexmech_py.run.stepping): the dynamic mode starts its
         integration afresh there; the kinematic mode, whose samples do not depend on the force laws,
         goes on as it was."""
         if self.setup.mode == "kinematic":

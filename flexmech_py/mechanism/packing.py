@@ -187,7 +187,7 @@ def pack(mech: Mechanism, gravity=(0.0, 0.0), starts: dict | None = None, extra_
 def force_constant_positions(packed: Packed) -> dict:
     """{joint: index in packed.rspec} of the ``constant`` of every force drive (the first of its law's
     four parameters, which flexmech_drivelaw adds to the effort at every evaluation): a caller that
-    changes it there changes the effort from the next evaluation on (flexmech_py.stepping)."""
+    changes it there changes the effort from the next evaluation on (flexmech_py.run.stepping)."""
     return {d.joint: packed.laws_at + 4 * k for k, d in enumerate(packed.drives) if not d.kinematic}
 
 

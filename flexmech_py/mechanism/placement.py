@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import kernels
+from ..base import kernels
 from .analysis import ASSEMBLY_MAXIT, ASSEMBLY_TOL, MotionSetup
 from .packing import coordinate_drive, joint_coordinates, pack
 

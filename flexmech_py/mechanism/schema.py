@@ -13,10 +13,10 @@ import math
 
 import numpy as np
 
-from .. import validate as v
-from ..errors import CaseError
-from ..materials import material_values
-from ..sections import section_properties
+from ..base import validate as v
+from ..base.errors import CaseError
+from .materials import material_values
+from .sections import section_properties
 from .drives import LAW_CODES, LAW_PARAMS, Drive
 from .joints import JOINT_KINDS, case_fields
 from .system import Mechanism

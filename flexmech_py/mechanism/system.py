@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import CaseError
+from ..base.errors import CaseError
 from .bodies import Link, RigidBody
 from .drives import Drive
 from .joints import JOINT_KINDS, Joint

@@ -15,8 +15,8 @@ from __future__ import annotations
 import copy
 import math
 
-from .. import validate as v
-from ..errors import CaseError, MechanismError
+from ..base import validate as v
+from ..base.errors import CaseError, MechanismError
 from .schema import link_section
 
 __all__ = ["TEMPLATES", "expand_template", "template_joints"]

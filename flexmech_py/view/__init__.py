@@ -18,11 +18,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..version import __version__
-from ..glyphs import table
+from ..base.version import __version__
+from ..figures.glyphs import table
 from .chart_data import stability_payload
 from .modes_data import modes_payload
-from ..outdir import ResultFolder
+from ..run.outdir import ResultFolder
 from .page import render, target
 from .run_data import run_payload
 from .source import kind_of
@@ -55,7 +55,7 @@ def write_view(folder, out=None) -> ViewInfo:
     """Write the page of the result in ``folder`` to ``out`` (default folder/view.html; a folder:
     view.html inside it).  FlexmechError (one line, exit code 2) for a folder that is not a result, a
     result without what the page needs, or a file that cannot be written; the page is written whole
-    or not at all (flexmech_py.outdir.ResultFolder: beside its name, then renamed)."""
+    or not at all (flexmech_py.run.outdir.ResultFolder: beside its name, then renamed)."""
     folder = Path(folder)
     path = target(out, folder)
     html, data = page_of(folder)

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FlexmechError
-from ..floquet import STABLE_RATE
-from ..study_plots import part_spans, region_label
+from ..base.errors import FlexmechError
+from ..studies.floquet import STABLE_RATE
+from ..figures.study_plots import part_spans, region_label
 from .pack import finite
 
 __all__ = ["read_csv_table", "stability_payload", "HARMONIC_LINES", "BANDS"]

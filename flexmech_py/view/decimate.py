@@ -7,7 +7,7 @@ in the page itself and in docs/cli.md.
   most about 2.6 MB (six 4-byte numbers per point and frame, base64); spread evenly over the frames
   there are, the first and the last included.
 - Curves: every output column drawn with at most CURVE_POINTS points (the smallest and the largest
-  value of every bucket of frames, flexmech_py.plots.decimate: every peak survives).
+  value of every bucket of frames, flexmech_py.figures.plots.decimate: every peak survives).
 
 A long run's page is then about 3 MB whatever its length.  What the rule costs is measured on the
 result itself and stated in the page: :func:`station_error` (the drawn line through the kept nodes
@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from ..shapes import Body, ShapeFrames, spread
+from ..models.shapes import Body, ShapeFrames, spread
 
 __all__ = ["FRAME_CAP", "POINT_FRAMES", "STATION_CAP", "CURVE_POINTS", "frames_for", "thin_stations",
            "thin_frames", "rule_text", "station_error", "curve_error", "kept_points", "bucket_span"]
@@ -48,7 +48,7 @@ def _kept_nodes(n: int) -> np.ndarray:
 
 
 def kept_points(bodies) -> int:
-    """The points the page keeps of a mechanism drawn with ``bodies`` (flexmech_py.shapes.Body)."""
+    """The points the page keeps of a mechanism drawn with ``bodies`` (flexmech_py.models.shapes.Body)."""
     return sum(_kept_nodes(b.sl.stop - b.sl.start).size if b.kind == "flexible" else b.sl.stop - b.sl.start
                for b in bodies)
 

@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from ..case import Case
-from ..drawing import TARGET_FRACTION, largest_drawn, mechanism_size
-from ..errors import FlexmechError
-from ..modes import turn_angle
-from ..shapes import ShapeFrames, read_shape_csv
+from ..figures.drawing import TARGET_FRACTION, largest_drawn, mechanism_size
+from ..base.errors import FlexmechError
+from ..studies.modes import turn_angle
+from ..models.shapes import ShapeFrames, read_shape_csv
 from .chart_data import read_csv_table
 from .pack import finite
 from .run_data import mechanism_payload, shape_payload

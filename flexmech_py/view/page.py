@@ -9,7 +9,7 @@ import re
 from importlib import resources
 from pathlib import Path
 
-from ..errors import FlexmechError
+from ..base.errors import FlexmechError
 
 __all__ = ["render", "target", "PARTS", "SCRIPTS"]
 

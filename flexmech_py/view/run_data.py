@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 
 from ..case import Case
-from ..drawing import largest_drawn, magnification, mechanism_size
-from ..errors import FlexmechError
-from ..glyphs import joint_marks, legend_words
-from ..plots import decimate, display_unit, panel_groups
-from ..results import read_timeseries
-from ..shapes import ShapeFrames, read_shape_csv
+from ..figures.drawing import largest_drawn, magnification, mechanism_size
+from ..base.errors import FlexmechError
+from ..figures.glyphs import joint_marks, legend_words
+from ..figures.plots import decimate, display_unit, panel_groups
+from ..run.results import read_timeseries
+from ..models.shapes import ShapeFrames, read_shape_csv
 from . import decimate as thin
 from .pack import f32, f64, finite
 from .source import need, read_json
@@ -68,7 +68,7 @@ def _read_curves(path: Path):
 
 
 def mechanism_payload(case: Case, sf: ShapeFrames) -> dict:
-    """The drawn bodies and the joints' glyph places (flexmech_py.glyphs) of a mechanism in sf's layout."""
+    """The drawn bodies and the joints' glyph places (flexmech_py.figures.glyphs) of a mechanism in sf's layout."""
     links = {ln["name"]: ln for ln in case["links"]}
     marks = joint_marks(case.mechanism, sf)
     bodies = []

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..errors import FlexmechError
+from ..base.errors import FlexmechError
 
 __all__ = ["kind_of", "read_json", "need"]
 

@@ -3,7 +3,7 @@
 /* The mechanism on a canvas: the rigid configuration dashed (the ghost), the deformed bodies (a
    flexible link's nodes joined by the cubic Hermite interpolation of its displacement and slope,
    coloured by a field along its length), the joints and the ground with the glyphs of
-   flexmech_py.glyphs; wheel zooms, dragging pans, a double click fits the view again. */
+   flexmech_py.figures.glyphs; wheel zooms, dragging pans, a double click fits the view again. */
 class Mechanism {
   constructor(canvas, d, field) {
     this.c = canvas; this.d = d; this.field = field; this.g = d.glyphs;
@@ -112,7 +112,7 @@ class Mechanism {
     });
     for (const j of this.d.joints) {
       if (j.point === null) continue;
-      const p = this.pt(i, j.point, amp), gl = G.joints[j.kind] || G.joints.revolute;   // every kind is in the table (flexmech_py.glyphs)
+      const p = this.pt(i, j.point, amp), gl = G.joints[j.kind] || G.joints.revolute;   // every kind is in the table (flexmech_py.figures.glyphs)
       glyph(g, gl.marker, T.sx(p[0]), T.sy(p[1]), gl.size * PT, j.driven ? gl.driven_fill : gl.fill, gl.edge);
     }
     state.draws++;

@@ -31,7 +31,7 @@ function runPage() {
     return (v) => divColour(v / m);
   };
   function legendText() {
-    // the joints' words: flexmech_py.glyphs.legend_words, the same as the PNG drawings' legend
+    // the joints' words: flexmech_py.figures.glyphs.legend_words, the same as the PNG drawings' legend
     legend.textContent = "rigid configuration dashed (the ghost); " + d.legend.join(", ") + "; wheel: zoom, drag: pan, double click: fit";
   }
   legendText();

@@ -63,7 +63,7 @@ class Joint:
     guided: ClassVar[bool] = False
     #: the joint leaves a relative motion free: a coordinate to drive and measure
     has_coordinate: ClassVar[bool] = True
-    #: the joint's mark at its point in every drawing (flexmech_py.glyphs: the PNGs of flexmech_py.drawing
+    #: the joint's mark at its point in every drawing (flexmech_py.figures.glyphs: the PNGs of flexmech_py.figures.drawing
     #: and the page of flexmech_py.view): ``marker`` circle | square | triangle, ``size`` [pt], ``fill``
     #: of an undriven joint, ``driven_fill`` of a driven one, ``edge`` colour (CSS hex), ``legend`` its
     #: words in a legend
@@ -101,7 +101,7 @@ class Joint:
 
     def rotation_weights(self) -> tuple:
         """(w_a, w_b) of the elastic rotation relation w_a rot_a + w_b rot_b = 0 the superposition
-        models hold when the rotation is tied (flexmech_py.slaving): (-1, 1), the same rotation."""
+        models hold when the rotation is tied (flexmech_py.models.superposition.slaving): (-1, 1), the same rotation."""
         return (-1.0, 1.0)
 
     def check_placed(self, a, b) -> None:

@@ -16,7 +16,7 @@ b) at the pitch point, i.e. at b's centre the same force and the moment ``-s r_b
 force is the torque on a gear divided by its pitch radius.  No coordinate: nothing to drive.
 
 Elastic condition: ``meshed`` only.  The superposition models hold the same row on the elastic
-rotations as a relation (flexmech_py.slaving) when the line of centres does not move elastically (both
+rotations as a relation (flexmech_py.models.superposition.slaving) when the line of centres does not move elastically (both
 centres on rigid bodies or at ground pivots); otherwise they refuse the joint, naming the coupled and
 nonlinear models, which take it anywhere.
 """
@@ -29,8 +29,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from ... import validate as v
-from ...errors import CaseError
+from ...base import validate as v
+from ...base.errors import CaseError
 from ..rows import CON_GEAR, gear_branch, gear_theta
 from .base import Joint
 

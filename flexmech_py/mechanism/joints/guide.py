@@ -9,8 +9,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from ... import validate as v
-from ...errors import CaseError
+from ...base import validate as v
+from ...base.errors import CaseError
 from ..rows import CON_PROJECTION
 from .base import Joint
 

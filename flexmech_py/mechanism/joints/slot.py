@@ -11,7 +11,7 @@ freely; no force along the slot unless its slide is held).
 
 Elastic conditions (superposition models): ``free`` (elastic slide free), ``locked`` (no elastic
 slide), ``force`` (free, loaded by the joint's force drive); the relative elastic rotation is free.
-The superposition models take a slot only on the ground or a rigid body (flexmech_py.slaving refuses
+The superposition models take a slot only on the ground or a rigid body (flexmech_py.models.superposition.slaving refuses
 one on a flexible link, naming the joint); in the coupled and nonlinear models the slot may be cut
 in a flexible link: its point a is then a mesh node and the slot is the straight line through that
 node turning with the node's frame, so the slot moves with the link's deflection there (its
@@ -25,7 +25,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ... import validate as v
+from ...base import validate as v
 from ..rows import CON_PROJECTION
 from .base import Joint
 from .guide import Guide

@@ -1,0 +1,1 @@
+"""The base layer: leaves every other layer may import (the version, whole-or-absent files, exceptions and warnings, the model-family registry, input checks, sizes, notices, the compiled kernels' wrapper). Imports nothing else of the package."""

@@ -1,0 +1,1 @@
+"""Checks and error estimates of a run: validity limits, the period-2 dt alternation, ringing, step doubling, the error budget (mesh and model probes) and the automatic model choice. Fed a run's blocks and handed the function that reruns; they never construct a run."""

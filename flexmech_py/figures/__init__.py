@@ -1,0 +1,1 @@
+"""Figures (matplotlib, imported when a figure is asked for). Nothing below imports them."""

@@ -1,0 +1,1 @@
+"""The model families: their finite-element models, outputs and reactions (superposition/: the Hac case I/II and classic models on a rigid-body motion computed first; constrained/: the coupled and nonlinear models in one pass with the constraint rows), and what they share (modes, shapes, the motion tap)."""

@@ -1,0 +1,1 @@
+"""Strength of the links and joints from a run: sections and materials, normal stress at the outer fibres, joint loads, rainflow fatigue and the design report. Reads a run's blocks; never starts a run."""
