@@ -99,12 +99,15 @@ MECHANISM_TABLES = ("mechanism", "links", "bodies", "joints", "drives", "initial
 
 
 def _same_tables(kept: list, tables: list) -> bool:
-    """Whether the tables are those a Mechanism was built from (a deep comparison of values: cheaper
-    than serializing them at every access; tables holding arrays compare by their text)."""
+    """Whether the tables are those a Mechanism was built from: a deep comparison of values (cheaper
+    than serializing them at every access), then, where it says no or cannot say (NaN, arrays in the
+    tables), the comparison of their JSON text."""
     try:
-        return bool(kept == tables)
+        if kept == tables:
+            return True
     except ValueError:          # (an array somewhere in the tables: its == is elementwise)
-        return json.dumps(kept, sort_keys=True, default=str) == json.dumps(tables, sort_keys=True, default=str)
+        pass
+    return json.dumps(kept, sort_keys=True, default=str) == json.dumps(tables, sort_keys=True, default=str)
 
 
 class Case(dict):

@@ -384,6 +384,8 @@ class KernelInputs:
         """(nc, nframes) a kernel's per-row frames (kept rows) on all the model's rows (zeros elsewhere)."""
         if self._all:
             return lk
+        if self.nc == 0:
+            return lk[:0]
         out = np.zeros((self.nc, lk.shape[1]))
         out[self.keep] = lk[:self.keep.size]
         return out
