@@ -94,6 +94,22 @@ TOP_KEYS = {"case", "mechanism", "links", "bodies", "mesh", "joints", "drive", "
             "rotary_inertias", "loads", "solver", "outputs", "controllers"}
 
 
+#: the tables a case's Mechanism is built from (Case.mechanism is rebuilt when one of them changes)
+MECHANISM_TABLES = ("mechanism", "links", "bodies", "joints", "drives", "initial", "point_masses", "rotary_inertias")
+
+
+def _same_tables(kept: list, tables: list) -> bool:
+    """Whether the tables are those a Mechanism was built from: a deep comparison of values (cheaper
+    than serializing them at every access), then, where it says no or cannot say (NaN, arrays in the
+    tables), the comparison of their JSON text."""
+    try:
+        if kept == tables:
+            return True
+    except ValueError:          # (an array somewhere in the tables: its == is elementwise)
+        pass
+    return json.dumps(kept, sort_keys=True, default=str) == json.dumps(tables, sort_keys=True, default=str)
+
+
 class Case(dict):
     """A resolved case (a dict: the case-file tables, checked and with every default) whose
     :attr:`mechanism` is the Mechanism it describes.  Build one with :func:`load_case`,
@@ -103,11 +119,10 @@ class Case(dict):
     def mechanism(self):
         """The :class:`~flexmech_py.mechanism.Mechanism` of the case's current tables (rebuilt when the
         tables change, e.g. after a study edits a copy)."""
-        key = json.dumps([self.get(k) for k in ("mechanism", "links", "bodies", "joints", "drives", "initial",
-                                                 "point_masses", "rotary_inertias")], sort_keys=True, default=str)
+        tables = [self.get(k) for k in MECHANISM_TABLES]
         cached = self.__dict__.get("_mechanism")
-        if cached is None or cached[0] != key:
-            cached = (key, mechanism_from_spec(self))
+        if cached is None or not _same_tables(cached[0], tables):
+            cached = (copy.deepcopy(tables), mechanism_from_spec(self))
             self.__dict__["_mechanism"] = cached
         return cached[1]
 

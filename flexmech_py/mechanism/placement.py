@@ -12,6 +12,8 @@ changes, flexmech_mbs: mbs_assemble).
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from ..base import kernels
@@ -45,8 +47,16 @@ class Placement:
                        extra_drives=[coordinate_drive(m, 1.0 if m == n else 0.0) for m in names])
             self.slots.append(int(np.flatnonzero(one.rspec != zero.rspec)[0]))
         self.tol = ASSEMBLY_TOL * zero.lref
-        self.z = np.array(setup.z0 if z_start is None else z_start, float)
+        self.z_start = np.array(setup.z0 if z_start is None else z_start, float)
+        self.z = self.z_start.copy()
         self.failed_at = None
+
+    def restarted(self) -> "Placement":
+        """A placement of the same set-up for a new run (from ``z_start`` again), without packing the
+        mechanism again."""
+        other = copy.copy(self)
+        other.z, other.failed_at = self.z_start.copy(), None
+        return other
 
     def __call__(self, t, q) -> np.ndarray:
         t = np.asarray(t, float)

@@ -288,6 +288,14 @@ class RecordedFrames:
     (``current()``) evaluated into Results by the family's ``_block``."""
 
     frames: list
+    prep: Prepared
+
+    @property
+    def deflection(self) -> DeflectionReference:
+        """The deflection outputs' reference, built once (a fresh start of it per evaluation)."""
+        if getattr(self, "_deflection", None) is None:
+            self._deflection = DeflectionReference(self.prep.case, self.prep.setup)
+        return self._deflection
 
     def recorded(self) -> int:
         return len(self.frames)
@@ -372,7 +380,7 @@ class SuperpositionStepper(RecordedFrames):
         rm, rest = _grouped(items, 2)
         cols = [np.stack([r[0][k] for r in rest], axis=1) for k in range(4)]
         acc = Accumulated()
-        acc.deflection = DeflectionReference(self.prep.case, self.prep.setup)
+        acc.deflection = self.deflection.fresh()
         return self.prep.superposition_block(self.model, self.sol, rm, i0, cols, None, acc, step, every=1)
 
 
@@ -389,6 +397,7 @@ class CoupledStepper(RecordedFrames):
         sol = self.sol = prep.case["solver"]
         integ = integrator_of(sol, model)
         self.coef = integrator_coefficients(integ["integrator"], integ)
+        self.kin = self.cm.kernel_inputs(prep.dt, prep.gravity, sol["rayleigh"], sol.get("divergence_limit"))
         self.first = None
         self.state, self.iters = None, 0
         self.frames, self.last = [], None
@@ -396,6 +405,7 @@ class CoupledStepper(RecordedFrames):
 
     def set_constants(self, values: dict) -> None:
         self.cm.set_force_constants(values)
+        self.kin.set_force_constants(values)
 
     def advance(self, i0: int, k: int, every: int, keep_from: int | None):
         """As :meth:`SuperpositionStepper.advance`."""
@@ -403,22 +413,22 @@ class CoupledStepper(RecordedFrames):
         c, a = self.rigid.chunk(i0, k)
         if self.first is None:
             self.first = c.rm.select(slice(a, a + 1))
-        cval = c.derived("cval", lambda rm: cm.constraint_values(rm, self.first))[:, :, a:a + k + 1]
+        cval = c.derived("cval", self._constraint_values)[:, :, a:a + k + 1]
         q0, v0 = cm.initial_state(self.first) if self.state is None else (None, None)
         am, af, beta, gamma = self.coef
         out = cm.run(q0, v0, c.rm.t[a:a + k + 1], cval, prep.dt, alpha_m=am, alpha_f=af, beta=beta, gamma=gamma,
-                     out_every=every, tol=sol["newton_tol"], maxit=sol["newton_maxit"], gravity=prep.gravity,
-                     rayleigh=sol["rayleigh"], div_limit=sol.get("divergence_limit"), state=self.state)
+                     out_every=every, tol=sol["newton_tol"], maxit=sol["newton_maxit"], state=self.state,
+                     inputs=self.kin)
         self.state = cm.last_run
         self.iters += int(out[5])
         la, oe = cm.last_run["la"], prep.out_every
         for j in range(out[0].shape[1]):
             step = i0 + j * every
-            frame = tuple(x[:, j] for x in out[:5])
             if j > 0 or step == 0:
-                its, alt = max(self.since[0], frame[4][3]), np.maximum(self.since[1], la[:, j])
+                its, alt = max(self.since[0], out[4][3, j]), np.maximum(self.since[1], la[:, j])
                 self.since = (its, alt)
                 if keep_from is not None and step >= keep_from and step % oe == 0:
+                    frame = tuple(x[:, j] for x in out[:5])
                     ef = frame[4].copy()
                     ef[3] = its          # (the controllers' outputs ride behind the energies)
                     ef = np.concatenate([ef, [u[j] for u in cm.last_run["controls"].values()]])
@@ -426,6 +436,9 @@ class CoupledStepper(RecordedFrames):
                 if step % oe == 0:
                     self.since = (0.0, 0.0)
         self.last = (c, a + k, cval[:, :, -1], tuple(x[:, -1] for x in out[:5]), la[:, -1])
+
+    def _constraint_values(self, rm: RigidMotion) -> np.ndarray:
+        return self.cm.constraint_values(rm, self.first)
 
     def save(self) -> dict:
         return {"state": self.state, "iters": self.iters, "last": self.last, "first": self.first, "since": self.since}
@@ -458,7 +471,7 @@ class CoupledStepper(RecordedFrames):
         cols = tuple(np.stack([r[1][k] for r in rest], axis=1) for k in range(5))
         la = np.stack([r[2] for r in rest], axis=1)
         acc = Accumulated()
-        acc.deflection = DeflectionReference(self.prep.case, self.prep.setup)
+        acc.deflection = self.deflection.fresh()
         diag = cpl_out.Diagnostics(self.cm)
         controls = cols[4][4:]
         cols = cols[:4] + (cols[4][:4],)

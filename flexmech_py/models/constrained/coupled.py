@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...base import kernels
+from ...case import DIVERGENCE_FACTOR
 from ...mechanism.control import ControlPack, pack_controllers
 from .layout import (CON_ANGLE, CON_POINT, CON_PROJECTION, MK_NODE, Layout, LinkMesh, Row, SharedAngles,
                      flat_description, force_constant_positions, marker_key, node_segment, start_value)
@@ -200,69 +201,60 @@ class CoupledModel:
         rspec[-4:] = [gravity[0], gravity[1], rayleigh[0], rayleigh[1]]
         return ispec, rspec
 
+    def kernel_inputs(self, dt: float, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), div_limit=None) -> "KernelInputs":
+        """What :meth:`run` hands the kernel that does not change between the calls of one run (built
+        once by a caller that runs it call by call; see :class:`KernelInputs`)."""
+        return KernelInputs(self, dt, gravity, rayleigh, div_limit)
+
     def run(self, q0, v0, t, cval, dt, *, beta=0.25, gamma=0.5, alpha_m=0.0, alpha_f=0.0, out_every=1, tol=1e-8,
-            maxit=25, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), p0=None, div_limit=None, t0=None, state=None):
+            maxit=25, gravity=(0.0, 0.0), rayleigh=(0.0, 0.0), p0=None, div_limit=None, t0=None, state=None,
+            inputs=None):
         """Generalized-alpha-Newton run over the grid t (Newmark (beta, gamma) for ``alpha_m = alpha_f
         = 0``; see :func:`flexmech_py.case.integrator_coefficients`); returns (qf, vf, af, lf, ef,
         iterations).  cval: constraint_values() on t.  ``p0`` (ndof): the pseudo-acceleration to start
         from (None: p0 = the consistent initial acceleration).  ``state``: the ``last_run`` of the run
-        this one continues (its ``q, v, a, p, carry``; q0, v0 and p0 are then not used): the steps are
-        those of one uninterrupted run.  ``div_limit`` [m]: the divergence guard (default
-        DIVERGENCE_FACTOR x the longest flexible link).  After the call ``self.last_run`` holds the
-        frames, ``la`` (nc, nframes) the multipliers' largest step-to-step alternating part since the
-        last frame (fortran/flexmech_alternation.f90), ``frames_valid``, the final state ``q, v, a, p, carry``, ``status`` and ``fail_step``
-        (also when the run failed)."""
-        from ...case import DIVERGENCE_FACTOR
-
-        t = np.asarray(t, float)
+        this one continues (its ``q, v, a, p, carry, cst``, copied; q0, v0 and p0 are then not used):
+        the steps are those of one uninterrupted run.  ``div_limit`` [m]: the divergence guard (default
+        DIVERGENCE_FACTOR x the longest flexible link).  ``inputs``: :meth:`kernel_inputs` built once
+        for this dt, gravity, rayleigh and div_limit (then those four are not read).  After the call
+        ``self.last_run`` holds the frames, ``la`` (nc, nframes) the multipliers' largest step-to-step
+        alternating part since the last frame (fortran/flexmech_alternation.f90), ``frames_valid``, the
+        final state ``q, v, a, p, carry, cst``, ``status`` and ``fail_step`` (also when the run failed)."""
+        kin = self.kernel_inputs(dt, gravity, rayleigh, div_limit) if inputs is None else inputs
         t0 = float(t[0]) if t0 is None else float(t0)
-        nsteps = t.size - 1
-        nframes = nsteps // out_every + 1
-        nc = len(self.rows)
-        keep = np.arange(nc) if self.shared is None else self.shared.keep
-        carry = np.zeros(max(1, keep.size) + 2)
         if state is not None:
             start = 2
-            q, v, a, p, carry = (np.array(state[k], float) for k in ("q", "v", "a", "p", "carry"))
+            q, v, a, p, carry, cst = (np.array(state[k], float, order="F") for k in ("q", "v", "a", "p", "carry", "cst"))
         else:
             start = 1 if p0 is None else 0
             q, v, a = np.array(q0, float), np.array(v0, float), np.zeros(self.ndof)
             p = np.zeros(self.ndof) if p0 is None else np.array(p0, float)
             if self.shared is not None:
                 q, v, p = self.shared.to_kernel(q, v, p)
-        kval = np.zeros((3, max(1, keep.size), cval.shape[2]), order="F")
-        kval[:, :keep.size] = np.asarray(cval)[:, keep]
-        if div_limit is None:
-            div_limit = DIVERGENCE_FACTOR * max(self.case["links"][li]["length"] for li, _, _ in self.segments)
-        seg_link = np.array([li + 1 for li, _, _ in self.segments], np.int32)
-        ispec, rspec = self._spec(gravity, rayleigh, kernel=True)
-        if state is None:       # (a continued run keeps the structure its start took)
-            self.solver = self._structure(ispec, rspec, q, v)
-        ctl = self.controllers(dt)
-        if state is not None and state.get("cst") is not None:
-            ctl.cst[:] = state["cst"]
+            carry, cst = np.zeros(max(1, kin.keep.size) + 2), kin.ctl.cst.copy(order="F")
+            self.solver = self._structure(kin.ispec, kin.rspec, q, v)  # (a continued run keeps its start's)
+        ctl = kin.ctl
         qf, vf, af, lk, lka, ef, uf, status, fail, iters, nvalid, newton = kernels.cpl.cpl_run(
-            ispec, rspec, kval, t0, dt, alpha_m, alpha_f, beta, gamma,
-            out_every, tol, maxit, start, float(div_limit), seg_link, q, v, a, p, carry,
-            ctl.cint, ctl.cpar, ctl.ctab_t, ctl.ctab_c, ctl.cst)
-        lf = np.zeros((nc, nframes))      # the interior welds of shared node angles carry none
-        lf[keep] = lk[:keep.size]
-        la = np.zeros((nc, nframes))
-        la[keep] = lka[:keep.size]
+            kin.ispec, kin.rspec, kin.kernel_values(cval), t0, dt, alpha_m, alpha_f, beta, gamma,
+            out_every, tol, maxit, start, kin.div_limit, kin.seg_link, q, v, a, p, carry,
+            ctl.cint, ctl.cpar, ctl.ctab_t, ctl.ctab_c, cst)
+        lf, la = kin.all_rows(lk), kin.all_rows(lka)      # the interior welds of shared node angles carry none
         if self.shared is not None:         # the valid frames (a failed run leaves zeros after them)
             qf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid] = self.shared.from_kernel(
                 qf[:, :nvalid], vf[:, :nvalid], af[:, :nvalid])
         self.last_run = {"qf": qf, "vf": vf, "af": af, "lf": lf, "la": la, "ef": ef, "frames_valid": int(nvalid),
                          "q": q, "v": v, "a": a, "p": p, "carry": carry, "status": int(status), "fail_step": int(fail),
-                         "factorizations": int(newton[3]), "cst": ctl.cst,
+                         "factorizations": int(newton[3]), "cst": cst,
                          "controls": {n: uf[k] for k, n in enumerate(ctl.names)}}
-        detail = ""
-        if status == kernels.STATUS_NEWTON:
-            detail = (f" (last iteration: residual norm {newton[0]:.3g}, acceleration correction {newton[1]:.3g} "
-                      f"against accelerations of norm {newton[2]:.3g})")
-        kernels.check_status(status, "coupled time integration", time=t0 + fail * dt if fail else t0, detail=detail,
-                             step=int(fail), data={"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "iters": iters,
-                                                   "q": q, "v": v, "a": a, "p": p, "newton": newton})
+        if status != 0:
+            detail = ""
+            if status == kernels.STATUS_NEWTON:
+                detail = (f" (last iteration: residual norm {newton[0]:.3g}, acceleration correction "
+                          f"{newton[1]:.3g} against accelerations of norm {newton[2]:.3g})")
+            kernels.check_status(status, "coupled time integration", time=t0 + fail * dt if fail else t0,
+                                 detail=detail, step=int(fail),
+                                 data={"qf": qf, "vf": vf, "af": af, "lf": lf, "ef": ef, "iters": iters,
+                                       "q": q, "v": v, "a": a, "p": p, "newton": newton})
         return qf, vf, af, lf, ef, iters
 
     def controllers(self, dt: float) -> ControlPack:
@@ -354,6 +346,49 @@ class CoupledModel:
             np.asfortranarray(qf), np.asfortranarray(vf), np.asfortranarray(af), lfull, np.asarray(tf, float), mi, md)
         kernels.check_status(status, "cpl_post")
         return {"markers": mks, "measures": mv[:, :len(measures)], "forces": dvals[:len(self.forces)], "ends": rend}
+
+
+class KernelInputs:
+    """The arguments of the coupled kernel's run (kernels.cpl.cpl_run) that stay the same from call to
+    call of one run: the flat description with gravity and damping (``ispec``, ``rspec``), the
+    divergence limit [m], each segment's link (``seg_link``), the constraint rows the kernel keeps
+    (``keep``) and the controllers' pack (``ctl``, its ``cst`` the state a fresh run starts from)."""
+
+    def __init__(self, cm: CoupledModel, dt: float, gravity, rayleigh, div_limit):
+        self.nc = len(cm.rows)
+        self.keep = np.arange(self.nc) if cm.shared is None else cm.shared.keep
+        self.ispec, self.rspec = cm._spec(gravity, rayleigh, kernel=True)
+        if div_limit is None:
+            div_limit = DIVERGENCE_FACTOR * max(cm.case["links"][li]["length"] for li, _, _ in cm.segments)
+        self.div_limit = float(div_limit)
+        self.seg_link = np.array([li + 1 for li, _, _ in cm.segments], np.int32)
+        self.ctl = cm.controllers(dt)
+        self.positions = force_constant_positions(cm.layout, self.rspec.size, self.ispec)
+        self._all = self.keep.size == self.nc > 0       # the kernel's rows are the model's
+
+    def set_force_constants(self, values: dict) -> None:
+        """As :meth:`CoupledModel.set_force_constants`, in this description."""
+        for joint, value in values.items():
+            self.rspec[self.positions[joint]] = float(value)
+
+    def kernel_values(self, cval) -> np.ndarray:
+        """(3, max(1, kept rows), nt) the constraint values (CoupledModel.constraint_values) of the
+        rows the kernel keeps, Fortran-ordered (cval itself when it is all of them)."""
+        if self._all or self.nc == 0:
+            return np.asfortranarray(cval, float)
+        kval = np.zeros((3, max(1, self.keep.size), cval.shape[2]), order="F")
+        kval[:, :self.keep.size] = np.asarray(cval)[:, self.keep]
+        return kval
+
+    def all_rows(self, lk: np.ndarray) -> np.ndarray:
+        """(nc, nframes) a kernel's per-row frames (kept rows) on all the model's rows (zeros elsewhere)."""
+        if self._all:
+            return lk
+        if self.nc == 0:
+            return lk[:0]
+        out = np.zeros((self.nc, lk.shape[1]))
+        out[self.keep] = lk[:self.keep.size]
+        return out
 
 
 def validity(fe, axial: np.ndarray, u_dev: np.ndarray) -> dict:

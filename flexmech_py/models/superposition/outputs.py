@@ -15,6 +15,8 @@ curvature is averaged over the two elements that meet there.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from ...base import kernels
@@ -53,6 +55,12 @@ class DeflectionReference:
         needed = setup.mode == "dynamic" and any(sp["kind"] == "deflection" for sp in case["outputs"].values())
         self.placement = Placement(setup) if needed else None
         self.primary = setup.primary
+
+    def fresh(self) -> "DeflectionReference":
+        """The reference of a new run (its placement started again), without building it again."""
+        other = copy.copy(self)
+        other.placement = None if self.placement is None else self.placement.restarted()
+        return other
 
     def __call__(self, t, coordinate):
         """z (nf, n) at the frames t; ``coordinate(joint)`` the model's (nf,) coordinate of a primary joint."""
