@@ -35,7 +35,7 @@ module flexmech_control
   use flexmech_drivelaw, only: kinematic_law, spline_eval, LAW_HARMONIC
   implicit none
   private
-  public :: control_bank, ctl_setup, ctl_output, ctl_start, ctl_commit, ctl_save, ctl_places, ctl_active
+  public :: control_bank, ctl_setup, ctl_output, ctl_slopes, ctl_start, ctl_commit, ctl_save, ctl_places, ctl_active
   public :: CTL_NCI, CTL_NCP, CTL_NST, CTL_MAXDELAY
 
   integer, parameter :: CTL_NCI = 12, CTL_NCP = 17, CTL_MAXDELAY = 2000
@@ -186,6 +186,26 @@ contains
       u = cb%st(2, j)
     end if
   end function ctl_output
+
+  !> Derivatives of controller j's output with respect to its measured signal and rate at (y, yd, t),
+  !> for the Newton iteration matrix (docs/theory.md 23.2): the continuous law off its limits gives
+  !> du/dy = -(kp + ki h) (ki h only while the integral grows: backward Euler) and du/dy' = -kd; a
+  !> sampled or delayed law (held output) or a saturated one gives zero.
+  pure subroutine ctl_slopes(cb, j, y, yd, t, dudy, dudyd)
+    type(control_bank), intent(in) :: cb
+    integer, intent(in) :: j
+    real(dp), intent(in) :: y, yd, t
+    real(dp), intent(out) :: dudy, dudyd
+    real(dp) :: u, e
+    logical :: integ
+    dudy = 0.0_dp; dudyd = 0.0_dp
+    if (cb%ci(7, j) /= 0) return
+    call continuous_law(cb, j, y, yd, t, u, e, integ)
+    if (u <= cb%cp(4, j) .or. u >= cb%cp(5, j)) return
+    dudy = -cb%cp(1, j)
+    if (integ) dudy = dudy - cb%cp(2, j)*cb%h
+    dudyd = -cb%cp(3, j)
+  end subroutine ctl_slopes
 
   !> The continuous law of controller j at (y, yd, t): output u, error e, whether I may grow.
   pure subroutine continuous_law(cb, j, y, yd, t, u, e, integrate)

@@ -5,9 +5,9 @@ module flexmech_coupled_assembly
   use flexmech_kinds, only: dp
   use flexmech_markers, only: marker_state, MAXCOL
   use flexmech_coupled_system, only: coupled_system
-  use flexmech_coupled_rows, only: drive_load, row_patterns
+  use flexmech_coupled_rows, only: drive_load, row_patterns, control_gains, eval_row
   use flexmech_coupled_storage, only: link_mats, lm_setup, lm_zero, lm_band_setup, lm_bordered_setup, lm_band_finish, &
-                                      lm_dense
+                                      lm_dense, lm_add_pair
   use flexmech_coupled_element, only: link_eval, segment_residual
   implicit none
   private
@@ -40,6 +40,7 @@ contains
     end do
     call bodies_eval(sys, q, v, a, want, res, lm, energy)
     call drive_loads(sys, q, v, t, res)
+    if (want .and. sys%ctl%n > 0) call control_matrix(sys, q, v, t, cc, ck, lm)
   end subroutine assemble
 
   !> The global residual R alone (assemble's, without energies or matrix): the Newton iterations
@@ -147,6 +148,46 @@ contains
       end do
     end do
   end subroutine drive_loads
+
+  !> The collocated controllers' part of S (docs/theory.md 23.2): force drive i's force -kq dth - kv dth'
+  !> (control_gains) adds (ck kq + cc kv) g g^T over its coordinate's gradient g (free DOFs); the
+  !> geometric part (tau dg/dq) is left out.  A drive whose g g^T does not fit S's storage (a coordinate
+  !> across two segments in the condensed or bordered storage) adds nothing: its force stays in the
+  !> residual only.
+  subroutine control_matrix(sys, q, v, t, cc, ck, lm)
+    type(coupled_system), intent(in) :: sys
+    real(dp), intent(in) :: q(:), v(:), t, cc, ck
+    type(link_mats), intent(inout) :: lm
+    integer :: i, a, b, nc, nf, cols(2*MAXCOL), f(2*MAXCOL), pass
+    real(dp) :: tau, theta, gd, acc0, kq, kv, grad(2*MAXCOL), g(2*MAXCOL)
+    logical :: stored, fits
+    type(marker_state) :: ma, mb
+    do i = 1, sys%nd
+      call eval_row(sys, sys%dv(1, i), 0, sys%dv_dir(:, i), sys%dv(2, i), sys%dv(3, i), q, v, theta, gd, acc0, nc, &
+                    cols, grad, ma, mb)
+      call control_gains(sys, i, t, theta, gd, kq, kv)
+      if (ck*kq + cc*kv == 0.0_dp) cycle
+      nf = 0                                   ! the gradient over free DOFs, repeated columns merged
+      do a = 1, nc
+        if (sys%free_of(cols(a)) == 0) cycle
+        b = findloc(f(1:nf), sys%free_of(cols(a)), 1)
+        if (b == 0) then
+          nf = nf + 1; b = nf; f(b) = sys%free_of(cols(a)); g(b) = 0.0_dp
+        end if
+        g(b) = g(b) + grad(a)
+      end do
+      fits = .true.
+      do pass = 1, 2                           ! 1: whether every pair fits; 2: add them
+        do b = 1, nf
+          do a = 1, nf
+            call lm_add_pair(sys, lm, f(a), f(b), (ck*kq + cc*kv)*g(a)*g(b), pass == 2, stored)
+            fits = fits .and. stored
+          end do
+        end do
+        if (.not. fits) exit
+      end do
+    end do
+  end subroutine control_matrix
 
   !> Dense residual (all DOFs, without constraint forces), iteration-matrix parts over the free DOFs and
   !> energies at one state and time t (for tests and analysis): mm = M, cm = C_v, km = K_t,

@@ -4,13 +4,13 @@
 module flexmech_coupled_rows
   use flexmech_kinds, only: dp
   use flexmech_drivelaw, only: force_law
-  use flexmech_control, only: ctl_output
+  use flexmech_control, only: ctl_output, ctl_slopes
   use flexmech_markers, only: marker_state, segment_marker, body_marker, ground_marker, constraint_row, &
                               CON_POINT, CON_ANGLE, CON_PROJECTION, MAXCOL
   use flexmech_coupled_system, only: coupled_system, MK_GROUND, MK_NODE, MK_BODY, NPAR
   implicit none
   private
-  public :: get_marker, eval_row, drive_load, coupled_rows, row_patterns, control_measure
+  public :: get_marker, eval_row, drive_load, coupled_rows, row_patterns, control_measure, control_gains
 
 contains
 
@@ -97,6 +97,25 @@ contains
       u = u + ctl_output(sys%ctl, j, y, yd, t)
     end do
   end function control_effort
+
+  !> The collocated controllers' gains on force drive i at (t, its coordinate theta and rate gd):
+  !> kq = -sum du/dtheta, kv = -sum du/dtheta' (ctl_slopes), the drive's force tau(theta, theta')
+  !> linearized as -kq dtheta - kv dtheta'.  A non-collocated controller (its force on this drive, its
+  !> measurement elsewhere: an unsymmetric coupling) adds nothing.
+  pure subroutine control_gains(sys, i, t, theta, gd, kq, kv)
+    type(coupled_system), intent(in) :: sys
+    integer, intent(in) :: i
+    real(dp), intent(in) :: t, theta, gd
+    real(dp), intent(out) :: kq, kv
+    integer :: j
+    real(dp) :: dy, dyd
+    kq = 0.0_dp; kv = 0.0_dp
+    do j = 1, sys%ctl%n
+      if (sys%ctl%ci(1, j) /= i .or. sys%ctl%ci(10, j) /= 0) cycle
+      call ctl_slopes(sys%ctl, j, theta, gd, t, dy, dyd)
+      kq = kq - dy; kv = kv - dyd
+    end do
+  end subroutine control_gains
 
   !> The signal y and rate yd controller j measures at (q, v): its drive's coordinate (collocated) or
   !> its own row between two markers (non-collocated, e.g. a tip position).

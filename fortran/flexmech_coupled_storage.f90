@@ -14,7 +14,7 @@ module flexmech_coupled_storage
   implicit none
   private
   public :: link_mats, lm_setup, lm_band_setup, lm_bordered_setup, lm_zero, lm_put_one, lm_band_finish, lm_dense
-  public :: lm_add, lm_add_block, lm_block_get, lm_block_put, lm_factor, lm_solve
+  public :: lm_add, lm_add_pair, lm_add_block, lm_block_get, lm_block_put, lm_factor, lm_solve
 
   !> Iteration matrix S = M + cc C_v + ck K_t stored by segment blocks.  Local DOFs of segment l:
   !> 1..4 the end positions ("boundary", B), 5..nl the elastic DOFs ("interior", I; ni_l = nl - 4),
@@ -179,6 +179,45 @@ contains
       lm%ai(2*lm%kbi + 1 + i - j, lm%off(l) + j - 4) = lm%ai(2*lm%kbi + 1 + i - j, lm%off(l) + j - 4) + val
     end if
   end subroutine lm_add
+
+  !> S(fi, fj) += val at free DOFs fi, fj, when S's storage holds that entry (stored true): a pair within
+  !> the band when S is one band, else a pair within one segment or a rigid body's diagonal entry (dg).
+  !> With add false only whether it is stored.
+  pure subroutine lm_add_pair(sys, lm, fi, fj, val, add, stored)
+    type(coupled_system), intent(in) :: sys
+    type(link_mats), intent(inout) :: lm
+    integer, intent(in) :: fi, fj
+    real(dp), intent(in) :: val
+    logical, intent(in) :: add
+    logical, intent(out) :: stored
+    integer :: l, li, lj
+    real(dp) :: s6(6, 6)
+    if (allocated(lm%ab) .and. .not. lm%bordered) then
+      stored = fi - fj <= sys%kl .and. fj - fi <= sys%ku
+      if (stored .and. add) lm%ab(lm%kd + fi - fj, fj) = lm%ab(lm%kd + fi - fj, fj) + val
+      return
+    end if
+    stored = .false.
+    do l = 1, sys%nseg
+      li = findloc(lm%fl(1:3*sys%n_el(l) + 3, l), fi, 1)
+      lj = findloc(lm%fl(1:3*sys%n_el(l) + 3, l), fj, 1)
+      stored = li > 0 .and. lj > 0
+      if (stored) exit
+    end do
+    if (.not. stored .and. fi == fj) then    ! a rigid body's DOF: its diagonal
+      stored = .true.
+      if (add) lm%dg(fi) = lm%dg(fi) + val
+      return
+    end if
+    if (.not. (stored .and. add)) return
+    if (lm%bordered) then
+      s6 = 0.0_dp
+      s6(li, lj) = val
+      call saddle_add6(lm%sd, lm%fl(1:6, l), s6)
+    else
+      call lm_add(lm, l, li, lj, val)
+    end if
+  end subroutine lm_add_pair
 
   !> S(cl(i), cl(j)) += blk(i, j), i, j = 1..ncl, local DOFs of segment l.
   pure subroutine lm_add_block(lm, l, ncl, cl, blk)
