@@ -44,13 +44,7 @@ LOCAL_IMPORT_REASON = re.compile(r"#.*start-?up", re.IGNORECASE)
 
 #: modules still holding function-local imports without a reason, with their number today: the
 #: count may only fall (the module moves into its layer's folder with them hoisted or explained)
-LOCAL_IMPORTS_LEFT = {
-    "models.constrained.coupled": 1, "models.superposition.model": 2, "models.superposition.slaving": 2,
-    "run.cluster": 2, "run.parallel": 1, "run.results": 1, "run.simulate": 3, "studies.accuracy": 5,
-    "studies.bench": 14, "studies.bench_exudyn": 3, "studies.compare": 4, "studies.extreme": 2,
-    "studies.floquet": 2, "studies.modes": 9, "studies.reproduce": 2, "studies.reproduce_modes": 4,
-    "studies.sampling": 9, "studies.sweep": 3,
-}
+LOCAL_IMPORTS_LEFT: dict = {}
 
 #: functions over MAX_FUNCTION_LINES and files over MAX_FILE_LINES today, with their length: each
 #: may only shrink until it is split (issue 26)

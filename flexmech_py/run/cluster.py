@@ -27,6 +27,7 @@ from collections import Counter
 
 from ..base.errors import CaseError, FlexmechError
 from .worker import call_task, default_jobs, worker_lost
+from ..base.version import __version__
 
 __all__ = ["DaskExecutor", "SchedulerLost", "parse_scheduler", "CONNECT_TIMEOUT_S"]
 
@@ -63,8 +64,6 @@ def _import_distributed():
 
 
 def _flexmech_version() -> str:
-    from ..base.version import __version__
-
     return __version__
 
 
@@ -121,8 +120,6 @@ class DaskExecutor:
 
     def _check_workers(self, address: str) -> int:
         """The number of workers, once every one runs this flexmech version; FlexmechError if not."""
-        from ..base.version import __version__
-
         try:
             self.client.wait_for_workers(1, timeout=WORKER_WAIT_S)
         except (TimeoutError, OSError):

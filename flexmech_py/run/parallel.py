@@ -52,6 +52,7 @@ from ..base.errors import CaseError
 from ..base.signals import die_with_parent
 from .worker import call_task, default_jobs, worker_lost, worker_name  # noqa: F401 (re-exported)
 from ..base.fileio import atomic_write, json_default
+from .cluster import DaskExecutor
 
 __all__ = ["run_tasks", "Batch", "LocalPool", "open_executor", "using_executor", "default_jobs", "task_key",
            "MAX_WORKER_DEATHS"]
@@ -239,7 +240,6 @@ def open_executor(scheduler=None, jobs: int | None = None):
     if jobs is not None:
         raise CaseError("--jobs", "sizes the local process pool; with --scheduler the cluster's workers run "
                                   "the tasks: give one of the two")
-    from .cluster import DaskExecutor
 
     return DaskExecutor(str(scheduler))
 

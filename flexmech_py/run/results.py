@@ -25,6 +25,7 @@ import numpy as np
 from ..checks.budget_text import budget_lines, choice_lines
 from ..base.fileio import atomic_write, json_default
 from ..base.version import versions
+from .frames import ColumnStats
 
 __all__ = ["Result", "TimeseriesWriter", "read_timeseries", "versions"]
 
@@ -96,8 +97,6 @@ class Result:
     def all_stats(self):
         """ColumnStats over every frame of the run (those of the frames held when not streamed)."""
         if self.stats is None:
-            from .frames import ColumnStats
-
             self.stats = ColumnStats.of(self.t, self.columns)
         return self.stats
 

@@ -266,7 +266,7 @@ class Prepared:
         whose rigid motion reaches a singular position raises MechanismError carrying the frames before
         it.  A run whose frames would not fit in memory is refused (CaseError naming
         ``solver.output_every``): :meth:`stream` writes any length to files."""
-        from .runner import MemorySink, execute
+        from .runner import MemorySink, execute  # start-up: the runner and its checks load with the first run
 
         res = execute(self, model, MemorySink(self.frames), geometric=geometric, estimate=estimate,
                       diagnose=diagnose, u0=u0, v0=v0)
@@ -283,7 +283,7 @@ class Prepared:
         an earlier run's in ``out_dir`` only when the run completes (:func:`flexmech_py.run.runner.stream_to_folder`).
         A run whose CSV would not fit on the disk is refused (CaseError) unless ``force``.
         ``progress``: called as progress(done, total) [steps] after every block."""
-        from .runner import stream_to_folder
+        from .runner import stream_to_folder  # start-up: the runner and its checks load with the first run
 
         res = stream_to_folder(self, out_dir, model, force=force, geometric=geometric, estimate=estimate,
                                diagnose=diagnose, progress=progress)

@@ -42,12 +42,16 @@ import numpy as np
 from .bench_runs import DT, bench_case, fit_exponent, table, write_csv
 from .bench_scaling import bench_scaling, scaling_summary, scaling_pivot, scaling_rows
 from .bench_side_by_side import exudyn_sections, exudyn_rows, exudyn_report
-from ..base.errors import FlexmechError
+from ..base.errors import FlexmechError, SolverError
 from ..base.inputs import checked_file, checked_folder
 from ..run.outdir import ResultFolder
 from ..base.families import MODELS, family
 from ..figures.plots import save_figure
 from .bench_stepping import bench_stepping
+from ..case import load_case
+from ..run.simulate import Prepared
+from ..models.superposition import reference
+from ..base.kernels import api, check_status
 
 __all__ = ["run_bench", "flops_superposition", "flops_newton", "fit_exponent", "DT"]
 
@@ -138,8 +142,6 @@ def bench_startup(seed: Path, reps: int) -> dict:
 
 
 def bench_seed_cases(cases: Path, reps: int) -> list[dict]:
-    from ..case import load_case
-    from ..run.simulate import Prepared
 
     rows = []
     for path in sorted(cases.glob("*.toml")):
@@ -177,8 +179,6 @@ def _ladder_steps(model: str, epl: int, quick: bool) -> int:
 
 
 def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
-    from ..base.errors import SolverError
-    from ..run.simulate import Prepared
 
     nan = float("nan")
     ladder = (1, 2, 4, 8) if quick else tuple(2 ** k for k in range(9))
@@ -229,8 +229,6 @@ def bench_ladder(seed: Path, peak: float, quick: bool, progress) -> list[dict]:
 
 def bench_reference(seed: Path, nref: int, reps: int) -> dict:
     """Fortran against the NumPy reference of the same equations on the seed four-bar (hac)."""
-    from ..models.superposition import reference
-    from ..run.simulate import Prepared
 
     p = Prepared(bench_case(seed, nref, 1))
     rig = p.rig
@@ -255,8 +253,6 @@ def bench_reference(seed: Path, nref: int, reps: int) -> dict:
 
 
 def bench_solves(seed: Path, quick: bool, progress) -> list[dict]:
-    from ..base.kernels import api, check_status
-    from ..run.simulate import Prepared
 
     ladder = (1, 2, 4, 8) if quick else tuple(2 ** k for k in range(9))
     rows = []
@@ -289,7 +285,6 @@ def bench_solves(seed: Path, quick: bool, progress) -> list[dict]:
 
 def bench_peak(quick: bool) -> float:
     """Measured multiply-add rate of one core [flop/s] (bench_peak: 8 independent chains)."""
-    from ..base.kernels import api
     n = 20_000_000 if quick else 200_000_000
     best = math.inf
     for _ in range(3):
@@ -304,7 +299,6 @@ def memory_probe(case_path, nsteps: int, out_every: int) -> dict:
     import resource
     import tracemalloc
 
-    from ..run.simulate import Prepared
 
     case = bench_case(case_path, nsteps, out_every)
     tracemalloc.start()

@@ -25,6 +25,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from ..case import load_case
+from ..run.simulate import Prepared
 
 __all__ = ["unavailable", "side_by_side", "manipulator_side_by_side", "SEED_TORQUE", "link_geometry", "cable_links",
            "coord_marker", "ground_pin", "tie_nodes", "midspan_sensors", "midspan_strain", "solve_dynamic", "smallest_times",
@@ -43,8 +45,6 @@ def unavailable() -> str | None:
 
 
 def _seed_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float, node_angles: str = "shared"):
-    from ..case import load_case
-
     return load_case(case_path, overrides=[f"solver.dt={dt!r}", f"solver.t_end={t_end!r}", "solver.output_every=10",
                                            f"solver.node_angles={node_angles!r}",
                                            "solver.integrator='generalized-alpha'", f"solver.rho_inf={rho_inf!r}",
@@ -54,8 +54,6 @@ def _seed_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float, nod
 def run_flexmech(case, model: str = "nonlinear", columns=("strain_coupler_mid", "strain_follower_mid", "crank_angle")) -> dict:
     """flexmech's run (nonlinear, or the coupled model of seed Section 3): the output ``columns`` at
     the case's frames, CPU of the kernel [s]."""
-    from ..run.simulate import Prepared
-
     p = Prepared(case)
     p.elastic_checked = True
     r = p.run(model)
@@ -315,8 +313,6 @@ def side_by_side(case_path, epl: int = 16, dt: float = 1.25e-5, t_end: float = 0
 def _manipulator_case(case_path, epl: int, dt: float, t_end: float, rho_inf: float):
     """The seed manipulator with its midspan strains as outputs and a frame at every step: its step
     torques ring up to tens of kHz, which frames every 10th step would fold into the low band."""
-    from ..case import load_case
-
     return load_case(case_path, overrides=[
         f"solver.dt={dt!r}", f"solver.t_end={t_end!r}", "solver.output_every=1", "solver.node_angles='shared'",
         "solver.integrator='generalized-alpha'", f"solver.rho_inf={rho_inf!r}", "solver.error_estimate='none'",

@@ -21,6 +21,10 @@ from ..base.inputs import read_text
 from ..base.names import inside, safe_name
 from ..run.outdir import ResultFolder
 from ..figures.plots import display_unit, line_figure
+from ..run.results import read_timeseries
+from ..models.superposition.outputs import output_unit
+from ..run.simulate import simulate
+from ..run.parallel import run_tasks
 
 __all__ = ["read_reference", "compare_columns", "compare_result_dir", "compare_models", "model_run", "ModelRun"]
 
@@ -227,8 +231,6 @@ def table(metrics: dict) -> str:
 def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None):
     """Compare a run folder (its timeseries.csv) with a reference CSV; writes compare.* into out_dir
     (default RESULT_DIR/compare; a :class:`~flexmech_py.run.outdir.ResultFolder`: whole or not at all)."""
-    from ..run.results import read_timeseries
-
     result_dir = Path(result_dir)
     ts = result_dir / "timeseries.csv"
     if not ts.is_file():
@@ -250,8 +252,6 @@ def compare_result_dir(result_dir, reference, x="t", columns=None, out_dir=None)
 
 def _case_units(case: dict) -> dict:
     """{output: unit} of a case's outputs (outputs.output_unit)."""
-    from ..models.superposition.outputs import output_unit
-
     return {name: output_unit(spec, case) for name, spec in case["outputs"].items()}
 
 
@@ -268,8 +268,6 @@ class ModelRun:
 def model_run(task: dict) -> dict:
     """Worker of ``compare --models`` (a :func:`~flexmech_py.run.parallel.run_tasks` task): one model of one
     case.  ``task``: {"case": validated case, "model": M}; returns the frame times, columns and timings."""
-    from ..run.simulate import simulate
-
     res = simulate(task["case"], model=task["model"])
     return {"model": res.model, "t": res.t, "columns": res.columns, "timing": res.timing,
             "rigid_motion": res.extra.get("mechanism", {}).get("rigid_motion", "kinematic")}
@@ -280,8 +278,6 @@ def compare_models(case: dict, models, reference_model="nonlinear", x="t", colum
     """Run several models of one case (each a task of :func:`~flexmech_py.run.parallel.run_tasks`: the local
     pool of ``jobs`` processes or the Dask ``scheduler``) and compare each with reference_model.
     Returns ({model: metrics}, {model: :class:`ModelRun`}, paths)."""
-    from ..run.parallel import run_tasks
-
     models = list(dict.fromkeys(list(models) + [reference_model]))
     with ResultFolder(out_dir, "compare-models") as rf:
         batch = run_tasks(model_run, [{"case": case, "model": m} for m in models], jobs=jobs, scheduler=scheduler,

@@ -35,6 +35,7 @@ from .extreme_runs import (LABEL, SPINUP_CONFIGS, SPINUP_REFERENCE, attempt, cas
 from .floquet import PeriodicCase, floquet
 from ..base.notices import silenced
 from ..run.simulate import Prepared
+from .gap import validity_time
 
 __all__ = ["STUDIES", "case_path", "load", "integrator_overrides", "sawtooth", "run_case", "stiff_study",
            "flexible_study", "critical_study", "toggle_study", "spinup_study", "long_run_study",
@@ -83,8 +84,6 @@ def flexible_study(models=("hac", "classic", "nonlinear"), t_end=0.01, windows=(
     the Euler load, the first times the bending deflection passes 2 % of a link length and a compressive
     force the Euler load (flexmech_py.studies.gap.validity_time), the validity warnings, and the coupler strain
     against the nonlinear model over windows [0, w]."""
-    from .gap import validity_time
-
     sets = [f"solver.t_end={t_end}"] + ([f"solver.dt={dt}"] if dt else [])
     kw = {"elements_per_link": elements} if elements else {}
     prep = Prepared(load("flexible_fourbar", sets), **kw)

@@ -35,6 +35,8 @@ from ..base.sizes import check_points
 from ..run.simulate import Prepared
 from ..models.superposition.loads import check_elastic_problem
 from ..base.fileio import atomic_write
+from ..models.modal import superposition_frequencies
+from ..run.parallel import run_tasks
 
 __all__ = ["PeriodicCase", "FloquetResult", "floquet", "steady_state", "frozen_frequencies", "stability_point",
            "STABLE_RATE", "ILL_CONDITIONED", "stability_chart", "ChartRuns", "REFINE_ROUNDS",
@@ -242,8 +244,6 @@ def frozen_frequencies(pc: PeriodicCase, fr: FloquetResult, nmodes: int = 4, sam
     positions over the cycle: sqrt of the eigenvalues of (K + Kc [+ Kg], M) at that instant (the
     stiffness the model uses there, centrifugal and geometric terms included; gyroscopic and damping
     terms left out), lowest first (flexmech_py.models.modal.superposition_frequencies)."""
-    from ..models.modal import superposition_frequencies
-
     nfr = fr.nf_rest.shape[1]                    # frames of the run from rest over one period
     frames = np.unique(np.linspace(0, nfr - 1, samples, endpoint=False).round().astype(int))
     steps = frames * (pc.nsteps // (nfr - 1))
@@ -329,8 +329,6 @@ def stability_chart(case: dict, speeds, *, model: str | None = None, geometric: 
     :func:`~flexmech_py.studies.regions.default_resolution`) is left to split.  Returns (rows, runs): one dict
     per speed, sorted by speed (an ``error`` entry for a failed one; ``round`` 0 for the user's speeds;
     ``worker`` where it ran), and a :class:`ChartRuns`."""
-    from ..run.parallel import run_tasks
-
     model = study_model(model, case)
     geometric = case["solver"]["geometric_stiffness"] if geometric is None else geometric
     PeriodicCase.check(case, model, geometric)

@@ -28,6 +28,13 @@ from ..base.errors import CaseError
 from ..base.sizes import check_count, format_count
 from ..base.fileio import atomic_write, json_default
 from ..base.version import versions
+from ..run.simulate import time_grid
+from ..models.superposition.model import FEModel
+from ..models.constrained.coupled import CoupledModel
+from ..models.superposition.loads import check_elastic_problem, elastic_torque_loads
+from ..models.constrained.outputs import deviation
+from ..case import with_elements
+from ..run.simulate import motion_source
 
 __all__ = ["ModeSet", "Along", "modes", "frequencies_along", "drive_joint", "turn_angle", "configuration_time",
            "cycle_times", "resonance_crossings", "DEFAULT_COUNT"]
@@ -86,7 +93,6 @@ def configuration_time(case: Case, source, at: float | None = None, crank_angle:
     if not math.isfinite(crank_angle):
         raise CaseError("--crank-angle", f"must be a number of degrees, got {crank_angle!r}")
     joint = _revolute_drive(case.mechanism, "--crank-angle")
-    from ..run.simulate import time_grid
 
     nsteps, _, every = time_grid(case)
     grid = np.linspace(0.0, t_end, nsteps // every + 1)
@@ -159,13 +165,9 @@ class _Frozen:
         self.case, self.model, self.gravity = case, model, case["loads"]["gravity"]
         self.geometric = family(model).superposition and geometric != "none"
         if family(model).superposition:
-            from ..models.superposition.model import FEModel
-
             self.fe, self.cm = FEModel.from_case(case), None
             node_frac = self.fe.node_frac
         else:
-            from ..models.constrained.coupled import CoupledModel
-
             self.fe, self.cm = None, CoupledModel.from_case(case, split=family(model).element_frames, hold_forced=True)
             node_frac = self.cm.mesh.node_frac
         self.bodies = shapes.body_points(case.mechanism, node_frac)
@@ -175,7 +177,6 @@ class _Frozen:
     def eigen(self, rm, i: int, count: int | None) -> modal.Eigen:
         if self.cm is not None:
             return modal.coupled_eigen(self.cm, rm, i, self.gravity, count)
-        from ..models.superposition.loads import check_elastic_problem, elastic_torque_loads
 
         fe = self.fe
         rig = fe.rig_samples(rm, self.gravity, slice(i, i + 1))
@@ -208,8 +209,6 @@ class _Frozen:
     def _coupled_shapes(self, rmi, ev: modal.Eigen):
         """Node and body displacements of the coupled models' mode vectors by central differences of the
         model's own kinematics about the linearized state (exact to round-off for small steps)."""
-        from ..models.constrained.outputs import deviation
-
         cm, n = self.cm, ev.lam.size
         dq = np.zeros((cm.ndof, n))
         free = modal.free_order(cm)
@@ -229,8 +228,6 @@ def _model_and_geometric(case, model, geometric):
 
 
 def _prepared_case(case, elements_per_link):
-    from ..case import with_elements
-
     case = case if isinstance(case, Case) else Case(case)
     return with_elements(case, elements_per_link) if elements_per_link is not None else case
 
@@ -310,8 +307,6 @@ def modes(case, *, at: float | None = None, crank_angle: float | None = None, co
     instant its driven joint reaches ``crank_angle`` [deg] (default t = 0): the ``count`` lowest elastic
     modes plus any rigid-body modes, with ``model`` (default: the case's solver.model) and ``geometric``
     (none | quasi_static; superposition models only; default: the case's solver.geometric_stiffness)."""
-    from ..run.simulate import motion_source
-
     if not isinstance(count, (int, np.integer)) or count < 1:
         raise CaseError("--count", f"must be a whole number >= 1, got {count!r}")
     case = _prepared_case(case, elements_per_link)
@@ -430,8 +425,6 @@ def frequencies_along(case, positions: int = 36, *, count: int = DEFAULT_COUNT, 
                       geometric: str | None = None, elements_per_link: int | None = None) -> Along:
     """The ``count`` lowest elastic natural frequencies at ``positions`` instants over one cycle of the
     drive (:func:`cycle_times`)."""
-    from ..run.simulate import motion_source
-
     if not isinstance(count, (int, np.integer)) or count < 1:
         raise CaseError("--count", f"must be a whole number >= 1, got {count!r}")
     case = _prepared_case(case, elements_per_link)

@@ -28,6 +28,7 @@ from .reproduce_modes import modes_section
 from .seed_cases import SEED_CASES, load_vector_difference, model_differences
 from .seed_report import report_text
 from ..run.simulate import simulate_models
+from .gap import gap_study, gap_table
 
 __all__ = ["reproduce", "seed_case_path", "model_differences"]
 
@@ -219,8 +220,6 @@ def _rel_text(diff, peak: float) -> str:
 
 
 def _gap_section(cases_dir, t_end, say) -> list[str]:
-    from .gap import gap_study, gap_table
-
     lines = ["", "## The model gap: linear configurations against the nonlinear model", "",
              "Coupler midspan strain (four-bars) or the tip's Y deflection from the rigid arm at each model's own "
              "joint angles (manipulator), max |error| over "

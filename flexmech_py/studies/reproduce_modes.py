@@ -11,6 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from ..case import load_case
+from ..figures.drawing import plot_along
+from .modes import frequencies_along
+from ..figures.drawing import draw_frames
+from ..models.shapes import ShapeCollector
 
 __all__ = ["modes_section"]
 
@@ -38,8 +42,6 @@ def modes_section(out: Path, case_path, runs: dict, say) -> list[str]:
 
 
 def _frequencies(out: Path, case, name: str, positions: int, say) -> list[str]:
-    from ..figures.drawing import plot_along
-    from .modes import frequencies_along
 
     t0 = time.perf_counter()
     al = frequencies_along(case, positions, count=3)
@@ -61,8 +63,6 @@ def _frequencies(out: Path, case, name: str, positions: int, say) -> list[str]:
 
 def _drawing(out: Path, res, name: str, say) -> list[str]:
     """The drawing of a seed case from its run ``res`` (a Result kept in memory)."""
-    from ..figures.drawing import draw_frames
-    from ..models.shapes import ShapeCollector
 
     t0 = time.perf_counter()
     case = res.case

@@ -37,6 +37,12 @@ from ..run.outdir import ResultFolder
 from ..base.sizes import check_points
 from ..base.fileio import atomic_write, csv_cell, json_default
 from ..base.version import versions
+from .accuracy import DEFAULT_KINDS
+from ..run.parallel import using_executor
+from .sweep import check_first_point, failure_reasons, load_base, run_points
+from ..case import validate_case
+from .sweep import write_table
+from ..figures.study_plots import plot_samples
 
 __all__ = ["Distribution", "parse_sample", "unit_points", "draw", "statistics", "correlations", "sample_study",
            "METHODS", "PERCENTILES"]
@@ -175,8 +181,6 @@ def _write_rows(path: Path, rows: list[dict], names: list[str], header: str) -> 
 
 def key_outputs(case: dict, columns) -> list[str]:
     """The ``<output>_maxabs`` columns of the elastic outputs (strain, displacement), else of all."""
-    from .accuracy import DEFAULT_KINDS
-
     peaks = [c for c in columns if c.endswith("_maxabs")]
     elastic = [f"{n}_maxabs" for n, sp in case["outputs"].items() if sp["kind"] in DEFAULT_KINDS]
     return [c for c in peaks if c in elastic] or peaks
@@ -190,8 +194,6 @@ def sample_study(case_path, samples: list[str], *, n: int, seed: int = 0, method
     inputs and outputs, as sweep.csv), ``statistics.csv``, ``correlations.csv``, ``samples.json`` and
     ``samples.png``.  Returns {"rows", "batch", "paths", "statistics", "correlations", "failures",
     "warnings", "key_outputs"}."""
-    from ..run.parallel import using_executor
-    from .sweep import check_first_point, failure_reasons, load_base, run_points
 
     path, base = load_base(case_path, overrides)
     dists = [parse_sample(s) for s in samples]
@@ -212,8 +214,6 @@ def sample_study(case_path, samples: list[str], *, n: int, seed: int = 0, method
 def _write_study(out: Path, path: Path, base: dict, dists, rows, batch, notes, plots: bool, settings: dict) -> dict:
     """samples.csv, statistics.csv, correlations.csv, samples.json and samples.png of a finished study;
     {"paths", "statistics", "correlations", "key_outputs"}."""
-    from ..case import validate_case
-    from .sweep import write_table
 
     n, method, seed = settings["samples"], settings["method"], settings["seed"]
     what = f"{n} {method} samples (seed {seed}) of {path.name}: " + "; ".join(f"{d.key} = {d.spec}" for d in dists)
@@ -237,8 +237,6 @@ def _write_study(out: Path, path: Path, base: dict, dists, rows, batch, notes, p
     paths.append(out / "samples.json")
     atomic_write(paths[-1], json.dumps(info, indent=2, default=json_default) + "\n")
     if plots and ok:
-        from ..figures.study_plots import plot_samples
-
         png = plot_samples(out / "samples.png", inputs, {c: outputs[c] for c in keys[:4]}, corr,
                            title=f"{path.name}: {len(ok)} of {n} {method} samples, seed {seed}")
         paths += [png] if png else []

@@ -29,6 +29,9 @@ from ..run.outdir import ResultFolder
 from ..base.sizes import check_points, format_count
 from ..base.fileio import atomic_write, csv_cell, json_default
 from ..base.version import versions
+from ..run.simulate import simulate
+from ..run.parallel import run_tasks
+from ..run.parallel import using_executor
 
 __all__ = ["parse_param", "grid_points", "sweep", "sweep_point", "point_overrides", "load_base", "check_first_point",
            "run_points", "write_table", "failure_reasons", "TIMING_COLUMNS", "VARYING_COLUMNS"]
@@ -102,8 +105,6 @@ def point_overrides(point: dict) -> list[str]:
 def sweep_point(task: dict) -> dict:
     """Worker of ``flexmech sweep``: one grid point.  ``task``: {"raw": the case file's TOML
     table, "source": its name, "overrides": [KEY.PATH=VALUE ...], "model": M or None}."""
-    from ..run.simulate import simulate
-
     t0 = time.perf_counter()
     case = validate_case(apply_overrides(task["raw"], task["overrides"]), source=task["source"])
     res = simulate(case, model=task["model"])
@@ -143,8 +144,6 @@ def check_first_point(base: dict, source: str, points: list[dict], what: str = "
 def run_points(path: Path, base: dict, points: list[dict], *, model, out: Path, executor, progress: bool = True):
     """Run the case at every point {key: value} on ``executor`` (cache in ``out/cache``).
     Returns (rows, batch): one row per point, the point's values first."""
-    from ..run.parallel import run_tasks
-
     tasks = [{"raw": base, "source": path.name, "model": model, "overrides": point_overrides(pt)} for pt in points]
     batch = run_tasks(sweep_point, tasks, cache_dir=out / "cache", progress=progress, label="runs", scheduler=executor)
     rows = []
@@ -184,8 +183,6 @@ def sweep(case_path, params: list[str], *, model: str | None = None, overrides=(
     ``out_dir/cache``).  ``scheduler``: None (local pool of ``jobs`` processes), a Dask scheduler
     address or ``local:N`` (:func:`~flexmech_py.run.parallel.open_executor`).
     Returns {"rows", "batch", "paths", "grid", "failures"}."""
-    from ..run.parallel import using_executor
-
     path, base = load_base(case_path, overrides)
     axes = [parse_param(p) for p in params]
     points = grid_points(axes)

@@ -31,6 +31,8 @@ from ..mesh import mesh_fractions, uniform_mesh
 from ..numbering import rcm_free_numbering
 from ...base.families import STUDY_MODEL, SUPERPOSITION_MODELS, family
 from ...base.errors import CaseError
+from .slaving import build_slaving
+from ...case import DIVERGENCE_FACTOR
 
 __all__ = ["FEModel", "Joint"]
 
@@ -227,8 +229,6 @@ class FEModel:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_case(cls, case: dict) -> "FEModel":
-        from .slaving import build_slaving
-
         mech = case.mechanism
         links = case["links"]
         names = [ln["name"] for ln in links]
@@ -515,8 +515,6 @@ class FEModel:
 
         Raises SolverError (naming the time) if the compiled loop stops.
         """
-        from ...case import DIVERGENCE_FACTOR
-
         rig = np.asfortranarray(rig, float)
         nsteps = rig.shape[2] - 1
         nf = self.nfree

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...base.errors import CaseError, SolverError
+from ...mechanism.packing import drawn_coordinates, joint_coordinates
 
 __all__ = ["Jet", "RigidPart", "Slide", "Slaving", "build_slaving", "rig_columns"]
 
@@ -502,8 +503,6 @@ def _on_ground(mech, j) -> bool:
 
 def drawn_rig(mech) -> np.ndarray:
     """Rig columns (5, ncols, 1) of the drawn configuration at rest (links, rigid bodies, slides)."""
-    from ...mechanism.packing import drawn_coordinates, joint_coordinates
-
     bodies, prisms = rig_columns(mech)
     cols = [[ln.angle, 0, 0, 0, 0] for ln in mech.links] + [[b.angle, 0, 0, 0, 0] for b in bodies]
     coords = joint_coordinates(mech, drawn_coordinates(mech))
