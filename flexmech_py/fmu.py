@@ -65,7 +65,7 @@ def _inputs(sim: Simulation, joints: list | None) -> dict:
     if not joints:
         raise CaseError("--inputs", "the case has no force-driven joint: give a joint a drive with law = 'force' "
                                     "and constant = 0 to take an effort from the master")
-    kinds = {j.name: j.kind for j in sim.case.mechanism.joints}
+    angular = {j.name: j.angular for j in sim.case.mechanism.joints}
     for j in joints:
         if j in sim.kinematic:
             raise CaseError("--inputs", f"joint {j!r} is prescribed by a kinematic drive: give it the law 'force' "
@@ -73,7 +73,7 @@ def _inputs(sim: Simulation, joints: list | None) -> dict:
         if j not in sim.base:
             raise CaseError("--inputs", f"no force-driven joint {j!r}; joints that take efforts: "
                                         f"{', '.join(sim.base) or 'none'}")
-    return {j: "N" if kinds.get(j) == "prismatic" else "N m" for j in dict.fromkeys(joints)}
+    return {j: "N m" if angular.get(j, True) else "N" for j in dict.fromkeys(joints)}
 
 
 def _outputs(sim: Simulation, names: list | None) -> dict:

@@ -542,7 +542,7 @@ class Prepared:
         for name, u in cm.control_outputs(qf.shape[1]).items():      # the feedback controllers' outputs
             joint = next(c["joint"] for c in case["controllers"] if c["name"] == name)
             columns[f"control_{name}"] = u
-            units[f"control_{name}"] = "N" if case.mechanism.joint(joint).kind == "prismatic" else "N m"
+            units[f"control_{name}"] = "N m" if case.mechanism.joint(joint).angular else "N"
         diag.add(fr, ef, rmf, iters, cval[:, :, idx])
         extra = {"integrator": integrator_summary(sol, model), "coupled": diag.summary(steps_done),
                  "step_alternation": cpl_out.multiplier_alternation(cm, alternating, lf,

@@ -260,7 +260,7 @@ class CoupledModel:
     def controllers(self, dt: float) -> ControlPack:
         """The case's feedback controllers packed for a run with step dt (flexmech_control)."""
         mech = self.case.mechanism
-        revolute = {j.name for j in mech.joints if j.kind != "prismatic"}
+        revolute = {j.name for j in mech.joints if j.angular}
         return pack_controllers(self.case.get("controllers", []), [d.joint for _, d in self.forces], revolute, dt,
                                 self.layout.control_rows)
 
