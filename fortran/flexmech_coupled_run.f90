@@ -314,8 +314,7 @@ contains
       call newton_iterations(rs, sys, cv, q, v, a, status)
       if (status == STATUS_OK .and. .not. rs%converged) status = STATUS_NEWTON
       if (status /= STATUS_OK) return
-      q(fi) = rs%qs(fi) + (rs%betap*dt*dt)*a(fi)
-      v(fi) = rs%vs(fi) + (rs%gammap*dt)*a(fi)
+      call set_iterate(rs, a, q, v)
       p(fi) = c1*((1.0_dp - rs%alpha_f)*a(fi) + rs%w(fi))
     end associate
   end subroutine run_step
@@ -373,6 +372,18 @@ contains
     end do
   end subroutine newton_iterations
 
+  !> The iterate at acceleration a on the free DOFs: q = qs + beta' dt^2 a, v = vs + gamma' dt a
+  !> (the step's predictor qs, vs; the constrained DOFs keep their values).
+  pure subroutine set_iterate(rs, a, q, v)
+    type(run_state), intent(in) :: rs
+    real(dp), intent(in) :: a(:)
+    real(dp), intent(inout) :: q(:), v(:)
+    associate (fi => rs%freeidx)
+      q(fi) = rs%qs(fi) + (rs%betap*rs%dt*rs%dt)*a(fi)
+      v(fi) = rs%vs(fi) + (rs%gammap*rs%dt)*a(fi)
+    end associate
+  end subroutine set_iterate
+
   !> One Newton iteration at the current acceleration a: the iterate (q, v), the residual (and S,
   !> factorized, when refresh), the rows and the correction of (a, lam); refresh for the next.
   subroutine newton_iteration(rs, sys, cv, q, v, a, status)
@@ -383,10 +394,7 @@ contains
     integer, intent(out) :: status
     real(dp) :: dt
     dt = rs%dt
-    associate (fi => rs%freeidx)
-      q(fi) = rs%qs(fi) + (rs%betap*dt*dt)*a(fi)
-      v(fi) = rs%vs(fi) + (rs%gammap*dt)*a(fi)
-    end associate
+    call set_iterate(rs, a, q, v)
     if (rs%refresh) then
       call assemble(sys, q, v, a, rs%t, .true., rs%gammap*dt, rs%betap*dt*dt, rs%res, rs%lm, rs%energy)
       call factor(rs, sys, status)
