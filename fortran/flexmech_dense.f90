@@ -1,4 +1,4 @@
-!> LU factorization with partial pivoting and solves for the small dense systems of the rigid-body
+!> LU factorization with partial pivoting, Cholesky factorization, and solves for the small dense systems of the rigid-body
 !> layer (a mechanism's constraint Jacobian and augmented matrix: tens of unknowns).  At these sizes
 !> the reference LAPACK's blocked, recursive dgetrf spends most of its time in call overhead
 !> (measured with callgrind: dtrsm/dgemm/dlaswp/lsame dominate a 9 x 9 factorization), so the
@@ -8,7 +8,7 @@ module flexmech_dense
   use flexmech_kinds, only: dp
   implicit none
   private
-  public :: lu_factor, lu_solve, pivot_ratio, det_sign
+  public :: lu_factor, lu_solve, pivot_ratio, det_sign, chol_factor, chol_solve
 
 contains
 
@@ -122,5 +122,56 @@ contains
       if (piv(k) /= k) det_sign = -det_sign
     end do
   end function det_sign
+
+  !> In-place Cholesky factor L (lower triangle, A = L L^T) of the symmetric a(1:n, 1:n) given by its
+  !> lower triangle.  info = k > 0 when the pivot of column k is not above rtol times the column's
+  !> diagonal entry (a is not positive definite to that tolerance: dependent rows of a Gram matrix).
+  pure subroutine chol_factor(a, n, rtol, info)
+    integer, intent(in) :: n
+    real(dp), intent(inout) :: a(:, :)
+    real(dp), intent(in) :: rtol
+    integer, intent(out) :: info
+    integer :: i, j, k
+    real(dp) :: d
+    info = 0
+    do k = 1, n
+      d = a(k, k)
+      do j = 1, k - 1
+        d = d - a(k, j)**2
+      end do
+      if (.not. d > rtol*a(k, k)) then
+        info = k
+        return
+      end if
+      d = sqrt(d)
+      a(k, k) = d
+      do i = k + 1, n
+        do j = 1, k - 1
+          a(i, k) = a(i, k) - a(i, j)*a(k, j)
+        end do
+        a(i, k) = a(i, k)/d
+      end do
+    end do
+  end subroutine chol_factor
+
+  !> Solve A x = b with the factor of chol_factor, b overwritten.
+  pure subroutine chol_solve(a, n, b)
+    integer, intent(in) :: n
+    real(dp), intent(in) :: a(:, :)
+    real(dp), intent(inout) :: b(:)
+    integer :: i, j
+    do i = 1, n                   ! L y = b
+      do j = 1, i - 1
+        b(i) = b(i) - a(i, j)*b(j)
+      end do
+      b(i) = b(i)/a(i, i)
+    end do
+    do i = n, 1, -1               ! L^T x = y
+      do j = i + 1, n
+        b(i) = b(i) - a(j, i)*b(j)
+      end do
+      b(i) = b(i)/a(i, i)
+    end do
+  end subroutine chol_solve
 
 end module flexmech_dense

@@ -27,7 +27,7 @@ module flexmech_mbs
   use, intrinsic :: ieee_arithmetic, only: ieee_is_finite
   use flexmech_kinds, only: dp
   use flexmech_lapack, only: STATUS_OK, STATUS_BAD_INPUT, STATUS_SINGULAR, STATUS_NONFINITE
-  use flexmech_dense, only: lu_factor, lu_solve
+  use flexmech_dense, only: lu_factor, lu_solve, chol_factor, chol_solve
   use flexmech_drivelaw, only: kinematic_law, force_law, LAW_FORCE
   use flexmech_markers, only: marker_state, body_marker, ground_marker, constraint_row, con_valid, &
                               con_in_radians, CON_POINT, MAXCOL
@@ -59,6 +59,9 @@ module flexmech_mbs
     ! workspace of the last evaluation
     real(dp), allocatable :: phi(:), jac(:, :), gam(:), nu(:), q(:), aug(:, :), sol(:)
     integer, allocatable :: ipiv(:)
+    type(marker_state), allocatable :: mk(:)       !< (nmk) every marker at the state of the last evaluation
+    real(dp), allocatable :: minv(:)               !< (n) the inverse of the diagonal mass matrix (0: singular M)
+    logical :: schur = .false.                     !< the last factor_augmented is the Gram matrix's (below)
   contains
     procedure :: rhs => dynamics_rhs
   end type mbs_system
@@ -94,7 +97,16 @@ contains
     call number_rows(sys)
     r = sys%nrow
     allocate (sys%phi(r), sys%jac(max(r, 1), sys%n), sys%gam(r), sys%nu(r), sys%q(sys%n))
-    allocate (sys%aug(sys%n + r, sys%n + r), sys%sol(sys%n + r), sys%ipiv(sys%n + r))
+    allocate (sys%aug(sys%n + r, sys%n + r), sys%sol(sys%n + r), sys%ipiv(sys%n + r), sys%mk(sys%nmk))
+    allocate (sys%minv(sys%n))
+    sys%minv = 0.0_dp
+    if (all(sys%inertia > 0.0_dp)) then
+      sys%minv(1:sys%n:3) = 1.0_dp/sys%mass; sys%minv(2:sys%n:3) = 1.0_dp/sys%mass
+      sys%minv(3:sys%n:3) = 1.0_dp/sys%inertia
+    end if
+    do r = 1, sys%nmk          ! the ground's markers never change
+      if (sys%mk_body(r) == 0) call ground_marker(sys%mk_pos(:, r), sys%mk(r))
+    end do
     status = STATUS_OK
   end subroutine mbs_build
 
@@ -197,57 +209,53 @@ contains
     end do
   end subroutine number_rows
 
-  !> State of marker k at (z, zd) (flexmech_markers): a point of its body, or of the ground.
-  pure subroutine mbs_marker(sys, k, z, zd, ms)
-    type(mbs_system), intent(in) :: sys
-    integer, intent(in) :: k
+  !> Every moving marker's state at (z, zd) into sys%mk (flexmech_markers: body_marker; the ground's
+  !> are set once by mbs_build).  Each marker is evaluated once per state: the joints' rows, the drives'
+  !> rows and forces, and the joint coordinates all read these.
+  subroutine eval_markers(sys, z, zd)
+    type(mbs_system), intent(inout) :: sys
     real(dp), intent(in) :: z(:), zd(:)
-    type(marker_state), intent(out) :: ms
-    integer :: b
-    b = sys%mk_body(k)
-    if (b == 0) then
-      call ground_marker(sys%mk_pos(:, k), ms)
-    else
-      call body_marker(z(3*b - 2:3*b), zd(3*b - 2:3*b), [3*b - 2, 3*b - 1, 3*b], sys%mk_pos(:, k), ms)
-    end if
-  end subroutine mbs_marker
+    integer :: k, b
+    do k = 1, sys%nmk
+      b = sys%mk_body(k)
+      if (b > 0) call body_marker(z(3*b - 2:3*b), zd(3*b - 2:3*b), [3*b - 2, 3*b - 1, 3*b], sys%mk_pos(:, k), sys%mk(k))
+    end do
+  end subroutine eval_markers
 
-  !> Coordinate g of joint j (its coordinate row), its rate gd, the velocity part acc0 of its second
-  !> derivative (g'' = grad . z'' + acc0) and its gradient grad over the coordinates cols(1:nc).
-  pure subroutine joint_coordinate(sys, j, z, zd, g, gd, acc0, nc, cols, grad)
+  !> Coordinate g of joint j (its coordinate row) at the markers of the last evaluation, its rate gd,
+  !> the velocity part acc0 of its second derivative (g'' = grad . z'' + acc0) and its gradient grad
+  !> over the coordinates cols(1:nc).
+  pure subroutine joint_coordinate(sys, j, g, gd, acc0, nc, cols, grad)
     type(mbs_system), intent(in) :: sys
     integer, intent(in) :: j
-    real(dp), intent(in) :: z(:), zd(:)
     real(dp), intent(out) :: g, gd, acc0, grad(2*MAXCOL)
     integer, intent(out) :: nc, cols(2*MAXCOL)
-    type(marker_state) :: ma, mb
-    call mbs_marker(sys, sys%jt_mk(1, j), z, zd, ma)
-    call mbs_marker(sys, sys%jt_mk(2, j), z, zd, mb)
-    call constraint_row(sys%jt_coord(1, j), sys%jt_coord(2, j), sys%jt_dir(:, j), ma, mb, g, gd, acc0, nc, cols, grad)
+    call constraint_row(sys%jt_coord(1, j), sys%jt_coord(2, j), sys%jt_dir(:, j), sys%mk(sys%jt_mk(1, j)), &
+                        sys%mk(sys%jt_mk(2, j)), g, gd, acc0, nc, cols, grad)
   end subroutine joint_coordinate
 
   !> Constraint values phi, Jacobian jac (nrow x n, dense), acceleration right-hand side gam and velocity
-  !> right-hand side nu at (z, zd, t), into sys's workspace.
+  !> right-hand side nu at (z, zd, t), into sys's workspace (the markers' states too: mbs_forces,
+  !> mbs_joint_coordinates and mbs_drive_values read them).
   subroutine mbs_constraints(sys, z, zd, t)
     type(mbs_system), intent(inout) :: sys
     real(dp), intent(in) :: z(:), zd(:), t
     integer :: j, r, i, nc, cols(2*MAXCOL)
     real(dp) :: g, gd, acc0, grad(2*MAXCOL), f(3)
-    type(marker_state) :: ma, mb
+    call eval_markers(sys, z, zd)
     sys%jac = 0.0_dp; sys%nu = 0.0_dp
     do j = 1, sys%nj
-      if (sys%jt_row(j + 1) == sys%jt_row(j)) cycle
-      call mbs_marker(sys, sys%jt_mk(1, j), z, zd, ma)
-      call mbs_marker(sys, sys%jt_mk(2, j), z, zd, mb)
-      do r = sys%jt_row(j), sys%jt_row(j + 1) - 1
-        call constraint_row(sys%cr(2, r), sys%cr(3, r), sys%cr_dir(:, r), ma, mb, g, gd, acc0, nc, cols, grad)
-        call put_row(sys, r, g - sys%cr_ref(r), -acc0, nc, cols, grad)
-      end do
+      associate (ma => sys%mk(sys%jt_mk(1, j)), mb => sys%mk(sys%jt_mk(2, j)))
+        do r = sys%jt_row(j), sys%jt_row(j + 1) - 1
+          call constraint_row(sys%cr(2, r), sys%cr(3, r), sys%cr_dir(:, r), ma, mb, g, gd, acc0, nc, cols, grad)
+          call put_row(sys, r, g - sys%cr_ref(r), -acc0, nc, cols, grad)
+        end do
+      end associate
     end do
     do i = 1, sys%nd
       r = sys%dv_row(i)
       if (r == 0) cycle
-      call joint_coordinate(sys, sys%dv_joint(i), z, zd, g, gd, acc0, nc, cols, grad)
+      call joint_coordinate(sys, sys%dv_joint(i), g, gd, acc0, nc, cols, grad)
       f = drive_law(sys, i, t)
       call put_row(sys, r, g - f(1), f(3) - acc0, nc, cols, grad)
       sys%nu(r) = f(2)
@@ -267,10 +275,11 @@ contains
     end do
   end subroutine put_row
 
-  !> Generalized applied forces q (n) at (z, zd, t): gravity and the force drives.
-  pure subroutine mbs_forces(sys, z, zd, t, q)
+  !> Generalized applied forces q (n) at time t and the state of the last mbs_constraints: gravity and
+  !> the force drives.
+  pure subroutine mbs_forces(sys, t, q)
     type(mbs_system), intent(in) :: sys
-    real(dp), intent(in) :: z(:), zd(:), t
+    real(dp), intent(in) :: t
     real(dp), intent(out) :: q(:)
     integer :: i, b, c, nc, cols(2*MAXCOL)
     real(dp) :: g, gd, acc0, grad(2*MAXCOL), tau
@@ -280,7 +289,7 @@ contains
     end do
     do i = 1, sys%nd
       if (sys%dv_kind(i) /= LAW_FORCE) cycle
-      call joint_coordinate(sys, sys%dv_joint(i), z, zd, g, gd, acc0, nc, cols, grad)
+      call joint_coordinate(sys, sys%dv_joint(i), g, gd, acc0, nc, cols, grad)
       tau = force_value(sys, i, g, t)
       do c = 1, nc
         q(cols(c)) = q(cols(c)) + tau*grad(c)
@@ -312,7 +321,7 @@ contains
     real(dp), intent(out) :: zdd(:), lam(:)
     integer, intent(out) :: status
     call mbs_constraints(sys, z, zd, t)
-    call mbs_forces(sys, z, zd, t, sys%q)
+    call mbs_forces(sys, t, sys%q)
     call factor_augmented(sys, status)
     if (status /= STATUS_OK) return
     sys%sol(1:sys%n) = sys%q
@@ -322,11 +331,51 @@ contains
     lam = sys%sol(sys%n + 1:)
   end subroutine mbs_accelerations
 
-  !> LU of the augmented matrix [M Phi_z^T; Phi_z 0] of the last mbs_constraints in sys%aug.
+  !> Factor the augmented matrix [M Phi_z^T; Phi_z 0] of the last mbs_constraints for solve_augmented.
+  !> M is diagonal: when it is regular (every body has a rotary inertia), through the Gram matrix
+  !> G = Phi_z M^-1 Phi_z^T (nrow x nrow, Cholesky in sys%aug(1:nrow, 1:nrow); (nrow^3/6 + nrow^2 n/2
+  !> flops against (n + nrow)^3/3 for the whole matrix).  When G is not positive definite to 1e-10 of
+  !> its diagonal (rows dependent or nearly so) or M is singular: LU of the whole augmented matrix.
   subroutine factor_augmented(sys, status)
     type(mbs_system), intent(inout) :: sys
     integer, intent(out) :: status
-    integer :: b, n, info
+    integer :: info
+    status = STATUS_OK
+    sys%schur = sys%minv(1) > 0.0_dp
+    if (sys%schur .and. sys%nrow > 0) then
+      call gram_lower(sys)
+      call chol_factor(sys%aug, sys%nrow, 1e-10_dp, info)
+      sys%schur = info == 0
+    end if
+    if (sys%schur) return
+    call augmented_lu(sys, info)
+    status = merge(STATUS_SINGULAR, STATUS_OK, info > 0)
+  end subroutine factor_augmented
+
+  !> Lower triangle of G = Phi_z M^-1 Phi_z^T into sys%aug(1:nrow, 1:nrow), column by column of
+  !> Phi_z (a row touches at most two bodies: most products are skipped).
+  subroutine gram_lower(sys)
+    type(mbs_system), intent(inout) :: sys
+    integer :: i, j, c, m
+    real(dp) :: t
+    m = sys%nrow
+    sys%aug(1:m, 1:m) = 0.0_dp
+    do c = 1, sys%n
+      do j = 1, m
+        t = sys%jac(j, c)*sys%minv(c)
+        if (t == 0.0_dp) cycle
+        do i = j, m
+          sys%aug(i, j) = sys%aug(i, j) + sys%jac(i, c)*t
+        end do
+      end do
+    end do
+  end subroutine gram_lower
+
+  !> LU of the whole augmented matrix in sys%aug (info > 0: an exactly zero pivot).
+  subroutine augmented_lu(sys, info)
+    type(mbs_system), intent(inout) :: sys
+    integer, intent(out) :: info
+    integer :: b, n
     n = sys%n
     sys%aug = 0.0_dp
     do b = 1, sys%nb
@@ -339,14 +388,24 @@ contains
       sys%aug(1:n, n + 1:) = transpose(sys%jac(1:sys%nrow, :))
     end if
     call lu_factor(sys%aug, n + sys%nrow, sys%ipiv, info)
-    status = merge(STATUS_SINGULAR, STATUS_OK, info > 0)
-  end subroutine factor_augmented
+  end subroutine augmented_lu
 
-  !> Solve with factor_augmented's factors: sys%sol (n + nrow) overwritten.
+  !> Solve [M Phi_z^T; Phi_z 0] [x; lam] = [f; g] with factor_augmented's factors: sys%sol = [f; g]
+  !> (n + nrow) overwritten by [x; lam].  Through the Gram matrix: G lam = Phi_z M^-1 f - g,
+  !> x = M^-1 (f - Phi_z^T lam).
   subroutine solve_augmented(sys, status)
     type(mbs_system), intent(inout) :: sys
     integer, intent(out) :: status
-    call lu_solve(sys%aug, sys%n + sys%nrow, sys%ipiv, sys%sol, .false.)
+    integer :: n, m
+    n = sys%n; m = sys%nrow
+    if (sys%schur) then
+      sys%sol(1:n) = sys%minv*sys%sol(1:n)
+      sys%sol(n + 1:) = matmul(sys%jac(1:m, :), sys%sol(1:n)) - sys%sol(n + 1:)
+      call chol_solve(sys%aug, m, sys%sol(n + 1:))
+      sys%sol(1:n) = sys%sol(1:n) - sys%minv*matmul(sys%sol(n + 1:), sys%jac(1:m, :))
+    else
+      call lu_solve(sys%aug, n + m, sys%ipiv, sys%sol, .false.)
+    end if
     status = STATUS_OK
     if (.not. ieee_is_finite(sum(abs(sys%sol)))) status = STATUS_NONFINITE
   end subroutine solve_augmented
@@ -364,11 +423,12 @@ contains
     end associate
   end subroutine dynamics_rhs
 
-  !> The generalized force every drive applies on its joint coordinate [N m or N] at (z, zd, t) with
-  !> multipliers lam: a force drive's law, a kinematic drive's -lambda (its constraint force).
-  pure subroutine mbs_drive_values(sys, z, zd, t, lam, dv)
+  !> The generalized force every drive applies on its joint coordinate [N m or N] at time t and the
+  !> state of the last mbs_constraints, with multipliers lam: a force drive's law, a kinematic drive's
+  !> -lambda (its constraint force).
+  pure subroutine mbs_drive_values(sys, t, lam, dv)
     type(mbs_system), intent(in) :: sys
-    real(dp), intent(in) :: z(:), zd(:), t, lam(:)
+    real(dp), intent(in) :: t, lam(:)
     real(dp), intent(out) :: dv(:)
     integer :: i, nc, cols(2*MAXCOL)
     real(dp) :: g, gd, acc0, grad(2*MAXCOL)
@@ -377,7 +437,7 @@ contains
         dv(i) = -lam(sys%dv_row(i))
         cycle
       end if
-      call joint_coordinate(sys, sys%dv_joint(i), z, zd, g, gd, acc0, nc, cols, grad)
+      call joint_coordinate(sys, sys%dv_joint(i), g, gd, acc0, nc, cols, grad)
       dv(i) = force_value(sys, i, g, t)
     end do
   end subroutine mbs_drive_values
@@ -400,19 +460,20 @@ contains
     end do
   end function mbs_drive_change
 
-  !> Coordinates of every joint [value, rate, acceleration] (3, nj) at (z, zd, zdd) and time t [s].  A
+  !> Coordinates of every joint [value, rate, acceleration] (3, nj) at the state of the last
+  !> mbs_constraints, accelerations zdd and time t [s].  A
   !> kinematically driven joint's are its law's [f, f', f''] at t: the position solve meets the law only
   !> to its tolerance (1e-12 of the mechanism's size, drifting between Newton corrections), and the
   !> coupled models prescribe these values in their drive rows, where an error of 1e-13 m is a
   !> multiplier kick of m 1e-13 / (beta h^2) (docs/theory.md section 15.4).
-  pure subroutine mbs_joint_coordinates(sys, z, zd, zdd, t, jq)
+  pure subroutine mbs_joint_coordinates(sys, zdd, t, jq)
     type(mbs_system), intent(in) :: sys
-    real(dp), intent(in) :: z(:), zd(:), zdd(:), t
+    real(dp), intent(in) :: zdd(:), t
     real(dp), intent(out) :: jq(:, :)
     integer :: i, j, c, nc, cols(2*MAXCOL)
     real(dp) :: g, gd, acc0, grad(2*MAXCOL), acc
     do j = 1, sys%nj
-      call joint_coordinate(sys, j, z, zd, g, gd, acc0, nc, cols, grad)
+      call joint_coordinate(sys, j, g, gd, acc0, nc, cols, grad)
       acc = acc0
       do c = 1, nc
         acc = acc + grad(c)*zdd(cols(c))

@@ -50,7 +50,7 @@ contains
     if (status /= STATUS_OK) return
     call mbs_constraints(sys, z, zd, t)
     phi = sys%phi; jac = sys%jac(1:nrow, :); gam = sys%gam; nu = sys%nu
-    call mbs_forces(sys, z, zd, t, q)
+    call mbs_forces(sys, t, q)
   end subroutine mbs_eval
 
   !> Close the loops: Gauss-Newton with minimum-norm corrections dz = -W^-1 J^T (J W^-1 J^T)^-1 phi,

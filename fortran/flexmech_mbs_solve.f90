@@ -86,7 +86,7 @@ contains
     call mbs_constraints(sys, z, zd, t)                          ! gamma with the velocities (same Jacobian)
     zdd = sys%gam
     call square_solve(sys, zdd, 'N', status)
-    call mbs_forces(sys, z, zd, t, sys%q)
+    call mbs_forces(sys, t, sys%q)
     lam = sys%q
     lam(1:sys%n:3) = lam(1:sys%n:3) - sys%mass*zdd(1:sys%n:3)
     lam(2:sys%n:3) = lam(2:sys%n:3) - sys%mass*zdd(2:sys%n:3)

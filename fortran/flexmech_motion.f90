@@ -65,8 +65,8 @@ contains
         return
       end if
       zf(:, i) = z; zdf(:, i) = zd; zddf(:, i) = zdd; lamf(:, i) = lam
-      call mbs_joint_coordinates(sys, z, zd, zdd, ts(i), jqf(:, :, i))
-      call mbs_drive_values(sys, z, zd, ts(i), lam, dvf(:, i))
+      call mbs_joint_coordinates(sys, zdd, ts(i), jqf(:, :, i))     ! advance left the constraints at (z, zd)
+      call mbs_drive_values(sys, ts(i), lam, dvf(:, i))
       nvalid = i
     end do
 
@@ -202,8 +202,8 @@ contains
         exit
       end if
       zf(:, i) = y(1:n); zdf(:, i) = y(n + 1:); lamf(:, i) = lam
-      call mbs_joint_coordinates(sys, y(1:n), y(n + 1:), zddf(:, i), ts(i), jqf(:, :, i))
-      call mbs_drive_values(sys, y(1:n), y(n + 1:), ts(i), lam, dvf(:, i))
+      call mbs_joint_coordinates(sys, zddf(:, i), ts(i), jqf(:, :, i))     ! at y, as mbs_accelerations
+      call mbs_drive_values(sys, ts(i), lam, dvf(:, i))
       nvalid = i
     end do
     call ode_pack(st, state)
