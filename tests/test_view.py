@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexmech_py.case import Case
+from flexmech_py.case import Case, read_case_file
 from flexmech_py.cli import main
 from flexmech_py.figures.plots import decimate
 from flexmech_py.run.results import read_timeseries
@@ -232,3 +232,33 @@ def test_an_unwritable_target_is_one_line_exit_2_and_leaves_nothing(run_dir):
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "--out" in p.stderr, p.stderr
     assert sorted(q.name for q in run_dir.iterdir()) == sorted([".flexmech-results.json", "shape.csv", "summary.json",
                                                                  "timeseries.csv", "view.html"])
+
+
+@pytest.mark.parametrize("case, shape", [("geared_fivebar", "circle"), ("scotch_yoke", "slot")])
+def test_a_gear_and_a_slot_bring_their_outline_to_the_page(tmp_path, case, shape):
+    """The page carries each kind's own outline (Joint.glyph_shapes: a gear's two pitch circles of the
+    case's radii and its line of centres; a slot's outline) with the two sides it is drawn between, and
+    the PNG drawing's polylines from the same shapes pass through those sides."""
+    from flexmech_py.figures.glyphs import shape_lines
+
+    out = tmp_path / case
+    assert _run("run", CASES / f"{case}.toml", "--set", "solver.t_end=0.002", "--view", "--no-plots", "--quiet",
+                "--out", out) == 0
+    data = _data((out / "view.html").read_text())
+    joints = [j for j in data["joints"] if any(s["shape"] == shape for s in j["shapes"])]
+    assert joints, [j["kind"] for j in data["joints"]]
+    sf, _, _ = read_shape_csv(out / "shape.csv")
+    table = read_case_file(CASES / f"{case}.toml")
+    for j in joints:
+        ends = [np.asarray(e, float) if isinstance(e, list) else sf.x[0, e] + sf.d[0, e] for e in j["ends"]]
+        lines = shape_lines(j["shapes"], *ends)
+        if shape == "circle":
+            radii = [s["radius"] for s in j["shapes"] if s["shape"] == "circle"]
+            gear = next(t for t in table["joints"] if isinstance(t, dict) and t.get("name") == j["name"])
+            assert radii == gear["radii"]
+            for line, r, c in zip(lines, radii, ends):
+                assert np.allclose(np.hypot(*(line - c).T), r, rtol=1e-12)
+            assert np.allclose(lines[2], np.array(ends))
+        else:
+            pin = lines[1]
+            assert np.allclose(pin[:-1].mean(axis=0), ends[1], atol=1e-9)

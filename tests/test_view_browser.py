@@ -131,3 +131,26 @@ def test_stability_chart_loads_clean_and_hovers(browser, pages):
     ActionChains(b.driver).move_to_element(canvas).perform()
     tip = b.driver.find_element("id", "tip")
     assert tip.is_displayed() and "rad/s" in tip.text and "growth rate" in tip.text
+
+
+def test_the_page_draws_a_gears_pitch_circles_and_a_slot_as_the_pngs_do(browser, tmp_path):
+    """The page's shapeLines (view_mechanism.js) gives the polylines of flexmech_py.figures.glyphs.shape_lines
+    for every joint kind's outline (the page loads clean with them drawn)."""
+    from flexmech_py.figures.glyphs import shape_lines
+
+    b = browser
+    for case in ("geared_fivebar", "scotch_yoke"):
+        out = tmp_path / case
+        assert main(["run", str(CASES / f"{case}.toml"), "--set", "solver.t_end=0.002", "--view", "--no-plots",
+                     "--quiet", "--out", str(out)]) == 0
+        _clean_load(b, out)
+        data = json.loads(b.js("return document.getElementById('flexmech-data').textContent"))
+        drawn = [j for j in data["joints"] if j["shapes"]]
+        assert drawn
+        for j in drawn:
+            pa, pb = [0.01, -0.02], [0.13, 0.05]
+            page = b.js("return window.flexmechView.shapeLines(arguments[0], arguments[1], arguments[2])", j["shapes"], pa, pb)
+            ours = shape_lines(j["shapes"], np.array(pa), np.array(pb))
+            assert len(page) == len(ours)
+            for a, c in zip(page, ours):
+                assert np.allclose(np.asarray(a, float), c, rtol=0, atol=1e-12)

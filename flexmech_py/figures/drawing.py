@@ -11,12 +11,13 @@ mechanism's size; the rigid configuration is drawn dashed underneath.
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
 
 from .glyphs import (BODY_COLOURS, BODY_STYLES, GROUND_GUIDE, GROUND_PIVOT, RIGID_GHOST, glyph_of, joint_marks,
-                     legend_words)
+                     legend_words, shape_lines)
 from .plots import PNG_OPTIONS, have_matplotlib, save_figure
 
 __all__ = ["magnification", "deformed_lines", "draw_frames", "animate_frames", "draw_modes", "plot_along",
@@ -115,7 +116,7 @@ def _draw_instant(ax, sf, i: int, scale: float, marks, colours) -> None:
         if m.point is not None:
             _draw_joint(ax, m, sf.x[i, m.point] + scale * sf.d[i, m.point])
             ends = [e if e is None or isinstance(e, np.ndarray) else sf.x[i, e] + scale * sf.d[i, e] for e in m.ends]
-            for line in (m.joint.glyph_lines(*ends) if all(e is not None for e in ends) else ()):
+            for line in (shape_lines(m.joint.glyph_shapes(), *ends) if all(e is not None for e in ends) else ()):
                 ax.plot(line[:, 0], line[:, 1], "-", color="0.2", lw=1.0, zorder=4)   # the kind's own outline
 
 
@@ -185,8 +186,13 @@ def _figure(width, height):
     return fig
 
 
-def _legend_line(fig, text: str) -> None:
-    fig.text(0.5, 0.012, text, ha="center", va="bottom", fontsize=8, color="0.25")
+def _legend_line(fig, text: str) -> float:
+    """The legend under the panels, wrapped to the figure's width (about 17 characters of 8 pt text per
+    inch); returns the fraction of the figure's height it takes."""
+    width, height = fig.get_size_inches()
+    lines = textwrap.wrap(text, width=max(40, int(17 * width)))
+    fig.text(0.5, 0.012, "\n".join(lines), ha="center", va="bottom", fontsize=8, color="0.25")
+    return (0.012 * height + 0.16 * len(lines)) / height
 
 
 def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str = "", labels=None, legend=None):
@@ -214,9 +220,9 @@ def draw_frames(path, sf, mech, idx, *, scale: float | None = None, title: str =
         if n // cols == rows - 1 or n + cols >= idx.size:
             ax.set_xlabel("X [m]", fontsize=8)
     fig.suptitle(title, fontsize=9.5)
-    _legend_line(fig, (legend or f"elastic deflection {factor_text(scale)} (magnified)")
-                 + ", rigid configuration dashed; " + _symbols(marks))
-    fig.tight_layout(rect=(0, 0.035, 1, 1))
+    bottom = _legend_line(fig, (legend or f"elastic deflection {factor_text(scale)} (magnified)")
+                          + ", rigid configuration dashed; " + _symbols(marks))
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     save_figure(fig, path, dpi=100, pil_kwargs=PNG_OPTIONS)
     return Path(path), scale
 

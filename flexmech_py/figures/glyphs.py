@@ -16,7 +16,7 @@ import numpy as np
 from ..mechanism.joints import JOINT_KINDS, Joint
 
 __all__ = ["JOINT_GLYPHS", "GROUND_PIVOT", "GROUND_GUIDE", "BODY_STYLES", "BODY_COLOURS", "RIGID_GHOST",
-           "JointMark", "joint_marks", "glyph_of", "legend_words", "table"]
+           "JointMark", "joint_marks", "glyph_of", "legend_words", "shape_lines", "table"]
 
 #: joint kind -> its mark at the joint's point (``Joint.glyph`` of the kind's module): ``marker`` circle |
 #: square, ``size`` [pt], ``fill`` of an undriven joint, ``driven_fill`` of a joint with a drive, ``edge``
@@ -47,7 +47,7 @@ class JointMark:
     points (None when that point is not drawn), ``ground`` the ground point [m] when one side is the
     ground (else None), ``axis`` the unit direction of a guided joint's guide on the ground; ``ends`` its
     two sides a and b: a point index among the drawn points, the ground point [m], or None (not drawn),
-    for the kind's own outline (``Joint.glyph_lines``, drawn in the PNGs)."""
+    for the kind's own outline (``Joint.glyph_shapes``, :func:`shape_lines`)."""
 
     name: str
     kind: str
@@ -95,6 +95,42 @@ def legend_words(marks) -> list[str]:
         guides = any(m.axis is not None and m.kind == kind for m in marks)
         words.append(legend + (" " + GROUND_GUIDE["legend"] if guides else ""))
     return words
+
+
+def shape_lines(shapes: list, pa, pb) -> list:
+    """Polylines ((n, 2) arrays [m]) of a joint kind's outline (``Joint.glyph_shapes``) at its two points'
+    drawn positions pa, pb.  The page's ``shapeLines`` (view_mechanism.js) draws the same shapes."""
+    pa, pb = np.asarray(pa, float), np.asarray(pb, float)
+    ring = _ring(73)
+    out = []
+    for sh in shapes:
+        if sh["shape"] == "circle":
+            out.append((pa, pb)[sh["at"]] + sh["radius"] * ring)
+        elif sh["shape"] == "segment":
+            out.append(np.array([pa, pb]))
+        elif sh["shape"] == "slot":
+            out.extend(_slot_lines(sh, pa, pb))
+    return out
+
+
+def _ring(n: int) -> np.ndarray:
+    t = np.linspace(0.0, 2.0 * np.pi, n)[:, None]
+    return np.hstack([np.cos(t), np.sin(t)])
+
+
+def _slot_lines(sh: dict, pa, pb) -> list:
+    """A slot's stadium centred on pa along the line to the pin pb (its axis when pb is on pa), half
+    length ``half`` or 1.15 |pb - pa|, width a tenth of it; the pin's circle about pb."""
+    d = pb - pa
+    dist = float(np.hypot(*d))
+    u = d / dist if dist > 1e-9 else np.asarray(sh["axis"], float)
+    half = sh["half"] if sh["half"] is not None else 1.15 * dist
+    w = 0.05 * max(half, 1e-3)
+    n = np.array([-u[1], u[0]])
+    t = np.linspace(-0.5 * np.pi, 0.5 * np.pi, 13)[:, None]
+    cap = np.cos(t) * u + np.sin(t) * n
+    outline = np.vstack([pa + half * u + w * cap, pa - half * u - w * cap])
+    return [np.vstack([outline, outline[:1]]), pb + 0.8 * w * _ring(25)]
 
 
 def table() -> dict:

@@ -78,8 +78,16 @@ def mechanism_payload(case: Case, sf: ShapeFrames) -> dict:
                        "half_depth": finite(ln.get("half_depth")), "E": finite(ln.get("youngs_modulus"))})
     joints = [{"name": m.name, "kind": m.kind, "point": m.point, "driven": m.driven,
                "ground": None if m.ground is None else [float(v) for v in m.ground],
-               "axis": None if m.axis is None else [float(v) for v in m.axis]} for m in marks]
+               "axis": None if m.axis is None else [float(v) for v in m.axis],
+               "shapes": m.joint.glyph_shapes(), "ends": [_end(e) for e in m.ends]} for m in marks]
     return {"bodies": bodies, "joints": joints, "legend": legend_words(marks), "size": mechanism_size(sf)}
+
+
+def _end(e):
+    """A joint side for the page: its drawn point's index, a ground point [x, y] [m], or None."""
+    if e is None or isinstance(e, (int, np.integer)):
+        return None if e is None else int(e)
+    return [float(v) for v in e]
 
 
 def shape_payload(sf: ShapeFrames) -> dict:

@@ -110,6 +110,12 @@ class Mechanism {
         g.lineCap = "round";
       } else { g.strokeStyle = colour; g.lineWidth = wpx; poly(g, T, pts); }
     });
+    g.strokeStyle = "#333"; g.lineWidth = PT;     // a kind's own outline (pitch circles, a slot): Joint.glyph_shapes
+    for (const j of this.d.joints) {
+      if (j.point === null || !j.shapes || !j.shapes.length) continue;
+      const ends = j.ends.map((e) => (e === null ? null : Array.isArray(e) ? e : this.pt(i, e, amp)));
+      if (ends[0] && ends[1]) for (const line of shapeLines(j.shapes, ends[0], ends[1])) poly(g, T, line);
+    }
     for (const j of this.d.joints) {
       if (j.point === null) continue;
       const p = this.pt(i, j.point, amp), gl = G.joints[j.kind] || G.joints.revolute;   // every kind is in the table (flexmech_py.figures.glyphs)
@@ -156,6 +162,31 @@ class Mechanism {
   describe() { return ""; }
 }
 
+function ring(c, r, n) {                       // a circle of radius r about c, n points, closed
+  const out = [];
+  for (let k = 0; k < n; k++) { const t = (2 * Math.PI * k) / (n - 1); out.push([c[0] + r * Math.cos(t), c[1] + r * Math.sin(t)]); }
+  return out;
+}
+function shapeLines(shapes, pa, pb) {           // the polylines of a joint kind's outline: flexmech_py.figures.glyphs.shape_lines
+  const out = [];
+  for (const sh of shapes) {
+    if (sh.shape === "circle") out.push(ring(sh.at ? pb : pa, sh.radius, 73));
+    else if (sh.shape === "segment") out.push([pa, pb]);
+    else if (sh.shape === "slot") {
+      const dx = pb[0] - pa[0], dy = pb[1] - pa[1], dist = Math.hypot(dx, dy);
+      const u = dist > 1e-9 ? [dx / dist, dy / dist] : sh.axis, n = [-u[1], u[0]];
+      const half = sh.half === null ? 1.15 * dist : sh.half, w = 0.05 * Math.max(half, 1e-3), line = [];
+      for (const side of [1, -1]) for (let k = 0; k < 13; k++) {
+        const t = -0.5 * Math.PI + (Math.PI * k) / 12, cx = Math.cos(t) * u[0] + Math.sin(t) * n[0], cy = Math.cos(t) * u[1] + Math.sin(t) * n[1];
+        line.push([pa[0] + side * (half * u[0] + w * cx), pa[1] + side * (half * u[1] + w * cy)]);
+      }
+      line.push(line[0]);
+      out.push(line, ring(pb, 0.8 * w, 25));
+    }
+  }
+  return out;
+}
+state.shapeLines = shapeLines;                  // reachable from outside the page's scope (tests/test_view_browser.py)
 function outline(pts, kind) {                  // a rigid body's points around their centroid, closed
   if (kind !== "body" || pts.length < 3) return pts;
   const cx = pts.reduce((s, p) => s + p[0], 0) / pts.length, cy = pts.reduce((s, p) => s + p[1], 0) / pts.length;

@@ -130,9 +130,14 @@ class Joint:
         superposition models' reaction equations take them as its unknown's columns); None otherwise."""
         return None
 
-    def glyph_lines(self, pa, pb) -> list:
-        """Polylines ((n, 2) arrays) drawing the joint beside its marker, given its two points' drawn
-        positions (e.g. two pitch circles); none for most kinds."""
+    def glyph_shapes(self) -> list:
+        """The kind's own outline beside its marker, as plain data that every drawing evaluates at the
+        two points' drawn positions (flexmech_py.figures.glyphs.shape_lines for the PNGs, the page's
+        shapeLines for the browser view): a list of ``{"shape": "circle", "at": 0 | 1, "radius": r}``
+        (a circle about point a or b), ``{"shape": "segment"}`` (a to b) and ``{"shape": "slot",
+        "half": h | None, "axis": [x, y]}`` (a slot's outline centred on a along the line from a to the
+        pin b, ``h`` its half length or None: 1.15 |b - a|, ``axis`` the line when b is on a, and the
+        pin's circle); none for most kinds."""
         return []
 
     def default_condition(self, driven: bool) -> str:

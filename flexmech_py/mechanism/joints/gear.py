@@ -146,11 +146,10 @@ class Gear(Joint):
         return ((self.centre_distance * h, np.full(n, -self.sign * self.radii[1])),
                 (-self.centre_distance * h, np.full(n, -float(self.radii[0]))))
 
-    def glyph_lines(self, pa, pb) -> list:
+    def glyph_shapes(self) -> list:
         """The two pitch circles about the drawn centres, and the line of centres."""
-        t = np.linspace(0.0, 2.0 * np.pi, 73)[:, None]
-        ring = np.hstack([np.cos(t), np.sin(t)])
-        return [pa + self.radii[0] * ring, pb + self.radii[1] * ring, np.array([pa, pb])]
+        return [{"shape": "circle", "at": 0, "radius": float(self.radii[0])},
+                {"shape": "circle", "at": 1, "radius": float(self.radii[1])}, {"shape": "segment"}]
 
     def tooth_force(self, lam: np.ndarray) -> np.ndarray:
         """The tooth force along the line of action [N] (signed: positive pushes b's pitch point along +t)."""

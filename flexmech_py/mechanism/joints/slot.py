@@ -23,8 +23,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-import numpy as np
-
 from ...base import validate as v
 from ..rows import CON_PROJECTION
 from .base import Joint
@@ -62,20 +60,7 @@ class Slot(Guide):
     def rigid_rows(self, pose) -> tuple:
         return ((CON_PROJECTION, 0, (-pose.axis[1], pose.axis[0]), 0.0),)
 
-    def glyph_lines(self, pa, pb) -> list:
-        """The slot's outline (a stadium about its line through point a, ``slot_length`` long, or reaching
-        past the pin) and the pin's circle.  The pin is on the slot's line, so the line is the one from
-        a through the pin (the drawn axis when the pin is at a)."""
-        d = pb - pa
-        dist = float(np.linalg.norm(d))
-        u = d / dist if dist > 1e-9 else self.unit_axis()
-        if self.slot_length is None and dist > 1e-9 and float(d @ self.unit_axis()) < 0:
-            u = -u
-        half = 0.5 * self.slot_length if self.slot_length is not None else 1.15 * dist
-        w = 0.05 * max(half, 1e-3)
-        n = np.array([-u[1], u[0]])
-        t = np.linspace(-0.5 * np.pi, 0.5 * np.pi, 13)[:, None]
-        cap = np.cos(t) * u + np.sin(t) * n
-        outline = np.vstack([pa + half * u + w * cap, pa - half * u - w * cap])
-        ring = np.hstack([np.cos(2.0 * t), np.sin(2.0 * t)])
-        return [np.vstack([outline, outline[:1]]), pb + 0.8 * w * ring]
+    def glyph_shapes(self) -> list:
+        """The slot's outline (``slot_length`` long, or reaching past the pin) and the pin's circle."""
+        half = None if self.slot_length is None else 0.5 * float(self.slot_length)
+        return [{"shape": "slot", "half": half, "axis": [float(x) for x in self.unit_axis()]}]
