@@ -374,3 +374,23 @@ def test_rigid_rows_are_the_one_vocabulary_and_an_unknown_kind_is_refused(cases_
         coord[header + nmk + 2 * nj] = bad_kind    # the first joint's coordinate row
         *_, status = kernels.mbs.mbs_eval(packed.nrow, coord, packed.rspec, z, np.zeros_like(z), 0.0)
         assert status == kernels.STATUS_BAD_INPUT, bad_kind
+
+
+@pytest.mark.parametrize("name", ["fourbar_hac.toml", "slider_crank_torque.toml", "manipulator_bricout.toml"])
+def test_accelerations_solve_the_augmented_system(cases_dir, name):
+    """The dynamic mode's accelerations and multipliers (solved through the Gram matrix J M^-1 J^T, or
+    the pivoted LU of the whole matrix where that is not definite) solve [M J^T; J 0][z''; lam] = [Q; gamma]
+    at every sample, as a dense solve of the whole augmented matrix from the same J, Q, gamma does."""
+    case = fm.load_case(cases_dir / name, ["solver.t_end=0.05"])
+    src = motion_source(case)
+    rm = src(np.linspace(0.0, 0.05, 11))
+    p = src.setup.packed
+    nb = p.n // 3
+    mass = np.repeat(np.asarray(p.rspec[:nb]), 3)
+    mass[2::3] = p.rspec[nb:2 * nb]
+    for k in range(rm.t.size):
+        _, jac, gam, _, q = constraint_matrices(p, rm.z[k], rm.zd[k], t=float(rm.t[k]))
+        aug = np.block([[np.diag(mass), jac.T], [jac, np.zeros((p.nrow, p.nrow))]])
+        want = np.linalg.solve(aug, np.concatenate([q, gam]))
+        got = np.concatenate([rm.zdd[k], rm.lam[k]])
+        assert np.allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
