@@ -25,6 +25,7 @@ from .base.families import (AUTO, DEFAULT_INTEGRATORS, MODEL_CHOICES, MODELS, RH
 from .base.inputs import read_text
 from .mechanism import mechanism_from_spec
 from .mechanism.control import check_controllers
+from .mechanism.feedforward import resolve_feedforward
 from .mechanism.schema import derived_keys, mechanism_spec
 from .mechanism.templates import expand_template
 from .base.sizes import check_elements, check_mesh
@@ -289,6 +290,7 @@ def validate_case(raw: dict, source: str = "<case>") -> Case:
     r["solver"] = _solver(general.get("solver", {}), mech)
     _check_tables_cover_run(mech, r["solver"]["t_end"])
     controllers = check_controllers(general.get("controllers"), mech, r["solver"])
+    resolve_feedforward(controllers, mech, r["loads"]["gravity"], r["solver"])
     if controllers:
         r["controllers"] = controllers
         if r["solver"]["model"] == "auto":      # (the superposition models cannot close a loop)

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py.studies.control_study import TIP, bricout, closed_loop, cycloid, link_case, run, saturated_pid, settles
+from flexmech_py.studies.control_study import (DURATION, J_HUB, TIP, TRAVEL, bricout, closed_loop, cycloid, link_case,
+                                               run, saturated_pid, settles)
+from flexmech_py.case import validate_case
 from flexmech_py.base.errors import CaseError, SolverError, ValidityWarning
 from flexmech_py.run.stepping import Simulation
 
@@ -170,3 +172,41 @@ def test_a_stable_loop_has_no_controller_suspect():
     from flexmech_py.mechanism.control import loop_suspect
     res = run(link_case(t_end=0.3))
     assert loop_suspect(res.case, res.columns) is None
+
+
+def test_inverse_dynamics_feedforward_is_the_rigid_torque_and_cancels_the_tracking_error():
+    """feedforward = "inverse_dynamics": on a link turning about its hub the rigid-body torque along the
+    cycloidal reference is J_hub r''(t) (no gravity, no own load); with it the rigid limit tracks the
+    reference to the integration error (measured 1.7e-5 rad against 0.32 rad by PD alone)."""
+    raw = link_case(stiffness=1e4)
+    raw["controllers"][0]["feedforward"] = "inverse_dynamics"
+    case = validate_case(copy.deepcopy(raw))
+    ff = case["controllers"][0]["feedforward"]
+    t, tau = np.asarray(ff["t"]), np.asarray(ff["value"])
+    s = np.clip(t / DURATION, 0.0, 1.0)
+    want = J_HUB * TRAVEL * 2 * np.pi * np.sin(2 * np.pi * s) / DURATION ** 2 * (t <= DURATION)
+    assert np.abs(tau - want).max() < 1e-6 * np.abs(want).max()
+    res, plain = run(case, "coupled"), run(link_case(stiffness=1e4), "coupled")
+    y = cycloid(res.t)[0]
+    err = np.abs(res.columns["hub_angle"] - y).max()
+    assert err < 1e-4 * TRAVEL and np.abs(plain.columns["hub_angle"] - y).max() > 0.1 * TRAVEL
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda c: c["controllers"][0].update(measure={"point": "arm.end", "direction": [0, 1]},
+                                          reference={"law": "rest_to_rest", "travel": 0.05, "duration": 0.3}),
+     "controllers[0].feedforward"),
+    (lambda c: c["drives"][0].update(sin=[0.1]), "controllers[0].feedforward"),
+])
+def test_an_inverse_dynamics_feedforward_that_cannot_be_computed_is_refused(change, field):
+    raw = link_case()
+    raw["controllers"][0]["feedforward"] = "inverse_dynamics"
+    change(raw)
+    with pytest.raises(CaseError) as exc:
+        validate_case(raw)
+    assert exc.value.field == field
+
+
+def test_inverse_dynamics_needs_every_free_joint_followed():
+    with pytest.raises(CaseError, match="free degree"):
+        fm.load_case("manipulator_bricout_pd", ["controllers.0.feedforward=inverse_dynamics"])

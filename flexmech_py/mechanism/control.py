@@ -23,6 +23,7 @@ from ..base import validate as v
 from ..base.errors import CaseError, ValidityWarning
 from ..base.shaping import SHAPERS, design
 from .drives import KINEMATIC_LAWS, LAW_PARAMS, Drive, cubic_spline
+from .feedforward import INVERSE_DYNAMICS
 from .schema import table_samples
 
 __all__ = ["check_controllers", "refuse_superposition", "loop_suspect", "ControlPack", "pack_controllers", "CONTROL_NST", "MAX_DELAY_STEPS"]
@@ -150,10 +151,13 @@ def _reference(ref, w: str) -> dict:
 
 
 def _feedforward(ff, w: str):
-    if ff is None:
-        return None
+    """A table {t, value} in time, or "inverse_dynamics" (resolved into a table by
+    flexmech_py.mechanism.feedforward once the case's loads are known)."""
+    if ff is None or ff == INVERSE_DYNAMICS:
+        return ff
     if not isinstance(ff, dict):
-        raise CaseError(w, "must be a table {t = [...], value = [...]} (the effort in time, N m or N)")
+        raise CaseError(w, "must be a table {t = [...], value = [...]} (the effort in time, N m or N) or "
+                           f"\"{INVERSE_DYNAMICS}\" (the rigid-body inverse dynamics along the reference)")
     return table_samples(ff, w)
 
 
