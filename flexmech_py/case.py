@@ -59,10 +59,10 @@ HHT_ALPHA_DEFAULT, HHT_ALPHA_MAX = 0.05, 1.0 / 3.0
 DIVERGENCE_FACTOR = 1.0   # default solver.divergence_limit = DIVERGENCE_FACTOR x the longest link length
 OUTPUT_KINDS = {
     # kind: (required keys, optional keys with defaults)
-    "joint_angle": ({"joint"}, {}),
-    "joint_displacement": ({"joint"}, {}),
-    "joint_speed": ({"joint"}, {}),
-    "joint_acceleration": ({"joint"}, {}),
+    "joint_angle": ({"joint"}, {"measure": "frames"}),
+    "joint_displacement": ({"joint"}, {"measure": "frames"}),
+    "joint_speed": ({"joint"}, {"measure": "frames"}),
+    "joint_acceleration": ({"joint"}, {"measure": "frames"}),
     "link_angle": ({"link"}, {}),
     "strain": ({"link"}, {"at": 0.5}),
     "curvature": ({"link"}, {"at": 0.5}),
@@ -86,6 +86,9 @@ UNITS = {
     "position": "m", "axial_force": "N",
 }
 REACTION_SOURCES = ("model", "rigid")   # reaction outputs: the run model's, or the rigid-body solution's
+#: joint_* outputs: the model's rigid coordinate between the bodies' frames (chords), or the coordinate measured
+#: at the joint (the bodies' tangents there: a hub, what an encoder and a collocated controller read)
+JOINT_MEASURES = ("frames", "joint")
 #: solver.error_estimate: the parts of the error budget (budget.py), "all" of them, "none", or parts joined
 #: by "+" (e.g. "time+mesh")
 ERROR_PARTS = ("time", "mesh", "model")
@@ -388,6 +391,8 @@ def _outputs(raw, mech) -> dict:
         d = {"kind": kind}
         if "joint" in req:
             d["joint"] = _output_joint(spec, kind, w, mech)
+        if "measure" in opt:
+            d["measure"] = v.text(spec, "measure", w, default="frames", choices=JOINT_MEASURES)
         if "link" in req:
             d["link"] = v.text(spec, "link", w, choices=tuple(ln.name for ln in mech.links))
             if kind != "link_angle":

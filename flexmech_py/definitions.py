@@ -20,7 +20,8 @@ def definition_notes(case: dict, model: str, reference_model: str, free_motion: 
     no kinematic drive fixes (``free_motion``: the coupled and nonlinear models' own rigid motion drifts
     from the rigid-body solution the displacement is measured from; the superposition models' does not,
     by their premise) and the ``joint_*`` outputs of a revolute or weld joint on a flexible link that no
-    kinematic drive moves (the rigid-body solution's frames against the chords); ``inertia_load`` with
+    kinematic drive moves (the rigid-body solution's frames against the chords; measured at the joint,
+    ``measure = "joint"``, they are one quantity); ``inertia_load`` with
     ``model = "run"`` between different load models.  Every other kind means the same in every model."""
     coupled = [m for m in (model, reference_model) if family(m).constrained]
     own = {m: family(m).inertia_loads for m in (model, reference_model)}  # a "run" load's model
@@ -32,11 +33,13 @@ def definition_notes(case: dict, model: str, reference_model: str, free_motion: 
                          "kinematic drive fixes), which the superposition models leave out by their premise; compare "
                          "deflection outputs (kind = \"deflection\", the same at and component) for the bending "
                          "alone")
-        elif sp["kind"] in JOINT_OUTPUT_KINDS and len(coupled) == 1 and _frames_differ(case.mechanism, sp["joint"]):
+        elif (sp["kind"] in JOINT_OUTPUT_KINDS and sp.get("measure", "frames") == "frames" and len(coupled) == 1
+              and _frames_differ(case.mechanism, sp["joint"])):
             out[name] = (f"not the same quantity: the superposition models give the rigid-body solution's angle "
                          f"between the bodies' frames (no elastic part), the {coupled[0]} model the angle between "
                          "their chords (the links' elastic rotation and the model's drift included); compare "
-                         "link_angle outputs (the chord in every model) for like with like")
+                         "link_angle outputs (the chord in every model), or measure = \"joint\" (the tangents at the "
+                         "joint in every model), for like with like")
         elif sp["kind"] == "inertia_load" and sp["model"] == "run" and own[model] != own[reference_model]:
             load = {m: (f"{m}: the classic load of its own rigid motion (it has no load model)" if m in coupled
                         else f"{m}: its {m} load") for m in (model, reference_model)}

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import flexmech_py as fm
+from flexmech_py.base.errors import CaseError
 from flexmech_py.cli import main
 from flexmech_py.definitions import definition_notes
 from flexmech_py.run.simulate import Prepared
@@ -116,3 +117,15 @@ def test_compare_models_marks_columns_that_are_not_the_same_quantity(cases_dir, 
     assert rc == 0 and "d_mid*" in out and "f_mid*" not in out and "* d_mid: not the same quantity" in out
     js = json.loads((tmp_path / "c" / "hac" / "compare.json").read_text())
     assert "drift" in js["columns"]["d_mid"]["definition_note"] and "definition_note" not in js["columns"]["f_mid"]
+
+
+def test_a_joint_output_measured_at_the_joint_is_one_quantity_in_every_family():
+    """``measure = "joint"``: the tangents at the joint (the hub) in every model, so compare --models does
+    not mark it where the default (the model's frames: chords against the rigid-body solution) is
+    marked; an unknown measure is refused naming the field."""
+    hub = 'outputs.hub={kind = "joint_speed", joint = "crank_pivot", measure = "joint"}'
+    notes = definition_notes(fm.load_case("fourbar_hac", overrides=[hub]), "hac", "coupled", free_motion=True)
+    assert "crank_speed" in notes and "hub" not in notes
+    assert 'measure = "joint"' in notes["crank_speed"]
+    with pytest.raises(CaseError, match="outputs.hub.measure"):
+        fm.load_case("fourbar_hac", overrides=[hub.replace('"joint"}', '"hub"}')])

@@ -34,7 +34,9 @@ __all__ = ["Result", "TimeseriesWriter", "read_timeseries", "versions"]
 class Result:
     """One run, or one block of a run's frames.  ``t`` (nf,) frame times [s]; ``columns[name]`` (nf,)
     outputs; ``u, v, a`` (ndof, nf) elastic displacements, velocities, accelerations over all DOFs
-    (zeros at constrained DOFs); ``q, qd, qdd`` (nf, ndof_rigid) rigid generalized coordinates.
+    (zeros at constrained DOFs); ``q, qd, qdd`` (nf, ndof_rigid) rigid generalized coordinates (the
+    superposition models: the rigid-body solution's; the coupled and nonlinear models: their own, as
+    their ``joint_*`` outputs measure them).
 
     A run streamed to files (:class:`flexmech_py.run.runner.FileSink`) keeps only its last block's frames
     here; ``stats`` (:class:`~flexmech_py.run.frames.ColumnStats`) then describes every frame and

@@ -550,8 +550,10 @@ class Prepared:
         rig_chord = np.asfortranarray(np.stack([fr.chord.phi, fr.chord.omega, fr.chord.alpha,
                                                 fr.chord.ax - self.gravity[0],
                                                 fr.chord.ay - self.gravity[1]]).transpose(0, 2, 1))
+        own = [cpl_out.joint_output(cm, fr, rmf, name) for name in self.setup.primary]
+        q, qd, qdd = (np.stack([o[k] for o in own], axis=1) if own else x for k, x in enumerate((rmf.q, rmf.qd, rmf.qdd)))
         res = Result(case=case, model=model, t=rmf.t, columns=columns, units=units, fe=cm.mesh,
-                     q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_dev, v=np.zeros_like(u_dev), a=np.zeros_like(u_dev),
+                     q=q, qd=qd, qdd=qdd, u=u_dev, v=np.zeros_like(u_dev), a=np.zeros_like(u_dev),
                      rig=rig_chord, nsteps=self.nsteps, dt=self.dt, timing=acc.timing(), extra=extra, axial=axial,
                      motion=ref, rigid=rmf, steps=i0 + oe * np.arange(qf.shape[1]), state=qf,
                      curvature_of=functools.partial(coupled_curvature, cm),

@@ -363,7 +363,8 @@ def evaluate(cm: CoupledModel, specs: dict, fr: ModelFrames, rm, ref: LinkMotion
         kind = sp["kind"]
         if kind in ("joint_angle", "joint_displacement", "joint_speed", "joint_acceleration"):
             k = {"joint_angle": 0, "joint_displacement": 0, "joint_speed": 1, "joint_acceleration": 2}[kind]
-            out[name] = joint_output(cm, fr, rm, sp["joint"])[k].copy()
+            at_joint = sp.get("measure", "frames") == "joint"
+            out[name] = (joint_at_joint if at_joint else joint_output)(cm, fr, rm, sp["joint"])[k].copy()
         elif kind == "link_angle":
             out[name] = np.unwrap(fr.chord.phi[:, cm.mesh.link_names.index(sp["link"])])
         elif kind in ("strain", "curvature"):

@@ -146,7 +146,10 @@ def evaluate_outputs(fe, specs: dict, u_all: np.ndarray, motion, rig_frames, run
         kind = sp["kind"]
         if kind in ("joint_angle", "joint_displacement", "joint_speed", "joint_acceleration"):
             k = {"joint_angle": 0, "joint_displacement": 0, "joint_speed": 1, "joint_acceleration": 2}[kind]
-            out[name] = rm.joint(sp["joint"])[:, k] + _elastic_slide(fe, sp["joint"], k, u_all, rates)
+            if sp.get("measure", "frames") == "joint":
+                out[name] = joint_at_joint(fe, rm, sp["joint"], k, u_all, rates)
+            else:
+                out[name] = rm.joint(sp["joint"])[:, k] + _elastic_slide(fe, sp["joint"], k, u_all, rates)
         elif kind == "link_angle":
             out[name] = np.unwrap(_chord_angle(fe, u_all, motion, fe.link_names.index(sp["link"])))
         elif kind in ("strain", "curvature"):
