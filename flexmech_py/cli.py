@@ -67,7 +67,8 @@ def _add_run_parsers(sub) -> None:
     r.add_argument("case", help="TOML case file (see docs/cases.md)")
     r.add_argument("--model", choices=MODEL_CHOICES,
                    help="model: a superposition load model, coupled, nonlinear, or auto (the cheapest one within "
-                        "solver.tolerance; default: the case's solver.model, auto when it names none)")
+                        "solver.tolerance; alias of --set solver.model=...; default: the case's solver.model, auto when "
+                        "it names none)")
     r.add_argument("--dt", type=positive_float, help="time step [s] (default: the case's solver.dt)")
     r.add_argument("--elements-per-link", type=positive_int, help="beam elements per link (default: the case's mesh)")
     r.add_argument("--integrator", choices=INTEGRATORS,

@@ -27,8 +27,9 @@ SHAPE_POINT_BYTES = 40
 
 
 def integrator_overrides(args) -> list[str]:
-    """The ``--set`` overrides that ``--integrator``, ``--rho-inf`` and ``--hht-alpha`` stand for."""
-    out = []
+    """The ``--set`` overrides that ``--model``, ``--integrator``, ``--rho-inf`` and ``--hht-alpha`` stand
+    for (the case is validated with them: e.g. a controlled case's model)."""
+    out = [f'solver.model="{args.model}"'] if getattr(args, "model", None) else []
     integrator = args.integrator
     if integrator is None and args.rho_inf is not None:
         integrator = "generalized-alpha"

@@ -268,3 +268,16 @@ def test_a_validity_warning_names_the_controlled_cranks_own_speed():
     t0, speed = (float(x) for x in re.search(r"after t = ([0-9.e+-]+) s \(crank speed ([0-9.e+-]+) rad/s\)", first).groups())
     own = np.interp(t0, res.t, res.columns["crank_speed"])
     assert own > 30.0 and abs(speed - own) < 1e-3 * own, (speed, own, first)
+
+
+def test_the_cli_model_choice_is_the_cases_model_when_it_is_validated(tmp_path):
+    """``--model coupled`` on a controlled case whose file names a superposition model runs (the case is
+    validated with --model as solver.model); --model hac on it is refused naming solver.model, exit 2."""
+    from flexmech_py.base.tomlfile import dumps_toml
+    from flexmech_py.cli import main
+
+    path = tmp_path / "link.toml"
+    path.write_text(dumps_toml(link_case(t_end=0.01, model="hac")))
+    assert main(["run", str(path), "--model", "coupled", "--no-plots", "--quiet", "--out", str(tmp_path / "a")]) == 0
+    assert main(["run", str(path), "--model", "hac", "--no-plots", "--quiet", "--out", str(tmp_path / "b")]) == 2
+    assert not (tmp_path / "b").exists()

@@ -107,10 +107,12 @@ def _force_driven(mech, joint: str, where: str) -> None:
     drives = [d for d in mech.drives if d.joint == joint]
     if any(d.kinematic for d in drives):
         raise CaseError(where, f"joint {joint!r} is prescribed by a kinematic drive (law {drives[0].law!r}); a "
-                               f"controller acts through a force drive: make its [[drives]] law = \"force\"")
+                               f"controller acts through a force drive: make its drive law = \"force\" (a template "
+                               f"case: [drive] type = \"torque\")")
     if not drives:
-        raise CaseError(where, f"joint {joint!r} has no force drive; add [[drives]] joint = \"{joint}\", "
-                               "law = \"force\" (the controller's effort adds to it)")
+        raise CaseError(where, f"joint {joint!r} has no force drive; add one (the controller's effort adds to it): "
+                               f"[[drives]] joint = \"{joint}\", law = \"force\", or in a template case (type = "
+                               f"\"fourbar\", ...) [drive] type = \"torque\" with [[drive.torques]] joint = \"{joint}\"")
 
 
 def _limits(c: dict, w: str):
