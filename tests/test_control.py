@@ -4,6 +4,7 @@ actuator's work, saturation and anti-windup, zero-order hold and measurement del
 and the refusals of bad input."""
 
 import copy
+import json
 import re
 
 import numpy as np
@@ -15,6 +16,8 @@ from flexmech_py.studies.control_study import (DAMPED, DURATION, J_HUB, TAU, TIP
                                                small_move, swing_growth)
 from flexmech_py.studies.control_eigen import critical_gain, linearize_loop
 from flexmech_py.case import validate_case
+from flexmech_py.base.tomlfile import dumps_toml
+from flexmech_py.cli import main
 from flexmech_py.base.errors import CaseError, SolverError, ValidityWarning
 from flexmech_py.run.stepping import Simulation
 from flexmech_py.studies.pi_motor import reference, rigid_closed_loop, ripple, run_case
@@ -84,7 +87,7 @@ def test_collocated_pd_is_stable_at_every_gain_by_the_closed_loop_eigenvalues():
     fine = eigen_loop(elements=8)
     assert fine.untouched_hz.size == 8 and fine.untouched_re == 0.0
     assert np.allclose(fine.untouched_hz[:2], [c / 4, 3 * c / 4], rtol=0.02), fine.untouched_hz
-    assert np.allclose(loop.p, loop.o, rtol=1e-6, atol=1e-9 * np.abs(loop.p).max())    # collocated: c = b
+    assert np.allclose(loop.p[:, 0], loop.o[0], rtol=1e-6, atol=1e-9 * np.abs(loop.p).max())    # collocated: c = b
     for k in (0.5, 50.0):
         assert settles(k) < 1.0
 
@@ -116,7 +119,7 @@ def test_tip_feedback_critical_gain_with_damping_in_eigenvalues_and_time_runs():
     loop = eigen_loop(TIP, DAMPED, 4)
     i = int(np.argmax(loop.slope_at_zero(TAU)))
     w = loop.omega[i]
-    assert abs(2 * (DAMPED[1] * w / 2) * w / (TAU * abs(loop.p[i] * loop.o[i])) / kc[4] - 1) < 0.01
+    assert abs(2 * (DAMPED[1] * w / 2) * w / (TAU * abs(loop.p[i, 0] * loop.o[0, i])) / kc[4] - 1) < 0.01
     f_hz = loop.leading(kc[4], TAU * kc[4])["f_hz"]
     for f in (0.8, 1.2):
         eig = loop.leading(f * kc[4], TAU * f * kc[4])["re_per_s"]
@@ -132,6 +135,20 @@ def test_tip_proportional_feedback_flutters_above_the_eigenvalues_critical_gain(
     crit = critical_gain(eigen_loop(TIP, elements=4), 0.0, gains=(100.0, 1000.0))
     assert 411.0 < crit["kp"] < 412.5 and abs(crit["f_hz"] - 15.79) < 0.05, crit
     assert swing_growth(0.985 * crit["kp"]) < 1.3 and swing_growth(1.015 * crit["kp"]) > 3.0
+
+
+def test_modes_closed_loop_cli_writes_the_loops_eigenvalues(tmp_path, capsys):
+    """`flexmech modes CASE --closed-loop` on the tip-feedback link: the 24.9 Hz mode unstable at every
+    factor on the gains (undamped), its files; refused with --at and on a case without controllers."""
+    case = tmp_path / "tip.toml"
+    case.write_text(dumps_toml(small_move(2.0, TIP)))
+    assert main(["modes", str(case), "--closed-loop", "--out", str(tmp_path / "out")]) == 0
+    summary = json.loads((tmp_path / "out" / "closed_loop.json").read_text())
+    assert summary["critical_gain_factor"]["scale"] == 0.0
+    assert abs(summary["leading"]["f_hz"] - 24.89) < 0.05 and summary["leading"]["re_per_s"] > 3.0
+    assert "UNSTABLE" in capsys.readouterr().out
+    assert main(["modes", str(case), "--closed-loop", "--at", "0.1", "--out", str(tmp_path / "o2")]) == 2
+    assert main(["modes", str(fm.case_path("fourbar_constant_speed")), "--closed-loop", "--out", str(tmp_path / "o3")]) == 2
 
 
 def test_closed_loop_eigenvalues_refuse_a_sampled_law_and_superposition_models():
