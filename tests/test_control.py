@@ -85,7 +85,7 @@ def test_collocated_pd_is_stable_at_every_gain_by_the_closed_loop_eigenvalues():
     assert max(sigma) < 0.0, max(sigma)      # measured -2.5e-4 1/s (at k = 0.01: the rigid mode, kd / 2J)
     c = (7.0e10 / 2700.0) ** 0.5
     fine = eigen_loop(elements=8)
-    assert fine.untouched_hz.size == 8 and fine.untouched_re == 0.0
+    assert fine.untouched_hz.size == 8 and abs(fine.untouched_re) <= fine.round_off
     assert np.allclose(fine.untouched_hz[:2], [c / 4, 3 * c / 4], rtol=0.02), fine.untouched_hz
     assert np.allclose(loop.p[:, 0], loop.o[0], rtol=1e-6, atol=1e-9 * np.abs(loop.p).max())    # collocated: c = b
     for k in (0.5, 50.0):

@@ -208,12 +208,13 @@ def linearize_loop(case, controllers=None, *, model: str | None = None,
     off = d - np.diag(np.diag(d))
     if np.any(np.abs(off[np.ix_(touched, ~touched)]) > TOUCH * max(np.abs(d).max(), 1e-300)):
         touched[:] = True                # damping couples them: keep every mode
-    du, wu = np.diag(d)[~touched], omega[~touched]
-    re = -0.5 * du + 0.5 * np.sqrt(np.maximum(du ** 2 - 4 * wu ** 2, 0.0))
+    nu = int((~touched).sum())
+    a_u = np.block([[np.zeros((nu, nu)), np.eye(nu)], [-np.diag(omega[~touched] ** 2), -d[np.ix_(~touched, ~touched)]]])
+    re = np.linalg.eigvals(a_u).real
     measures = ["joint" if c["measure"] == "joint" else f"{c['measure']['point']} along {list(c['measure']['direction'])}"
                 for c in chosen]
     gains = np.array([[c[k] for c in chosen] for k in ("kp", "kd", "ki")], float)
-    return Loop(omega[touched], p[touched], o[:, touched], d[np.ix_(touched, touched)], wu / (2 * math.pi),
+    return Loop(omega[touched], p[touched], o[:, touched], d[np.ix_(touched, touched)], omega[~touched] / (2 * math.pi),
                 float(re.max()) if re.size else -math.inf, [c["name"] for c in chosen], measures, gains, model,
                 int(case["mesh"]["elements_per_link"]))
 
