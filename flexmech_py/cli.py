@@ -10,7 +10,7 @@
     flexmech steady CASE.toml [--model M] [--geometric G] [--out DIR]
     flexmech draw RESULT_DIR [--frames N] [--scale S] [--gif] [--out FILE]
     flexmech view RESULT_DIR [--out FILE.html]
-    flexmech modes CASE.toml [--at T | --crank-angle A] [--count N] [--along-cycle K] [--model M] [--out DIR]
+    flexmech modes CASE.toml [--at T | --crank-angle A] [--count N] [--along-cycle K] [--model M] [--closed-loop] [--out DIR]
     flexmech sweep CASE.toml --param KEY.PATH=START:STOP:N [--param ...] [--model M] [--jobs N] [--out DIR]
     flexmech sweep CASE.toml --sample KEY.PATH=normal:MEAN:SD [--sample ...] --samples N [--seed S] [--method lhs]
     flexmech accuracy CASE.toml [--models M,M] [--integrators I,I] [--dt-levels K] [--elements 1,2,4,8] [--grid] ...
@@ -188,6 +188,9 @@ def _add_draw_parsers(sub) -> None:
     md.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override a case value")
     md.add_argument("--out", default=None, help="output folder (default: results/<case name>-<model>-modes)")
     md.add_argument("--no-plots", action="store_true", help="do not write PNG drawings")
+    md.add_argument("--closed-loop", action="store_true",
+                    help="the eigenvalues of the case's feedback loops closed at their gains, linearized at t = 0, "
+                         "and the factor on those gains at which they lose stability (CSV, JSON)")
 
 
 def _add_sweep_parsers(sub) -> None:
@@ -324,6 +327,8 @@ def _cmd_modes(args) -> int:
     from .run.outdir import ResultFolder  # start-up: only this command loads it
 
     case = load_case(args.case, overrides=args.set)
+    if args.closed_loop:
+        return _cmd_closed_loop(args, case)
     kw = {"count": args.count, "model": args.model, "geometric": args.geometric,
           "elements_per_link": args.elements_per_link}
     ms = modes(case, at=args.at, crank_angle=args.crank_angle, **kw)
@@ -341,6 +346,24 @@ def _cmd_modes(args) -> int:
         print(f"along {al.span}: " + "; ".join(f"mode {k + 1} {al.hz[:, k].min():.4g}..{al.hz[:, k].max():.4g} Hz"
                                                for k in range(al.hz.shape[1]))
               + f"; {len(al.crossings())} crossings with the crank speed harmonics (frequencies_along.json)")
+    print("wrote " + ", ".join(str(rf.where(p)) for p in paths))
+    return 0
+
+
+def _cmd_closed_loop(args, case) -> int:
+    from .studies import control_eigen as ce  # start-up: only this command loads it
+    from .run.outdir import ResultFolder  # start-up: only this command loads it
+
+    for flag, given in (("--at", args.at), ("--crank-angle", args.crank_angle), ("--along-cycle", args.along_cycle),
+                        ("--geometric", args.geometric)):
+        if given is not None:
+            raise FlexmechError(f"{flag}: not with --closed-loop (the loops are linearized about the state at t = 0)")
+    loop = ce.linearize_loop(case, model=args.model, elements_per_link=args.elements_per_link)
+    summary = ce.closed_loop_summary(loop, args.count, case["case"]["title"])
+    with ResultFolder(out_folder(args, f"{loop.model}-closed-loop"), "modes") as rf:
+        paths = ce.write_closed_loop(summary, rf.stage)
+        rf.commit()
+    print(ce.closed_loop_table(summary))
     print("wrote " + ", ".join(str(rf.where(p)) for p in paths))
     return 0
 

@@ -4,15 +4,20 @@ actuator's work, saturation and anti-windup, zero-order hold and measurement del
 and the refusals of bad input."""
 
 import copy
+import json
 import re
 
 import numpy as np
 import pytest
 
 import flexmech_py as fm
-from flexmech_py.studies.control_study import (DURATION, J_HUB, TIP, TRAVEL, bricout, closed_loop, cycloid, link_case,
-                                               run, saturated_pid, settles)
+from flexmech_py.studies.control_study import (DAMPED, DURATION, J_HUB, TAU, TIP, TRAVEL, bricout, closed_loop, cycloid,
+                                               eigen_loop, growth_rate, link_case, run, saturated_pid, settles,
+                                               small_move, swing_growth)
+from flexmech_py.studies.control_eigen import critical_gain, linearize_loop
 from flexmech_py.case import validate_case
+from flexmech_py.base.tomlfile import dumps_toml
+from flexmech_py.cli import main
 from flexmech_py.base.errors import CaseError, SolverError, ValidityWarning
 from flexmech_py.run.stepping import Simulation
 from flexmech_py.studies.pi_motor import reference, rigid_closed_loop, ripple, run_case
@@ -69,14 +74,92 @@ def test_measurement_delay_shifts_the_output_of_a_p_controller():
     assert np.allclose(u[k:], 2.0 * (r[k:] - y[:-k]), atol=1e-9)
 
 
-def test_collocated_pd_settles_where_tip_position_feedback_goes_unstable():
-    """The classic result (Cannon & Schmitz 1984): PD feedback of the hub angle settles at every gain,
-    the same law on the tip's position (non-collocated) only below a critical gain (between 2.6 and 2.8
-    for k (e + 0.15 s e') on this link: docs/validation.md)."""
+def test_collocated_pd_is_stable_at_every_gain_by_the_closed_loop_eigenvalues():
+    """The classic result (Cannon & Schmitz 1984), collocated half: hub-angle PD k (e + 0.15 s e') on
+    the flexible link has max Re lambda < 0 over k = 0.01 .. 1e4 (docs/theory.md 23.5: the feedback is
+    symmetric); the modes it leaves alone are the link's axial ones (one per element; pinned-free bar:
+    (2j - 1) c / 4L, 1273 and 3819 Hz exactly, 1275 and 3874 Hz with 8 elements), and the time runs
+    settle."""
+    loop = eigen_loop(elements=2)
+    sigma = [loop.abscissa(k, TAU * k) for k in np.geomspace(0.01, 1e4, 25)]
+    assert max(sigma) < 0.0, max(sigma)      # measured -2.5e-4 1/s (at k = 0.01: the rigid mode, kd / 2J)
+    c = (7.0e10 / 2700.0) ** 0.5
+    fine = eigen_loop(elements=8)
+    assert fine.untouched_hz.size == 8 and abs(fine.untouched_re) <= fine.round_off
+    assert np.allclose(fine.untouched_hz[:2], [c / 4, 3 * c / 4], rtol=0.02), fine.untouched_hz
+    assert np.allclose(loop.p[:, 0], loop.o[0], rtol=1e-6, atol=1e-9 * np.abs(loop.p).max())    # collocated: c = b
     for k in (0.5, 50.0):
         assert settles(k) < 1.0
-    assert settles(0.5, TIP) < 1.0
-    assert settles(8.0, TIP) >= 1.0 and settles(8.0) < 1.0
+
+
+def test_tip_feedback_without_damping_grows_at_every_gain_as_the_eigenvalues_say():
+    """Tip-height PD on the undamped link: the first bending mode (24.9 Hz) grows at every k > 0 with
+    Re lambda = k tau |p o| / 2 (first-order perturbation, docs/theory.md 23.5), the critical gain 0;
+    a time run at k = 1 grows at the eigenvalues' rate (measured 1.6649 against 1.6658 1/s), and the
+    old finite-time measure (late/early error over 1.5 s: 0.35) hides it until a longer run (6 s: 9.0)."""
+    loop = eigen_loop(TIP, elements=4)
+    crit = critical_gain(loop, TAU, gains=(1e-3, 10.0))
+    assert crit["kp"] == 0.0 and abs(crit["f_hz"] - 24.89) < 0.05
+    assert abs(crit["slope_at_zero_per_s"] - loop.slope_at_zero(TAU).max()) < 1e-3 * crit["slope_at_zero_per_s"]
+    lead = loop.leading(1.0, TAU)
+    rate = growth_rate(small_move(1.0, TIP, t_end=2.5), lead["f_hz"])
+    assert abs(rate - lead["re_per_s"]) < 0.01 * lead["re_per_s"], (rate, lead)
+    assert settles(1.0, TIP) < 1.0 < settles(1.0, TIP, t_end=6.0)
+
+
+def test_tip_feedback_critical_gain_with_damping_in_eigenvalues_and_time_runs():
+    """With Rayleigh damping (beta = 2.5e-4 s: 2 % of critical in the 24.9 Hz mode) tip-height PD has a
+    finite critical gain: the eigenvalues give kp = 1.8344 (4 elements; 1.8291 with 2, 1.8348 with 8:
+    converging with the mesh), the first-order estimate 2 zeta w / (tau |p o|) agrees to 1 %, and time
+    runs at 0.8 and 1.2 times it decay and grow at the eigenvalues' rates (measured -0.612 and +0.608
+    against -/+0.611 1/s)."""
+    kc = {ne: critical_gain(eigen_loop(TIP, DAMPED, ne), TAU, gains=(0.1, 100.0))["kp"] for ne in (2, 4, 8)}
+    assert 1.82 < kc[2] < kc[4] < kc[8] < 1.84, kc
+    assert abs(kc[8] - kc[4]) < 0.2 * abs(kc[4] - kc[2])
+    loop = eigen_loop(TIP, DAMPED, 4)
+    i = int(np.argmax(loop.slope_at_zero(TAU)))
+    w = loop.omega[i]
+    assert abs(2 * (DAMPED[1] * w / 2) * w / (TAU * abs(loop.p[i, 0] * loop.o[0, i])) / kc[4] - 1) < 0.01
+    f_hz = loop.leading(kc[4], TAU * kc[4])["f_hz"]
+    for f in (0.8, 1.2):
+        eig = loop.leading(f * kc[4], TAU * f * kc[4])["re_per_s"]
+        rate = growth_rate(small_move(f * kc[4], TIP, t_end=2.5, rayleigh=DAMPED), f_hz)
+        assert np.sign(rate) == np.sign(eig) and abs(rate - eig) < 0.05 * abs(eig), (f, rate, eig)
+
+
+def test_tip_proportional_feedback_flutters_above_the_eigenvalues_critical_gain():
+    """P feedback of the tip's height (tau = 0) on the undamped link is marginal until the rigid mode,
+    rising with k, meets the first bending mode: flutter at kp = 411.66 N m/m, 15.79 Hz (411.21 with 2
+    elements, 411.69 with 8).  Time runs: 1.5 % below it the swing stays (1.05 x the first eighth's),
+    1.5 % above it it grows (4.9 x) into a large-angle oscillation."""
+    crit = critical_gain(eigen_loop(TIP, elements=4), 0.0, gains=(100.0, 1000.0))
+    assert 411.0 < crit["kp"] < 412.5 and abs(crit["f_hz"] - 15.79) < 0.05, crit
+    assert swing_growth(0.985 * crit["kp"]) < 1.3 and swing_growth(1.015 * crit["kp"]) > 3.0
+
+
+def test_modes_closed_loop_cli_writes_the_loops_eigenvalues(tmp_path, capsys):
+    """`flexmech modes CASE --closed-loop` on the tip-feedback link: the 24.9 Hz mode unstable at every
+    factor on the gains (undamped), its files; refused with --at and on a case without controllers."""
+    case = tmp_path / "tip.toml"
+    case.write_text(dumps_toml(small_move(2.0, TIP)))
+    assert main(["modes", str(case), "--closed-loop", "--out", str(tmp_path / "out")]) == 0
+    summary = json.loads((tmp_path / "out" / "closed_loop.json").read_text())
+    assert summary["critical_gain_factor"]["scale"] == 0.0
+    assert abs(summary["leading"]["f_hz"] - 24.89) < 0.05 and summary["leading"]["re_per_s"] > 3.0
+    assert "UNSTABLE" in capsys.readouterr().out
+    assert main(["modes", str(case), "--closed-loop", "--at", "0.1", "--out", str(tmp_path / "o2")]) == 2
+    assert main(["modes", str(fm.case_path("fourbar_constant_speed")), "--closed-loop", "--out", str(tmp_path / "o3")]) == 2
+
+
+def test_closed_loop_eigenvalues_refuse_a_sampled_law_and_superposition_models():
+    raw = small_move(1.0, TIP)
+    raw["controllers"][0]["sample_time"] = 1e-3
+    with pytest.raises(CaseError, match="continuous"):
+        linearize_loop(validate_case(raw))
+    with pytest.raises(CaseError, match="cannot close a loop"):
+        linearize_loop(validate_case(small_move(1.0)), model="classic")
+    with pytest.raises(CaseError, match="no controller named"):
+        linearize_loop(validate_case(small_move(1.0)), "elbow")
 
 
 def test_stiff_collocated_gains_converge_with_the_law_in_the_iteration_matrix():

@@ -176,6 +176,9 @@ def test_console_example_runs(name, line, tmp_path, monkeypatch, capsys):
     if argv[0] == "compare":
         assert list(tmp_path.rglob("compare.json"))
         return
+    if argv[0] == "modes" and "--closed-loop" in argv:
+        assert list(tmp_path.rglob("closed_loop.csv")) and list(tmp_path.rglob("closed_loop.json"))
+        return
     if argv[0] == "modes":
         assert list(tmp_path.rglob("modes.csv")) and list(tmp_path.rglob("mode_shapes.csv"))
         return

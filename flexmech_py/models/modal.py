@@ -32,7 +32,8 @@ from ..base.errors import SolverError
 from .superposition.model import squared_frequencies
 
 __all__ = ["Eigen", "signed_sqrt", "select_modes", "rigid_apart", "superposition_eigen", "superposition_frequencies",
-           "quasi_static_axial", "coupled_eigen", "rigid_subspace", "ZERO_STIFFNESS", "RIGID_FRACTION"]
+           "quasi_static_axial", "coupled_eigen", "coupled_linearized", "Linearized", "free_order", "rigid_subspace",
+           "ZERO_STIFFNESS", "RIGID_FRACTION"]
 
 #: eigenvalues of (K_elastic, M) below this fraction of the largest are zero-stiffness (rigid-body)
 #: modes: they sit at round-off (~1e-16 of the largest), real modes above ~1e-10 even with 256 elements
@@ -248,9 +249,27 @@ def quasi_static_state(lin: _Linearization, q0, cval, m, z):
     return q, lam, k, gm
 
 
-def coupled_eigen(cm, rm, i: int, gravity, count: int | None = None) -> Eigen:
-    """Frozen eigenpairs of a coupled or nonlinear model linearized about its quasi-static state at
-    sample i of the rigid motion rm; the ``count`` lowest elastic modes plus the rigid-body modes."""
+@dataclass
+class Linearized:
+    """A coupled or nonlinear model linearized about its quasi-static state at one sample of the rigid
+    motion, over its free DOFs: ``q`` the state (all DOFs), ``m`` the mass matrix, ``c`` the velocity
+    matrix dR/dv (Rayleigh damping and the gyroscopic terms of the frozen motion), ``k`` the tangent
+    stiffness K_T (symmetric parts of m and k are what :func:`coupled_eigen` takes), ``n`` an
+    orthonormal basis (nfree, nfree - rank G) of the null space of the constraint Jacobian (the motions
+    the constraints allow), ``z`` the M-orthonormal rigid-body motions (nfree, r)."""
+
+    q: np.ndarray
+    m: np.ndarray
+    c: np.ndarray
+    k: np.ndarray
+    n: np.ndarray
+    z: np.ndarray
+
+
+def coupled_linearized(cm, rm, i: int, gravity, rayleigh=(0.0, 0.0)) -> Linearized:
+    """The coupled or nonlinear model cm linearized about its quasi-static state at sample i of the
+    rigid motion rm (the velocities and accelerations of the rigid motion held); ``rayleigh`` [1/s, s]
+    the damping that enters ``c``."""
     q0, v, a = cm.rigid_state(rm, i)
     t = float(rm.t[i])
     cval = cm.constraint_values(rm.select(slice(i, i + 1)))[0, :len(cm.rows), 0]
@@ -258,8 +277,15 @@ def coupled_eigen(cm, rm, i: int, gravity, count: int | None = None) -> Eigen:
     z = coupled_rigid_subspace(cm, q0, m0)
     lin = _Linearization(cm, v, a, t, gravity)
     q, lam_c, k, gm = quasi_static_state(lin, q0, cval, m0, z)
-    m = cm.dense(q, v, a, gravity=gravity)[1]
-    n = _null_space(gm, cm.nfree)
-    mr, kr = n.T @ (0.5 * (m + m.T)) @ n, n.T @ (0.5 * (k + k.T)) @ n
-    ev = rigid_apart(mr, kr, n.T @ z)        # z satisfies the constraints at q0: n.T z keeps it (to O(q - q0))
-    return select_modes(Eigen(ev.lam, n @ ev.x, ev.rigid_fraction, q), count)
+    _, m, c, _, _ = cm.dense(q, v, a, gravity=gravity, rayleigh=rayleigh, t=t)
+    return Linearized(q, m, c, k, _null_space(gm, cm.nfree), z)
+
+
+def coupled_eigen(cm, rm, i: int, gravity, count: int | None = None) -> Eigen:
+    """Frozen eigenpairs of a coupled or nonlinear model linearized about its quasi-static state at
+    sample i of the rigid motion rm; the ``count`` lowest elastic modes plus the rigid-body modes."""
+    lz = coupled_linearized(cm, rm, i, gravity)
+    n = lz.n
+    mr, kr = n.T @ (0.5 * (lz.m + lz.m.T)) @ n, n.T @ (0.5 * (lz.k + lz.k.T)) @ n
+    ev = rigid_apart(mr, kr, n.T @ lz.z)     # z satisfies the constraints at q0: n.T z keeps it (to O(q - q0))
+    return select_modes(Eigen(ev.lam, n @ ev.x, ev.rigid_fraction, lz.q), count)

@@ -1,8 +1,9 @@
 """The numbers of docs/validation.md "Controllers in the loop": a PD-controlled link in its rigid limit
 against the exact closed-loop response, the energy balance with the actuator's work, saturation with
-clamping against an ODE of the same law, the Bricout arm's residual ringing with and without a ZV
-shaper, and the cost of a controller per step (the PI-held four-bar's speed ripple:
-flexmech_py.studies.pi_motor).
+clamping against an ODE of the same law, collocated against tip-position PD (the closed loop's
+eigenvalues, control_eigen, against growth rates measured in time runs), the Bricout arm's residual
+ringing with and without a ZV shaper, and the cost of a controller per step (the PI-held four-bar's
+speed ripple: flexmech_py.studies.pi_motor).
 
     python -m flexmech_py.studies.control_study
 """
@@ -21,6 +22,7 @@ from ..base.bundled import case_path
 from ..case import load_case, validate_case
 from ..base.errors import SolverError
 from ..run.simulate import Prepared
+from .control_eigen import Loop, critical_gain, linearize_loop
 
 RHO, AREA, LENGTH = 2700.0, 1.0e-4, 1.0
 ROTOR = 0.01                                    # the hub's own inertia [kg m^2] (the motor's rotor)
@@ -86,33 +88,131 @@ def saturated_pid(t, kp, ki, kd, limit, clamp=True):
 
 
 TIP = {"point": "arm.end", "direction": [0.0, 1.0]}     # the tip's height [m] (the link starts along x)
+TAU = 0.15                  # the PD law k (e + TAU e') of the stability comparison [s]
+#: Rayleigh damping [1/s, s] of the damped link: 2.0 % of critical in its first bending mode (24.9 Hz)
+DAMPED = (0.0, 2.5e-4)
+SMALL_MOVE = {"law": "rest_to_rest", "travel": 0.05, "duration": 0.1}   # 0.05 rad at the hub, or 0.05 m at the tip
 
 
-def settles(k: float, measure="joint", tau: float = 0.15, t_end: float = 1.5) -> float:
-    """A small move (0.05 rad at the hub, or 0.05 m at the tip) under the PD law k (e + tau e') on the
-    hub angle or on the tip's height: the largest error over the last fifth of the run against the
-    first fifth (< 1: the loop settles; > 1 or inf (the run stopped): it does not)."""
-    ref = {"law": "rest_to_rest", "travel": 0.05, "duration": 0.1}
-    raw = link_case(kp=k, kd=tau * k, t_end=t_end, dt=5e-4, measure=measure, reference=ref)
+def small_move(k: float, measure="joint", tau: float = TAU, t_end: float = 1.5, dt: float = 5e-4,
+               rayleigh=(0.0, 0.0), elements: int = 4) -> dict:
+    """The link under the PD law k (e + tau e') on the hub angle (``measure`` "joint") or on the tip's
+    height (TIP) on a small move (SMALL_MOVE), with Rayleigh damping ``rayleigh``."""
+    raw = link_case(kp=k, kd=tau * k, t_end=t_end, dt=dt, measure=measure, reference=SMALL_MOVE)
+    raw["solver"]["rayleigh"] = list(rayleigh)
+    raw["mesh"]["elements_per_link"] = elements
+    return raw
+
+
+def settles(k: float, measure="joint", tau: float = TAU, t_end: float = 1.5) -> float:
+    """The largest error over the last fifth of the small move's run against the first fifth (< 1: the
+    error fell over the run; > 1 or inf (the run stopped): it grew).  A finite-time measure: a loop
+    with a slowly growing mode that the move barely excites can fall below 1 (see tip_undamped)."""
     try:
-        y = run(raw).columns["hub_angle"]
+        y = run(small_move(k, measure, tau, t_end)).columns["hub_angle"]
     except SolverError:
         return float("inf")
     n = y.size // 5
     return float(np.abs(y[-n:] - 0.05).max() / np.abs(y[:n] - 0.05).max())
 
 
-def tip_feedback(lo: float = 0.5, hi: float = 50.0, iters: int = 6) -> dict:
-    """Collocated PD (hub angle) against tip-position PD with the same law k (e + 0.15 s e'): the
-    collocated loop settles at every k tried, the tip loop only below a critical k, bracketed by
-    bisection between a k that settles and one that does not."""
-    collocated = {k: settles(k) for k in (0.5, 5.0, 50.0)}
-    if not (settles(lo, TIP) < 1.0 <= settles(hi, TIP)):
-        raise ValueError(f"the tip loop does not change from settling at k = {lo} to not at k = {hi}")
-    for _ in range(iters):
-        mid = (lo * hi) ** 0.5
-        lo, hi = (mid, hi) if settles(mid, TIP) < 1.0 else (lo, mid)
-    return {"collocated_late_over_early": collocated, "tip_critical_k_between": (lo, hi)}
+def growth_rate(raw: dict, f_hz: float, t_from: float = 0.4, window: float = 0.2) -> float:
+    """The growth rate [1/s] (< 0: decay) of the hub angle's oscillation at f_hz in the run of ``raw``
+    after t_from: in windows of ``window`` s, a least-squares fit of a cubic (the slow motion) plus
+    A cos + B sin at f_hz; the slope of log hypot(A, B) against the windows' centres."""
+    res = run(raw)
+    t, y, w = res.t, res.columns["hub_angle"], 2.0 * np.pi * f_hz
+    centres, amps = [], []
+    for t0 in np.arange(t_from, t[-1] - window + 1e-9, window):
+        m = (t >= t0) & (t < t0 + window)
+        s = (t[m] - t0) / window - 0.5
+        basis = np.c_[np.ones_like(s), s, s ** 2, s ** 3, np.cos(w * t[m]), np.sin(w * t[m])]
+        coef = np.linalg.lstsq(basis, y[m], rcond=None)[0]
+        centres.append(t0 + window / 2)
+        amps.append(np.hypot(coef[4], coef[5]))
+    return float(np.polyfit(centres, np.log(amps), 1)[0])
+
+
+def eigen_loop(measure="joint", rayleigh=(0.0, 0.0), elements: int = 4) -> Loop:
+    """The small-move link's loop linearized about rest (control_eigen), any gain."""
+    return linearize_loop(validate_case(small_move(1.0, measure, rayleigh=rayleigh, elements=elements)))
+
+
+def collocated_stability(gains=np.geomspace(0.01, 1e4, 61)) -> dict:
+    """Hub-angle PD: the largest max Re lambda over ``gains`` by eigenvalues (2, 4, 8 elements per
+    link; undamped), and the time runs' late/early error at k = 0.5, 5, 50."""
+    out = {}
+    for ne in (2, 4, 8):
+        loop = eigen_loop(elements=ne)
+        s = np.array([loop.abscissa(k, TAU * k) for k in gains])
+        out[f"{ne}_elements"] = {"max_abscissa_per_s": float(s.max()), "at_k": float(gains[np.argmax(s)]),
+                                 "untouched_hz": loop.untouched_hz.round(1).tolist()}
+    out["time_late_over_early"] = {k: settles(k) for k in (0.5, 5.0, 50.0)}
+    return out
+
+
+def tip_undamped(gains=(0.5, 1.0, 2.0)) -> dict:
+    """Tip-height PD on the undamped link: unstable at every positive gain (the eigenvalues: its
+    first bending mode's real part grows from 0 as slope x k), against the growth rates measured in
+    3 s time runs (dt 5e-4 s; at k = 1 also Newmark's average acceleration and dt / 2), and the
+    finite-time settling measure at k = 1 over 1.5 s and 6 s."""
+    out = {}
+    for ne in (2, 4, 8):
+        crit = critical_gain(eigen_loop(TIP, elements=ne), TAU)
+        out[f"{ne}_elements"] = {k: crit[k] for k in ("kp", "f_hz", "slope_at_zero_per_s")}
+    loop = eigen_loop(TIP)
+    f_hz = out["4_elements"]["f_hz"]
+    out["growth_per_s"] = {}
+    for k in gains:     # runs as long as the mode grows by e^6 at most (to 0.02 rad: still linear), 3 s at most
+        eig = loop.leading(k, TAU * k)["re_per_s"]
+        out["growth_per_s"][k] = {"eigen": eig, "time": growth_rate(small_move(k, TIP, t_end=min(3.0, 0.4 + 6.0 / eig)),
+                                                                    f_hz)}
+    newmark = small_move(1.0, TIP, t_end=3.0)
+    newmark["solver"]["integrator"] = "newmark"
+    out["growth_per_s_k1_newmark"] = growth_rate(newmark, f_hz)
+    out["growth_per_s_k1_dt_half"] = growth_rate(small_move(1.0, TIP, t_end=3.0, dt=2.5e-4), f_hz)
+    out["late_over_early_k1"] = {"1.5 s": settles(1.0, TIP), "6 s": settles(1.0, TIP, t_end=6.0)}
+    return out
+
+
+def tip_damped(factors=(0.8, 1.2)) -> dict:
+    """Tip-height PD on the link with Rayleigh damping DAMPED: the critical gain by eigenvalues (2, 4, 8
+    elements), the growth rates of 3 s time runs at factors x that gain, and the time runs' critical
+    gain (the zero of the growth rate, linear between the two)."""
+    out = {}
+    for ne in (2, 4, 8):
+        crit = critical_gain(eigen_loop(TIP, DAMPED, ne), TAU)
+        out[f"{ne}_elements"] = {"kp": crit["kp"], "f_hz": crit["f_hz"]}
+    kc, f_hz = out["4_elements"]["kp"], out["4_elements"]["f_hz"]
+    loop = eigen_loop(TIP, DAMPED)
+    rates = {f * kc: (loop.leading(f * kc, TAU * f * kc)["re_per_s"],
+                      growth_rate(small_move(f * kc, TIP, t_end=3.0, rayleigh=DAMPED), f_hz)) for f in factors}
+    (k0, (_, g0)), (k1, (_, g1)) = rates.items()
+    out["growth_per_s"] = {k: {"eigen": e, "time": g} for k, (e, g) in rates.items()}
+    out["time_critical_kp"] = float(k0 - g0 * (k1 - k0) / (g1 - g0))
+    return out
+
+
+def swing_growth(k: float, t_end: float = 2.0) -> float:
+    """The hub angle's largest peak-to-peak swing over the last three quarters of a small-move run
+    under the P law k e on the tip's height, against its swing over the first eighth (about 1: a
+    marginal loop keeps swinging; >> 1: it grew)."""
+    y = run(small_move(k, TIP, tau=0.0, t_end=t_end)).columns["hub_angle"]
+    n = y.size // 8
+    return float(max(np.ptp(y[i * n:(i + 1) * n]) for i in range(2, 8)) / np.ptp(y[:n]))
+
+
+def tip_proportional(factors=(0.985, 1.015)) -> dict:
+    """Tip-height P feedback (tau = 0) on the undamped link: marginal (no damping anywhere) up to the
+    gain at which the rigid mode, rising with k, and the first bending mode coalesce (flutter), by
+    eigenvalues (2, 4, 8 elements); the swing growth of time runs at factors x that gain."""
+    out = {}
+    for ne in (2, 4, 8):
+        crit = critical_gain(eigen_loop(TIP, elements=ne), 0.0)
+        out[f"{ne}_elements"] = {"kp": crit["kp"], "f_hz": crit["f_hz"]}
+    kc = out["4_elements"]["kp"]
+    out["time_swing_growth"] = {f * kc: swing_growth(f * kc) for f in factors}
+    return out
 
 
 def rigid_limit() -> dict:
@@ -188,7 +288,9 @@ def cost(pairs: int = 5) -> dict:
 
 def main() -> None:
     for name, fn in (("rigid limit", rigid_limit), ("flexible link energy", flexible_energy),
-                     ("saturation", saturation), ("tip feedback", tip_feedback), ("bricout", bricout), ("cost", cost)):
+                     ("saturation", saturation), ("collocated stability", collocated_stability),
+                     ("tip feedback, undamped", tip_undamped), ("tip feedback, damped", tip_damped),
+                     ("tip P feedback", tip_proportional), ("bricout", bricout), ("cost", cost)):
         print(name, fn())
 
 
