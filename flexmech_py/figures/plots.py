@@ -212,6 +212,8 @@ def _draw_panel(ax, p, series, drawn, spot):
     if p.get("title"):
         ax.set_title(p["title"], fontsize=8.5, loc="left")
     ax.yaxis.set_major_locator(MaxNLocator(5))
+    ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4), useMathText=True)   # short tick labels:
+    # a strain of 5e-4 is ticked 5 with x10^-4 above the axis, so the label keeps its place at the left
     ax.xaxis.set_major_locator(MaxNLocator(6))
     ax.grid(True, alpha=0.3)
     if spot is None:
@@ -319,6 +321,8 @@ def _panel(res, x, names) -> dict:
     if unit == "m" and max(float(np.nanmax(np.abs(res.columns[n]))) for n in names) < 0.1:
         scale, unit = 1e3, "mm"
     kind = res.case["outputs"].get(names[0], {}).get("kind", "energy" if unit == "J" else "")
+    if not kind and all(n.startswith("control_") for n in names):
+        kind = "controller output"
     what = names[0] if len(names) == 1 else kind.replace("_", " ")
     return {"x": x, "ylabel": f"{what} [{display_unit(unit)}]".strip(),
             "series": [(n if len(names) > 1 else "", scale * res.columns[n], None) for n in names]}
