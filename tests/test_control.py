@@ -364,3 +364,36 @@ def test_the_cli_model_choice_is_the_cases_model_when_it_is_validated(tmp_path):
     assert main(["run", str(path), "--model", "coupled", "--no-plots", "--quiet", "--out", str(tmp_path / "a")]) == 0
     assert main(["run", str(path), "--model", "hac", "--no-plots", "--quiet", "--out", str(tmp_path / "b")]) == 2
     assert not (tmp_path / "b").exists()
+
+
+def _gauge_case(at: float) -> dict:
+    raw = link_case(t_end=0.2)
+    raw["links"][0]["half_depth"] = 0.005
+    raw["controllers"].append({"name": "gauge", "joint": "hub", "kp": 1000.0, "measure": {"strain": "arm", "at": at},
+                               "reference": {"law": "constant_speed", "speed": 0.0, "start": 0.0}})
+    for f in (0.375, 0.5, 0.625):
+        raw["outputs"][f"s{round(f * 1000)}"] = {"kind": "strain", "link": "arm", "at": f}
+    return raw
+
+
+@pytest.mark.parametrize("model", ["coupled", "nonlinear"])
+def test_a_strain_gauge_controller_measures_the_mean_strain_of_its_elements(model):
+    """measure = {strain = link, at = f}: a P law on the strain (reference 0) outputs -kp times the mean
+    bending strain over the element holding f, which for the cubic elements' linear curvature is the
+    strain output at the element's middle (f = 0.375 of 4 elements), and over the two elements around a
+    node (f = 0.5): the mean of their middles' strains."""
+    for at, want in ((0.375, lambda c: c["s375"]), (0.5, lambda c: 0.5 * (c["s375"] + c["s625"]))):
+        c = run(_gauge_case(at), model).columns
+        y = -c["control_gauge"] / 1000.0
+        assert np.abs(c["s500"]).max() > 1e-5                 # the link bends
+        assert np.abs(y - want(c)).max() < 1e-9 * np.abs(want(c)).max()
+
+
+@pytest.mark.parametrize("measure, field", [({"strain": "nope", "at": 0.5}, "controllers[1].measure.strain"),
+                                            ({"strain": "arm", "at": 1.5}, "controllers[1].measure.at")])
+def test_a_strain_measure_on_no_flexible_link_or_off_the_link_is_refused(measure, field):
+    raw = _gauge_case(0.5)
+    raw["controllers"][1]["measure"] = measure
+    with pytest.raises(CaseError) as exc:
+        validate_case(raw)
+    assert exc.value.field == field

@@ -54,6 +54,8 @@ def check_controllers(raw, mech, solver: dict) -> list:
         _force_driven(mech, joint, f"{w}.joint")
         if isinstance(c.get("measure"), dict) and "point" in c["measure"]:
             mech.point(c["measure"]["point"], f"{w}.measure.point")
+        if isinstance(c.get("measure"), dict) and "strain" in c["measure"]:
+            _check_strain_measure(mech, _measure(c, w), f"{w}.measure")
         name = v.text(c, "name", w, default=f"{joint}_pid")
         if name in names:
             raise CaseError(f"{w}.name", f"{name!r} names two controllers; give each its own name")
@@ -207,15 +209,24 @@ def _whole_steps(x: float, unit: float, where: str, minimum: int) -> float:
 
 
 def _measure(c: dict, w: str):
-    """``"joint"`` (the joint's coordinate and rate, collocated) or ``{point = "<link>.<point>",
-    direction = [x, y]}``: the point's position along the unit direction (fixed in the frame of the
-    joint's body a) from the joint's point a, and its rate (non-collocated; the reference then in m)."""
+    """``"joint"`` (the joint's coordinate and rate, collocated), ``{point = "<link>.<point>", direction
+    = [x, y]}``: the point's position along the unit direction (fixed in the frame of the joint's body
+    a) from the joint's point a, and its rate (non-collocated; the reference then in m), or ``{strain =
+    "<link>", at = f}``: the bending strain at the outer fibre of a flexible link at fraction f of its
+    length, the mean over the element holding f (over the two elements around f when f is a mesh node:
+    flexmech_py.models.constrained.layout), like a strain gauge of that length (the reference then in
+    strain, the gains in effort per unit strain)."""
     m = c.get("measure", "joint")
     where = f"{w}.measure"
     if m == "joint":
         return m
     if not isinstance(m, dict):
-        raise CaseError(where, f"must be \"joint\" or {{point = \"<link>.end\", direction = [0, 1]}}, got {m!r}")
+        raise CaseError(where, f"must be \"joint\", {{point = \"<link>.end\", direction = [0, 1]}} or "
+                               f"{{strain = \"<link>\", at = 0.5}}, got {m!r}")
+    if "strain" in m:
+        v.keys(m, {"strain", "at"}, where)
+        return {"strain": v.text(m, "strain", where, required=True),
+                "at": v.num(m, "at", where, required=True, nonneg=True)}
     v.keys(m, {"point", "direction"}, where)
     point = v.text(m, "point", where, required=True)
     d = np.asarray(v.vector(m, "direction", where, 2, default=[0.0, 1.0]), float)
@@ -224,11 +235,36 @@ def _measure(c: dict, w: str):
     return {"point": point, "direction": [float(x) for x in d / np.linalg.norm(d)]}
 
 
+def _check_strain_measure(mech, m: dict, where: str) -> None:
+    link = next((ln for ln in mech.links if ln.name == m["strain"]), None)
+    if link is None or link.rigid:
+        names = ", ".join(ln.name for ln in mech.links if not ln.rigid)
+        raise CaseError(f"{where}.strain", f"{m['strain']!r} is not a flexible link (flexible links: {names})")
+    if not link.half_depth:
+        raise CaseError(f"{where}.strain", f"link {link.name!r} has no half_depth (the outer fibre's distance "
+                                           "from the axis, m): give links.half_depth or a section")
+    if m["at"] > 1.0:
+        raise CaseError(f"{where}.at", f"is a fraction of the link's length, 0..1; got {m['at']}")
+
+
+def _scaled_reference(ref: dict, s: float) -> dict:
+    """A reference law in units of its measured signal divided by s (a strain reference as the
+    relative node rotation the model measures): every value-like parameter divided by s."""
+    out = dict(ref)
+    for key in ("start", "travel", "speed", "final_speed", "amplitude", "mean"):
+        if out.get(key) is not None:
+            out[key] = out[key] / s
+    if "value" in out:
+        out["value"] = [x / s for x in out["value"]]
+    return out
+
+
 class ControlPack:
     """The flat layout of flexmech_control: cint (9, n), cpar (9, n), the tables' splines ctab_t,
     ctab_c and a fresh state cst (NST, n) (n >= 1: a padding controller with drive 0 when none)."""
 
-    def __init__(self, controllers: list, force_joints: list, revolute: set, dt: float, rows: dict):
+    def __init__(self, controllers: list, force_joints: list, revolute: set, dt: float, rows: dict,
+                 scales: dict | None = None):
         n = max(1, len(controllers))
         self.names = [c["name"] for c in controllers]
         self.joints = [c["joint"] for c in controllers]
@@ -236,8 +272,9 @@ class ControlPack:
         self.cpar = np.zeros((17, n), order="F")
         tab_t, tab_c = [], []
         for k, c in enumerate(controllers):
-            ref = Drive(joint=c["joint"], law=c["reference"]["law"],
-                        params={p: x for p, x in c["reference"].items() if p != "law"})
+            sc = (scales or {}).get(c["name"], 1.0)      # measured = sc x row: law and gains in row units
+            ref_law = _scaled_reference(c["reference"], sc) if sc != 1.0 else c["reference"]
+            ref = Drive(joint=c["joint"], law=ref_law["law"], params={p: x for p, x in ref_law.items() if p != "law"})
             law = ref.packed(math.nan)     # a start left out: the coordinate measured at the run's start
             rt = _append(tab_t, tab_c, law["table"])
             ft = _append(tab_t, tab_c, None if c.get("feedforward") is None else
@@ -250,7 +287,7 @@ class ControlPack:
             self.cint[:, k] = [force_joints.index(c["joint"]) + 1, ref.code, *rt, *ft, max(s, 1 if m else 0), m,
                                int(c["joint"] in revolute and kind == 0), kind, ma + 1, mb + 1]
             amps, times = _impulses(c.get("shaper"))
-            self.cpar[:, k] = [c["kp"], c["ki"], c["kd"], lo, hi, *law["par"], *amps, *times, *d]
+            self.cpar[:, k] = [c["kp"] * sc, c["ki"] * sc, c["kd"] * sc, lo, hi, *law["par"], *amps, *times, *d]
         self.ctab_t = np.asarray(tab_t or [0.0], float)
         self.ctab_c = np.asfortranarray(np.array(tab_c, float).T if tab_c else np.zeros((4, 1)))
         self.cst = np.zeros((CONTROL_NST, n), order="F")
@@ -274,8 +311,10 @@ def _append(tab_t: list, tab_c: list, table) -> list:
     return [first, len(table[0])]
 
 
-def pack_controllers(controllers: list, force_joints: list, revolute: set, dt: float, rows: dict) -> ControlPack:
+def pack_controllers(controllers: list, force_joints: list, revolute: set, dt: float, rows: dict,
+                     scales: dict | None = None) -> ControlPack:
     """The controllers for a run with step dt whose force drives act on ``force_joints`` (in the order
     of the model's force drives); ``revolute``: the joints whose coordinate is an angle; ``rows``:
-    {controller: (row kind, marker a, marker b (0-based), direction)} of the non-collocated ones."""
-    return ControlPack(controllers, force_joints, revolute, dt, rows)
+    {controller: (row kind, marker a, marker b (0-based), direction)} of the non-collocated ones,
+    ``scales`` {controller: s} their measured signal per unit of the row (a strain: c / span)."""
+    return ControlPack(controllers, force_joints, revolute, dt, rows, scales)

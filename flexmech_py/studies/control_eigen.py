@@ -142,7 +142,7 @@ def _controllers(case, names):
 
 def _measured_row(cm, c) -> Row:
     """The row controller c measures in the model: its force drive's coordinate (collocated) or its
-    own projection row (the layout's control_rows)."""
+    own row (the layout's control_rows: a projection, or a strain's relative node rotation)."""
     if c["measure"] == "joint":
         return next(row for row, d in cm.forces if d.joint == c["joint"])
     kind, a, b, d = cm.layout.control_rows[c["name"]]
@@ -204,6 +204,7 @@ def linearize_loop(case, controllers=None, *, model: str | None = None,
     b = {j: _actuator(cm, lz.q, j) for j in {c["joint"] for c in chosen}}
     p = np.column_stack([phi.T @ b[c["joint"]] for c in chosen])
     o = _gradients(cm, lz.q, [_measured_row(cm, c) for c in chosen]) @ phi
+    o *= np.array([cm.layout.control_scales.get(c["name"], 1.0) for c in chosen])[:, None]   # a strain: c/span
     touched = (np.abs(p).max(axis=1) > TOUCH * np.abs(p).max()) & (np.abs(o).max(axis=0) > TOUCH * np.abs(o).max())
     off = d - np.diag(np.diag(d))
     if np.any(np.abs(off[np.ix_(touched, ~touched)]) > TOUCH * max(np.abs(d).max(), 1e-300)):

@@ -262,7 +262,7 @@ class CoupledModel:
         mech = self.case.mechanism
         revolute = {j.name for j in mech.joints if j.angular}
         return pack_controllers(self.case.get("controllers", []), [d.joint for _, d in self.forces], revolute, dt,
-                                self.layout.control_rows)
+                                self.layout.control_rows, self.layout.control_scales)
 
     def control_outputs(self, nf: int) -> dict:
         """{controller: (nf,) its output [N m or N]} over the first nf frames of the last run."""

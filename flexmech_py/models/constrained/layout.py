@@ -189,6 +189,7 @@ class Layout:
         self.dof, self.fixed, self.node_ends, self.parent = {}, {}, {}, {}
         self._positions()
         self._joints()
+        self.control_scales: dict = {}
         self.control_rows = self._control_rows()
         self._lumped()
         self.n_el = np.array([k1 - k0 for _, k0, k1 in self.segments], np.int32)
@@ -310,11 +311,32 @@ class Layout:
         for c in self.case.get("controllers", []):
             if c["measure"] == "joint":
                 continue
+            if "strain" in c["measure"]:
+                out[c["name"]] = self._strain_row(c)
+                continue
             where = f"controllers.{c['name']}.measure.point"
             pr = self.mech.point(c["measure"]["point"], where)
             out[c["name"]] = (CON_PROJECTION, self.joints[c["joint"]].markers[0],
                               self.marker(marker_key(self, pr, where)), tuple(c["measure"]["direction"]))
         return out
+
+    def _strain_row(self, c) -> tuple:
+        """A strain measure ({strain = link, at = f}): the relative rotation psi_b - psi_a (CON_ANGLE) of
+        the mesh nodes bounding the element that holds f (the two elements around f when f is a node),
+        whose integral of the curvature it is; the signal c (psi_b - psi_a) / span, its scale in
+        control_scales."""
+        li = next(i for i, ln in enumerate(self.mech.links) if ln.name == c["measure"]["strain"])
+        f, at = self.fracs[li], c["measure"]["at"]
+        k = int(np.argmin(np.abs(f - at)))
+        if abs(f[k] - at) <= 1e-9:
+            ka, kb = max(k - 1, 0), min(k + 1, f.size - 1)
+        else:
+            kb = int(np.searchsorted(f, at))
+            ka = kb - 1
+        marks = [self.marker((MK_NODE, *node_segment(self.segments, li, kk), (0.0, 0.0))) for kk in (ka, kb)]
+        link = self.mech.links[li]
+        self.control_scales[c["name"]] = float(link.half_depth) / (float(f[kb] - f[ka]) * link.length)
+        return (CON_ANGLE, marks[0], marks[1], (0.0, 0.0))
 
     def _joints(self) -> None:
         """Markers and rows of every joint (its kind's coupled_rows), its drive, and the welds between the
