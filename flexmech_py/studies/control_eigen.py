@@ -149,6 +149,15 @@ def _measured_row(cm, c) -> Row:
     return Row(kind, a, b, d=d)
 
 
+def _measure_text(m) -> str:
+    """A controller's measured signal in words: joint, a point along a direction, a strain gauge."""
+    if m == "joint":
+        return "joint"
+    if "strain" in m:
+        return f"strain of {m['strain']} at {m['at']:g}"
+    return f"{m['point']} along {list(m['direction'])}"
+
+
 def _gradients(cm, q, rows) -> np.ndarray:
     """(len(rows), nfree) the rows' gradients over the free DOFs at configuration q: their rates at the
     unit velocities (the model's own kinematics, cpl_post; a rate is linear in the velocities)."""
@@ -212,8 +221,7 @@ def linearize_loop(case, controllers=None, *, model: str | None = None,
     nu = int((~touched).sum())
     a_u = np.block([[np.zeros((nu, nu)), np.eye(nu)], [-np.diag(omega[~touched] ** 2), -d[np.ix_(~touched, ~touched)]]])
     re = np.linalg.eigvals(a_u).real
-    measures = ["joint" if c["measure"] == "joint" else f"{c['measure']['point']} along {list(c['measure']['direction'])}"
-                for c in chosen]
+    measures = [_measure_text(c["measure"]) for c in chosen]
     gains = np.array([[c[k] for c in chosen] for k in ("kp", "kd", "ki")], float)
     return Loop(omega[touched], p[touched], o[:, touched], d[np.ix_(touched, touched)], omega[~touched] / (2 * math.pi),
                 float(re.max()) if re.size else -math.inf, [c["name"] for c in chosen], measures, gains, model,
