@@ -36,10 +36,12 @@ module flexmech_control
   implicit none
   private
   public :: control_bank, ctl_setup, ctl_output, ctl_slopes, ctl_start, ctl_commit, ctl_save, ctl_places, ctl_active
+  public :: ctl_law, CTL_REF_START
   public :: CTL_NCI, CTL_NCP, CTL_NST, CTL_MAXDELAY
 
   integer, parameter :: CTL_NCI = 12, CTL_NCP = 17, CTL_MAXDELAY = 2000
   integer, parameter :: HEAD = 4, START = 5, RING = 6
+  integer, parameter :: CTL_REF_START = START   !< the place of the reference's start in a controller's state
   integer, parameter :: CTL_NST = RING - 1 + 2*(CTL_MAXDELAY + 1)
 
   !> The controllers of a run and their state.
@@ -214,16 +216,39 @@ contains
     real(dp), intent(in) :: y, yd, t
     real(dp), intent(out) :: u, e
     logical, intent(out) :: integrate
+    call pid_law(cb, j, y, yd, t, cb%st(1, j), cb%h, u, e, integrate)
+  end subroutine continuous_law
+
+  !> The continuous-time law of controller j with its integral I given (the superposition models carry
+  !> I as a state of their rigid-body integration, I' = e while integrate, docs/theory.md 23.3):
+  !>   u = sat(ff + kp e + kd e' + ki I),  integrate false when clamped and e pushes further into the limit.
+  pure subroutine ctl_law(cb, j, y, yd, t, integral, u, e, integrate)
+    type(control_bank), intent(in) :: cb
+    integer, intent(in) :: j
+    real(dp), intent(in) :: y, yd, t, integral
+    real(dp), intent(out) :: u, e
+    logical, intent(out) :: integrate
+    call pid_law(cb, j, y, yd, t, integral, 0.0_dp, u, e, integrate)
+  end subroutine ctl_law
+
+  !> The law of controller j at (y, yd, t) from the integral i0 extended by the step h with the new
+  !> error (backward Euler; h = 0: the integral as given): output u, error e, whether I may grow.
+  pure subroutine pid_law(cb, j, y, yd, t, i0, h, u, e, integrate)
+    type(control_bank), intent(in) :: cb
+    integer, intent(in) :: j
+    real(dp), intent(in) :: y, yd, t, i0, h
+    real(dp), intent(out) :: u, e
+    logical, intent(out) :: integrate
     real(dp) :: r(3), ff, ur
     call reference(cb, j, t, r, ff)
     e = error(cb, j, r(1), y)
-    ur = ff + cb%cp(1, j)*e + cb%cp(3, j)*(r(2) - yd) + cb%cp(2, j)*(cb%st(1, j) + cb%h*e)
+    ur = ff + cb%cp(1, j)*e + cb%cp(3, j)*(r(2) - yd) + cb%cp(2, j)*(i0 + h*e)
     call saturate(cb, j, ur, e, u, integrate)
     if (.not. integrate) then
-      ur = ff + cb%cp(1, j)*e + cb%cp(3, j)*(r(2) - yd) + cb%cp(2, j)*cb%st(1, j)
+      ur = ff + cb%cp(1, j)*e + cb%cp(3, j)*(r(2) - yd) + cb%cp(2, j)*i0
       u = min(max(ur, cb%cp(4, j)), cb%cp(5, j))
     end if
-  end subroutine continuous_law
+  end subroutine pid_law
 
   !> A fresh start at t0 with the measurements y(:), yd(:) (per controller j): integral zero, the
   !> delay ring filled with the initial measurement, the first sample taken.

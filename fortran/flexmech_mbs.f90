@@ -35,7 +35,7 @@ module flexmech_mbs
   implicit none
   private
   public :: mbs_system, mbs_build, mbs_constraints, mbs_forces, mbs_accelerations, mbs_joint_coordinates, &
-            mbs_nspec_header, mbs_drive_values, mbs_drive_change, factor_augmented, solve_augmented
+            mbs_nspec_header, mbs_drive_values, mbs_drive_change, factor_augmented, solve_augmented, joint_coordinate
 
   integer, parameter :: NPAR = 4                   !< parameters per drive law (flexmech_drivelaw)
   integer, parameter :: mbs_nspec_header = 8       !< integers before the first block of ispec

@@ -12,9 +12,12 @@ module flexmech_mbs_api
   use flexmech_mbs_solve, only: mbs_residual
   use flexmech_motion, only: kinematic_samples, dynamic_start, dynamic_samples
   use flexmech_ode, only: ode_state_size
+  use flexmech_mbs_control, only: mbs_controlled, controlled_setup, controlled_start
+  use flexmech_control, only: CTL_NST, CTL_REF_START
   implicit none
   private
   public :: mbs_eval, mbs_assemble, mbs_kinematic, mbs_dynamic_start, mbs_dynamic, mbs_state_size
+  public :: mbs_controlled_state_size, mbs_controlled_start, mbs_controlled_dynamic
 
 contains
 
@@ -159,5 +162,83 @@ contains
     call dynamic_samples(sys, ts, state, hmax, tol, gram_min, zf, zdf, zddf, lamf, jqf, dvf(1:sys%nd, :), nvalid, &
                          status, fail_t, rcond_low)
   end subroutine mbs_dynamic
+
+  !> Length of the controlled dynamic mode's state for n coordinates and nc controllers: the
+  !> integrator's (states [z, zd, I, W]) and the controllers' reference starts.
+  subroutine mbs_controlled_state_size(n, nc, nst)
+    integer, intent(in) :: n, nc
+    integer, intent(out) :: nst
+    nst = ode_state_size(2*n + nc + 1) + nc
+  end subroutine mbs_controlled_state_size
+
+  !> Build the system with its collocated controllers (flexmech_mbs_control; layout: flexmech_control,
+  !> cint(1, :) the index among the force drives); STATUS_BAD_INPUT when a controller is not one the
+  !> rigid-body integration can close.
+  subroutine build_controlled(ispec, rspec, n, nrow, nj, cint, cpar, ctab_t, ctab_c, h, sys, status)
+    integer, intent(in) :: ispec(:), n, nrow, nj, cint(:, :)
+    real(dp), intent(in) :: rspec(:), cpar(:, :), ctab_t(:), ctab_c(:, :), h
+    type(mbs_controlled), intent(out) :: sys
+    integer, intent(out) :: status
+    real(dp), allocatable :: cst(:, :)
+    logical :: ok
+    call build_checked(ispec, rspec, n, nrow, nj, sys%mbs_system, status)
+    if (status /= STATUS_OK) return
+    allocate (cst(CTL_NST, size(cint, 2)))
+    cst = 0.0_dp
+    call controlled_setup(sys, cint, cpar, ctab_t, ctab_c, cst, h, ok)
+    if (.not. ok .or. sys%nc /= size(cint, 2)) status = STATUS_BAD_INPUT
+  end subroutine build_controlled
+
+  !> Start the controlled dynamic mode at (t0, z0, zd0) with the integrals x0, the drives' work w0 [J]
+  !> and the references' starts start (NaN: the measured coordinate, a fresh run): state
+  !> (mbs_controlled_state_size).
+  subroutine mbs_controlled_start(ni, nr, n, nc, nt, nst, ispec, rspec, cint, cpar, ctab_t, ctab_c, h, t0, z0, zd0, &
+                                  x0, w0, start, rtol, atol, hmax, tol, state, status)
+    integer, intent(in) :: ni, nr, n, nc, nt, nst
+    integer, intent(in) :: ispec(ni), cint(12, nc)
+    real(dp), intent(in) :: rspec(nr), cpar(17, nc), ctab_t(nt), ctab_c(4, nt), h, t0, z0(n), zd0(n), x0(nc), &
+                            w0, start(nc), rtol, atol, hmax, tol
+    real(dp), intent(out) :: state(nst)
+    integer, intent(out) :: status
+    type(mbs_controlled) :: sys
+    state = 0.0_dp
+    call build_controlled(ispec, rspec, n, -1, -1, cint, cpar, ctab_t, ctab_c, h, sys, status)
+    if (status /= STATUS_OK) return
+    if (nst /= ode_state_size(2*n + nc + 1) + nc) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    call controlled_start(sys, t0, z0, zd0, start)
+    call dynamic_start(sys, t0, z0, zd0, rtol, atol, hmax, tol, state(1:nst - nc), status, [x0, w0])
+    state(nst - nc + 1:) = sys%cb%st(CTL_REF_START, :)
+  end subroutine mbs_controlled_start
+
+  !> Controlled dynamic mode at times ts, continuing from state (see flexmech_motion: dynamic_samples):
+  !> dvf includes the controllers' outputs, uf (nc, ns) the outputs, xf (nc + 1, ns) the integrals and
+  !> the drives' work [J].
+  subroutine mbs_controlled_dynamic(ni, nr, n, nrow, nj, nd, nc, nt, ns, nst, ispec, rspec, cint, cpar, ctab_t, &
+                                    ctab_c, h, ts, state, hmax, tol, gram_min, zf, zdf, zddf, lamf, jqf, dvf, uf, xf, &
+                                    nvalid, status, fail_t, rcond_low)
+    integer, intent(in) :: ni, nr, n, nrow, nj, nd, nc, nt, ns, nst
+    integer, intent(in) :: ispec(ni), cint(12, nc)
+    real(dp), intent(in) :: rspec(nr), cpar(17, nc), ctab_t(nt), ctab_c(4, nt), h, ts(ns), hmax, tol, gram_min
+    real(dp), intent(inout) :: state(nst)
+    real(dp), intent(out) :: zf(n, ns), zdf(n, ns), zddf(n, ns), lamf(nrow, ns), jqf(3, nj, ns), dvf(nd, ns), &
+                             uf(nc, ns), xf(nc + 1, ns)
+    integer, intent(out) :: nvalid, status
+    real(dp), intent(out) :: fail_t, rcond_low
+    type(mbs_controlled) :: sys
+    zf = 0.0_dp; zdf = 0.0_dp; zddf = 0.0_dp; lamf = 0.0_dp; jqf = 0.0_dp; dvf = 0.0_dp; uf = 0.0_dp; xf = 0.0_dp
+    nvalid = 0; fail_t = 0.0_dp; rcond_low = 0.0_dp
+    call build_controlled(ispec, rspec, n, nrow, nj, cint, cpar, ctab_t, ctab_c, h, sys, status)
+    if (status /= STATUS_OK) return
+    if (nst /= ode_state_size(2*n + nc + 1) + nc .or. sys%nd > nd) then
+      status = STATUS_BAD_INPUT
+      return
+    end if
+    sys%cb%st(CTL_REF_START, :) = state(nst - nc + 1:)
+    call dynamic_samples(sys, ts, state(1:nst - nc), hmax, tol, gram_min, zf, zdf, zddf, lamf, jqf, dvf(1:sys%nd, :), &
+                         nvalid, status, fail_t, rcond_low, uf, xf)
+  end subroutine mbs_controlled_dynamic
 
 end module flexmech_mbs_api

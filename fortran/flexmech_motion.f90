@@ -26,6 +26,7 @@ module flexmech_motion
                           mbs_drive_change
   use flexmech_mbs_solve, only: mbs_kinematic_sample, mbs_project, mbs_gram_rcond
   use flexmech_ode, only: ode_state, ode_start, ode_step, ode_dense, ode_pack, ode_unpack, ODE_OK
+  use flexmech_mbs_control, only: mbs_controlled, controlled_eval
   implicit none
   private
   public :: kinematic_samples, dynamic_start, dynamic_samples, POSITION_MAXIT
@@ -133,18 +134,24 @@ contains
   end function substep
 
   !> Start the dynamic mode at (t0, z0, zd0) (projected onto the constraints first): the packed
-  !> integrator state in state (length ode_state_size(2n)).
-  subroutine dynamic_start(sys, t0, z0, zd0, rtol, atol, hmax, tol, state, status)
-    type(mbs_system), intent(inout) :: sys
+  !> integrator state in state (length ode_state_size(2n + nx)); x0 (nx): the initial values of the
+  !> system's extra states (a controlled system's integrals, flexmech_mbs_control).
+  subroutine dynamic_start(sys, t0, z0, zd0, rtol, atol, hmax, tol, state, status, x0)
+    class(mbs_system), intent(inout) :: sys
     real(dp), intent(in) :: t0, z0(:), zd0(:), rtol, atol, hmax, tol
     real(dp), intent(out) :: state(:)
     integer, intent(out) :: status
+    real(dp), intent(in), optional :: x0(:)
     type(ode_state) :: st
     real(dp) :: z(sys%n), zd(sys%n)
     z = z0; zd = zd0
     call mbs_project(sys, z, zd, t0, tol, POSITION_MAXIT, status)
     if (status /= STATUS_OK) return
-    call ode_start(sys, t0, [z, zd], rtol, atol, hmax, st, status)
+    if (present(x0)) then
+      call ode_start(sys, t0, [z, zd, x0], rtol, atol, hmax, st, status)
+    else
+      call ode_start(sys, t0, [z, zd], rtol, atol, hmax, st, status)
+    end if
     if (status /= STATUS_OK) return
     call ode_pack(st, state)
   end subroutine dynamic_start
@@ -152,22 +159,27 @@ contains
   !> Dynamic mode at the increasing times ts (>= the start of the last step), continuing from state.
   !> gram_min: the Gram matrix's reciprocal condition (about (sigma_min/sigma_max)^2 of the scaled
   !> constraint Jacobian) below which the position is singular.  rcond_low: the smallest value met.
+  !> A controlled system (flexmech_mbs_control) adds its controllers' outputs to the drives they act
+  !> through in dvf and returns them in uf (nc, ns), and its extra states (the integrals, the drives'
+  !> work) in xf (nc + 1, ns).
   subroutine dynamic_samples(sys, ts, state, hmax, tol, gram_min, zf, zdf, zddf, lamf, jqf, dvf, nvalid, status, &
-                             fail_t, rcond_low)
-    type(mbs_system), intent(inout) :: sys
+                             fail_t, rcond_low, uf, xf)
+    class(mbs_system), intent(inout) :: sys
     real(dp), intent(in) :: ts(:), hmax, tol, gram_min
     real(dp), intent(inout) :: state(:)
     real(dp), intent(out) :: zf(:, :), zdf(:, :), zddf(:, :), lamf(:, :), jqf(:, :, :), dvf(:, :)
     integer, intent(out) :: nvalid, status
     real(dp), intent(out) :: fail_t, rcond_low
+    real(dp), intent(out), optional :: uf(:, :), xf(:, :)
     type(ode_state) :: st
-    real(dp) :: y(2*sys%n), lam(sys%nrow), gr
+    real(dp), allocatable :: y(:)
+    real(dp) :: lam(sys%nrow), gr
     integer :: i, n, ost, rst
     n = sys%n
     nvalid = 0; fail_t = 0.0_dp; rcond_low = huge(1.0_dp)
     status = STATUS_OK
     call ode_unpack(state, st)
-    if (st%n /= 2*n) then
+    if (st%n /= 2*n + extra_states(sys)) then
       status = STATUS_BAD_INPUT
       return
     end if
@@ -191,32 +203,53 @@ contains
         end if
       end do
       if (status /= STATUS_OK) exit
-      if (ts(i) >= st%t) then
-        y = st%y
-      else
-        call ode_dense(st, ts(i), y)
-      end if
-      call mbs_accelerations(sys, y(1:n), y(n + 1:), ts(i), zddf(:, i), lam, status)
+      y = st%y
+      if (ts(i) < st%t) call ode_dense(st, ts(i), y)
+      call sample(i, status)
       if (status /= STATUS_OK) then
         fail_t = ts(i)
         exit
       end if
-      zf(:, i) = y(1:n); zdf(:, i) = y(n + 1:); lamf(:, i) = lam
-      call mbs_joint_coordinates(sys, zddf(:, i), ts(i), jqf(:, :, i))     ! at y, as mbs_accelerations
-      call mbs_drive_values(sys, ts(i), lam, dvf(:, i))
       nvalid = i
     end do
     call ode_pack(st, state)
 
   contains
 
+    !> Sample i at y (its time ts(i)): accelerations, multipliers, joint coordinates, drive values.
+    subroutine sample(i, stat)
+      integer, intent(in) :: i
+      integer, intent(out) :: stat
+      real(dp), allocatable :: u(:), xdot(:)
+      integer :: k
+      select type (sys)
+      type is (mbs_controlled)
+        allocate (u(sys%nc), xdot(sys%nc + 1))
+        call controlled_eval(sys, ts(i), y, zddf(:, i), lam, u, xdot, stat)
+      class default
+        call mbs_accelerations(sys, y(1:n), y(n + 1:2*n), ts(i), zddf(:, i), lam, stat)
+      end select
+      if (stat /= STATUS_OK) return
+      zf(:, i) = y(1:n); zdf(:, i) = y(n + 1:2*n); lamf(:, i) = lam
+      call mbs_joint_coordinates(sys, zddf(:, i), ts(i), jqf(:, :, i))     ! at y, as the accelerations
+      call mbs_drive_values(sys, ts(i), lam, dvf(:, i))
+      select type (sys)
+      type is (mbs_controlled)
+        do k = 1, sys%nc
+          dvf(sys%drive(k), i) = dvf(sys%drive(k), i) + u(k)
+        end do
+        if (present(uf)) uf(1:sys%nc, i) = u
+        if (present(xf)) xf(1:sys%nc + 1, i) = y(2*n + 1:)
+      end select
+    end subroutine sample
+
     subroutine settle(stat)
       integer, intent(out) :: stat
       real(dp) :: z(n), zd(n)
-      z = st%y(1:n); zd = st%y(n + 1:)
+      z = st%y(1:n); zd = st%y(n + 1:2*n)
       call mbs_project(sys, z, zd, st%t, tol, 3, stat)
       if (stat /= STATUS_OK) return
-      st%y = [z, zd]
+      st%y(1:2*n) = [z, zd]
       call sys%rhs(st%t, st%y, st%f, stat)        ! leaves the constraints evaluated at the new point
       if (stat /= STATUS_OK) return
       gr = mbs_gram_rcond(sys)
@@ -225,5 +258,15 @@ contains
     end subroutine settle
 
   end subroutine dynamic_samples
+
+  !> States of the integration beyond [z, zd]: a controlled system's integrals and work, none otherwise.
+  integer function extra_states(sys) result(nx)
+    class(mbs_system), intent(in) :: sys
+    nx = 0
+    select type (sys)
+    type is (mbs_controlled)
+      nx = sys%nc + 1
+    end select
+  end function extra_states
 
 end module flexmech_motion

@@ -26,7 +26,7 @@ from .drives import KINEMATIC_LAWS, LAW_PARAMS, Drive, cubic_spline
 from .feedforward import INVERSE_DYNAMICS
 from .schema import table_samples
 
-__all__ = ["check_controllers", "refuse_superposition", "loop_suspect", "ControlPack", "pack_controllers", "CONTROL_NST", "MAX_DELAY_STEPS"]
+__all__ = ["check_controllers", "refuse_superposition", "closes_in_rigid_motion", "rigid_pack", "loop_suspect", "ControlPack", "pack_controllers", "CONTROL_NST", "MAX_DELAY_STEPS"]
 
 KEYS = {"shaper", "name", "joint", "kp", "ki", "kd", "limit", "limits", "reference", "feedforward", "sample_time", "delay",
         "measure"}
@@ -42,8 +42,6 @@ def check_controllers(raw, mech, solver: dict) -> list:
         return []
     if not isinstance(raw, list):
         raise CaseError("controllers", "must be an array of tables [[controllers]] (joint, kp, ki, kd, reference)")
-    if solver["model"] != "auto":
-        refuse_superposition({"controllers": raw}, solver["model"])
     out, names = [], set()
     for i, c in enumerate(raw):
         w = f"controllers[{i}]"
@@ -68,18 +66,59 @@ def check_controllers(raw, mech, solver: dict) -> list:
                     "feedforward": _feedforward(c.get("feedforward"), f"{w}.feedforward"),
                     **_timing(c, w, solver["dt"]), "measure": _measure(c, w), **_shaper(c, w)}
         out.append({k: x for k, x in resolved.items() if x is not None})   # (written back as TOML)
+    if solver["model"] != "auto":
+        refuse_superposition({"controllers": out}, solver["model"])
     return out
 
 
 def refuse_superposition(case: dict, model: str) -> None:
-    """CaseError when a case with controllers is to run under a superposition model (docs/theory.md 23.3:
-    a loop that feeds the elastic motion back cannot close in a one-way model; the rigid-body loop alone
-    is not built yet)."""
-    if case.get("controllers") and model not in CONSTRAINED:
-        raise CaseError("solver.model", f"{model!r} cannot close the loop of controller "
-                                        f"{_name(case['controllers'][0])!r} (the superposition models solve the "
-                                        "rigid motion before the elastic one); use model = \"coupled\" or "
-                                        "\"nonlinear\"")
+    """CaseError when a controller of the case cannot close its loop in ``model`` (docs/theory.md 23.3): a
+    superposition model integrates the rigid-body motion first and the elastic motion after it, one way,
+    so it closes a collocated, continuous loop (the joint's own coordinate and rate) inside the rigid-body
+    integration, and refuses a loop on a measured point (the deflection never reaches the rigid motion)
+    and a sampled or delayed one (its rigid-body integration has no sample instants)."""
+    if model in CONSTRAINED:
+        return
+    for i, c in enumerate(case.get("controllers") or []):
+        why = _rigid_refusal(c, model)
+        if why is not None:
+            raise CaseError(f"controllers[{i}].{why[0]}", why[1])
+
+
+def closes_in_rigid_motion(case: dict) -> bool:
+    """Whether the case has controllers and every one closes inside the rigid-body integration (collocated,
+    continuous): then the rigid-body motion of the case is the controlled one (flexmech_mbs_control)."""
+    ctl = case.get("controllers") or []
+    return bool(ctl) and all(_rigid_refusal(c, "hac") is None for c in ctl)
+
+
+def _rigid_refusal(c: dict, model: str):
+    """(field, reason) why controller c cannot close in the rigid-body integration of ``model``, or None."""
+    m = c.get("measure", "joint")
+    if m != "joint":
+        what = (m.get("point") or f"the strain of {m.get('strain')}") if isinstance(m, dict) else m
+        return "measure", (f"controller {_name(c)!r} measures {what!r} (non-collocated); {model!r} integrates the "
+                           "rigid-body motion before the elastic motion, one way, so the deflection it would feed back "
+                           "never reaches the rigid motion the controller drives: use model = \"coupled\" or "
+                           "\"nonlinear\" (or measure = \"joint\")")
+    for key in ("sample_time", "delay"):
+        x = c.get(key, 0.0)
+        if isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0:
+            return key, (f"controller {_name(c)!r} has {key} = {x} s; {model!r} closes a continuous loop inside "
+                         f"its rigid-body integration (no sample instants there): remove {key} (and its zero-order "
+                         "hold or delay) or use model = \"coupled\" or \"nonlinear\"")
+    return None
+
+
+def rigid_pack(case: dict, packed, dt: float):
+    """The case's controllers packed for the rigid-body integration of ``packed`` (its force drives in
+    their packed order), or None when they do not all close there (:func:`closes_in_rigid_motion`)."""
+    if not closes_in_rigid_motion(case):
+        return None
+    mech = case.mechanism
+    revolute = {j.name for j in mech.joints if j.angular}
+    forces = [d.joint for d in packed.drives if not d.kinematic]
+    return pack_controllers(case["controllers"], forces, revolute, dt, {})
 
 
 def loop_suspect(case: dict, columns: dict) -> str | None:
@@ -266,6 +305,7 @@ class ControlPack:
     def __init__(self, controllers: list, force_joints: list, revolute: set, dt: float, rows: dict,
                  scales: dict | None = None):
         n = max(1, len(controllers))
+        self.dt = dt
         self.names = [c["name"] for c in controllers]
         self.joints = [c["joint"] for c in controllers]
         self.cint = np.zeros((12, n), np.int32, order="F")

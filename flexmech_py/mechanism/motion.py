@@ -57,13 +57,20 @@ class LinkMotion:
 class RigidMotion:
     """The motion sampled at times t (N,): body coordinates z, zd, zdd (N, n) (centre of mass and
     frame angle per body), multipliers lam (N, nrow), joint coordinates jq (N, nj, 3) [value, rate,
-    acceleration], the drives' generalized forces dv (N, ndrives); q, qd, qdd (N, ndof) the
-    coordinates of the primary joints; ``motion`` the links' LinkMotion."""
+    acceleration], the drives' generalized forces dv (N, ndrives) (with the outputs of the controllers
+    acting through them); q, qd, qdd (N, ndof) the coordinates of the primary joints; ``motion`` the
+    links' LinkMotion; ``control`` and ``integral`` (N, nc) the outputs [N m or N] and error integrals
+    of the controllers closed in the rigid-body integration (nc = 0 without them), ``work`` (N,) [J]
+    the work of the force drives and those controllers on the rigid-body motion (None without them)."""
 
-    def __init__(self, setup: MotionSetup, t, z, zd, zdd, lam, jq, dv, motion: LinkMotion | None = None):
+    def __init__(self, setup: MotionSetup, t, z, zd, zdd, lam, jq, dv, motion: LinkMotion | None = None,
+                 control=None, integral=None, work=None):
         self.setup = setup
         self.t, self.z, self.zd, self.zdd, self.lam, self.jq, self.dv = t, z, zd, zdd, lam, jq, dv
         self._motion = motion          # None: computed on first use
+        self.control = np.zeros((t.size, 0)) if control is None else control
+        self.integral = np.zeros((t.size, 0)) if integral is None else integral
+        self.work = work
 
     def _primary(self, k: int) -> np.ndarray:
         names = [j.name for j in self.setup.mech.joints]
@@ -90,7 +97,8 @@ class RigidMotion:
 
     def select(self, idx) -> "RigidMotion":
         return RigidMotion(self.setup, self.t[idx], self.z[idx], self.zd[idx], self.zdd[idx], self.lam[idx],
-                           self.jq[idx], self.dv[idx], None if self._motion is None else self._motion.select(idx))
+                           self.jq[idx], self.dv[idx], None if self._motion is None else self._motion.select(idx),
+                           self.control[idx], self.integral[idx], None if self.work is None else self.work[idx])
 
     @staticmethod
     def concat(parts) -> "RigidMotion":
@@ -98,7 +106,9 @@ class RigidMotion:
         return RigidMotion(parts[0].setup, *(np.concatenate([getattr(p, k) for p in parts])
                                              for k in ("t", "z", "zd", "zdd", "lam", "jq", "dv")),
                            None if any(p._motion is None for p in parts)
-                           else LinkMotion.concat([p._motion for p in parts]))
+                           else LinkMotion.concat([p._motion for p in parts]),
+                           *(np.concatenate([getattr(p, k) for p in parts]) for k in ("control", "integral")),
+                           None if parts[0].work is None else np.concatenate([p.work for p in parts]))
 
     def joint(self, name: str) -> np.ndarray:
         """(N, 3) [coordinate, rate, acceleration] of a joint (rad or m)."""
@@ -179,10 +189,14 @@ def _link_motion(mech: Mechanism, z, zd, zdd) -> LinkMotion:
 class MotionSource:
     """The rigid-body motion of a prepared mechanism as a function of time: ``source(t)`` is the
     RigidMotion on any increasing grid t >= 0.  ``rtol``, ``atol``: the dynamic mode's error
-    tolerances; ``hmax`` its largest step [s]."""
+    tolerances; ``hmax`` its largest step [s]; ``controls``: the collocated feedback controllers closed
+    in the dynamic mode (flexmech_py.mechanism.control: rigid_pack; their integrals are states of the
+    integration, docs/theory.md 23.3), or None."""
 
-    def __init__(self, setup: MotionSetup, rtol: float = 1e-10, atol: float = 1e-12, hmax: float = np.inf):
+    def __init__(self, setup: MotionSetup, rtol: float = 1e-10, atol: float = 1e-12, hmax: float = np.inf,
+                 controls=None):
         self.setup, self.rtol, self.atol = setup, float(rtol), float(atol)
+        self.controls = controls if setup.mode == "dynamic" else None
         self.hmax = float(min(hmax, 1e300))
         self.tol = POSITION_TOL * setup.packed.lref
         self.stats = {"steps": 0, "rejected": 0, "rhs": 0, "rcond_low": np.inf}
@@ -195,24 +209,37 @@ class MotionSource:
             self._t_from = 0.0
             self._sample(np.array([0.0]))       # velocities and accelerations at t = 0 for the extrapolation
             return
-        nst = kernels.mbs.mbs_state_size(p.n)
-        self._state, status = kernels.mbs.mbs_dynamic_start(nst, p.ispec, p.rspec, 0.0, st.z0, st.zd0, self.rtol,
-                                                            self.atol, self.hmax, self.tol)
+        self._state, status = self._start(0.0, st.z0, st.zd0, None)
         kernels.check_status(status, "rigid-body dynamics (start)", time=0.0, detail=self._detail(st.z0, 0.0))
         self._t_from = 0.0
 
-    def restart_at(self, t: float, z, zd) -> None:
+    def _start(self, t: float, z, zd, extra):
+        """(state, status) of the dynamic mode started at (t, z, zd); with controllers, ``extra`` their
+        integrals and the drives' work (None: zero, a fresh start) and the references' starts of t = 0
+        (kept from the state when it continues)."""
+        p, c = self.setup.packed, self.controls
+        if c is None:
+            nst = kernels.mbs.mbs_state_size(p.n)
+            return kernels.mbs.mbs_dynamic_start(nst, p.ispec, p.rspec, t, z, zd, self.rtol, self.atol, self.hmax,
+                                                 self.tol)
+        nc = len(c.names)
+        nst = kernels.mbs.mbs_controlled_state_size(p.n, nc)
+        start = np.full(nc, np.nan) if extra is None else self._state[-nc:]
+        x0, w0 = (np.zeros(nc), 0.0) if extra is None else (np.asarray(extra[0], float), float(extra[1]))
+        return kernels.mbs.mbs_controlled_start(nst, p.ispec, p.rspec, c.cint, c.cpar, c.ctab_t, c.ctab_c, c.dt, t,
+                                                z, zd, x0, w0, start, self.rtol, self.atol, self.hmax, self.tol)
+
+    def restart_at(self, t: float, z, zd, extra=None) -> None:
         """Continue the motion from the state (z, zd) at time t [s] with the description as it is now
         (a force drive's law changed at t, flexmech_py.run.stepping): the dynamic mode starts its
-        integration afresh there; the kinematic mode, whose samples do not depend on the force laws,
-        goes on as it was."""
+        integration afresh there (with controllers, ``extra`` = (their integrals, the drives' work) at t,
+        their references as they were); the kinematic mode, whose samples do not depend on the force laws, goes on as it was."""
         if self.setup.mode == "kinematic":
             return
-        p = self.setup.packed
-        nst = kernels.mbs.mbs_state_size(p.n)
         z, zd = np.asarray(z, float), np.asarray(zd, float)
-        self._state, status = kernels.mbs.mbs_dynamic_start(nst, p.ispec, p.rspec, float(t), z, zd, self.rtol,
-                                                            self.atol, self.hmax, self.tol)
+        if self.controls is not None and extra is None:
+            raise ValueError("restart_at: a motion with controllers continues from their integrals and work")
+        self._state, status = self._start(float(t), z, zd, extra)
         if status:
             kernels.check_status(status, "rigid-body dynamics (restart)", time=float(t), detail=self._detail(z, float(t)))
         self._t_from = float(t)
@@ -234,10 +261,18 @@ class MotionSource:
         return self._sample(t)
 
     def _sample(self, t: np.ndarray) -> RigidMotion:
-        p = self.setup.packed
+        p, ctl = self.setup.packed, (None, None, None)
         if self.setup.mode == "kinematic":
             zf, zdf, zddf, lamf, jqf, dvf, nvalid, status, fail_t, rlow = kernels.mbs.mbs_kinematic(
                 p.nrow, p.nj, max(len(p.drives), 1), p.ispec, p.rspec, t, self._state, self.tol, KINEMATIC_RCOND_MIN)
+        elif self.controls is not None:
+            c = self.controls
+            zf, zdf, zddf, lamf, jqf, dvf, uf, xf, nvalid, status, fail_t, rlow = kernels.mbs.mbs_controlled_dynamic(
+                p.n, p.nrow, p.nj, max(len(p.drives), 1), p.ispec, p.rspec, c.cint, c.cpar, c.ctab_t, c.ctab_c, c.dt,
+                t, self._state, self.hmax, self.tol, DYNAMIC_GRAM_MIN)
+            ctl = (uf.T[:nvalid], xf.T[:nvalid, :-1], xf[-1, :nvalid])
+            self.stats.update(steps=int(self._state[1]), rejected=int(self._state[2]), rhs=int(self._state[3]))
+            self._t_from = float(self._state[6])
         else:
             zf, zdf, zddf, lamf, jqf, dvf, nvalid, status, fail_t, rlow = kernels.mbs.mbs_dynamic(
                 p.n, p.nrow, p.nj, max(len(p.drives), 1), p.ispec, p.rspec, t, self._state, self.hmax, self.tol,
@@ -246,7 +281,7 @@ class MotionSource:
             self._t_from = float(self._state[6])
         self.stats["rcond_low"] = min(self.stats["rcond_low"], float(rlow))
         rm = RigidMotion(self.setup, t[:nvalid], zf.T[:nvalid], zdf.T[:nvalid], zddf.T[:nvalid], lamf.T[:nvalid],
-                         jqf.transpose(2, 1, 0)[:nvalid], dvf.T[:nvalid, :len(p.drives)])
+                         jqf.transpose(2, 1, 0)[:nvalid], dvf.T[:nvalid, :len(p.drives)], None, *ctl)
         if status != 0:
             z_at = zf[:, nvalid - 1] if nvalid else self.setup.z0
             try:

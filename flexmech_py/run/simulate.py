@@ -15,7 +15,7 @@ from ..base.errors import CaseError, MechanismError, SolverError
 from ..checks import guards, step_doubling
 from ..base import notices
 from ..models.constrained import outputs as cpl_out
-from ..mechanism.control import refuse_superposition
+from ..mechanism.control import refuse_superposition, rigid_pack
 from ..models.constrained.coupled import CoupledModel
 from ..mechanism import MotionSource, prepare_motion
 from ..mechanism.motion import RigidMotion
@@ -37,7 +37,8 @@ def motion_source(case: dict) -> MotionSource:
     """The rigid-body motion of a resolved case as a function of time (flexmech_py.mechanism.motion)."""
     setup = prepare_motion(case.mechanism, case["loads"]["gravity"])
     sol = case["solver"]
-    return MotionSource(setup, rtol=sol["rigid_rtol"], atol=sol["rigid_atol"], hmax=sol["t_end"])
+    return MotionSource(setup, rtol=sol["rigid_rtol"], atol=sol["rigid_atol"], hmax=sol["t_end"],
+                        controls=rigid_pack(case, setup.packed, sol["dt"]))
 
 
 def rigid_motion(case: dict, t: np.ndarray) -> RigidMotion:
@@ -455,6 +456,10 @@ class Prepared:
         z_ref = acc.deflection(rmf.t, lambda p: joint_at_joint(fe, rmf, p, 0, u_all))
         columns = evaluate_outputs(fe, case["outputs"], u_all, motion_f, rig_f, model, rm=rmf, axial=nf,
                                    rates=(v_all, a_all), reactions=reactions, z_ref=z_ref)
+        units = {name: output_unit(sp, case) for name, sp in case["outputs"].items()}
+        if self.source.controls is not None:     # the controllers closed in the rigid-body integration
+            add_control_columns(case, dict(zip(self.source.controls.names, rmf.control.T)), columns, units)
+            columns["work_inputs"], units["work_inputs"] = rmf.work, "J"     # on the rigid-body motion
         extra = {"integrator": integrator_summary(sol, model)}
         if sol["geometric_stiffness"] != "none":
             extra["geometric_stiffness"] = {"source": sol["geometric_stiffness"], "iterations": acc.geo_iters,
@@ -462,8 +467,7 @@ class Prepared:
         if reactions.checked:
             acc.reaction_residual = max(acc.reaction_residual, reactions.residual)
             extra["reactions"] = dict(reactions.summary(), equilibrium_residual=acc.reaction_residual)
-        res = Result(case=case, model=model, t=rmf.t, columns=columns,
-                     units={name: output_unit(sp, case) for name, sp in case["outputs"].items()}, fe=fe,
+        res = Result(case=case, model=model, t=rmf.t, columns=columns, units=units, fe=fe,
                      q=rmf.q, qd=rmf.qd, qdd=rmf.qdd, u=u_all, v=v_all, a=a_all, rig=rig_f, nsteps=self.nsteps,
                      dt=self.dt, timing=acc.timing(), extra=extra, axial=nf, motion=motion_f, rigid=rmf,
                      steps=i0 + oe * np.arange(uf.shape[1]), curvature_of=superposition_curvature,
@@ -539,10 +543,7 @@ class Prepared:
             columns[k], units[k] = y, "J"
         columns["newton_iterations"], units["newton_iterations"] = ef[3], "1"
         columns.update(drive_columns(cm, fr, units))
-        for name, u in cm.control_outputs(qf.shape[1]).items():      # the feedback controllers' outputs
-            joint = next(c["joint"] for c in case["controllers"] if c["name"] == name)
-            columns[f"control_{name}"] = u
-            units[f"control_{name}"] = "N m" if case.mechanism.joint(joint).angular else "N"
+        add_control_columns(case, cm.control_outputs(qf.shape[1]), columns, units)
         diag.add(fr, ef, rmf, iters, cval[:, :, idx])
         extra = {"integrator": integrator_summary(sol, model), "coupled": diag.summary(steps_done),
                  "step_alternation": cpl_out.multiplier_alternation(cm, alternating, lf,
@@ -574,6 +575,14 @@ class Prepared:
                                   "rigid_steps": self.source.stats.get("steps", 0)}
         res.extra["warnings"] = list(st.warnings) + list(res.extra.get("warnings", []))
         res.extra["warning_kinds"] = {**notices.kinds_of(st.warnings, "mechanism"), **res.extra.get("warning_kinds", {})}
+
+
+def add_control_columns(case, outputs: dict, columns: dict, units: dict) -> None:
+    """The feedback controllers' outputs {name: (nf,)} as the columns control_<name> [N m or N]."""
+    for name, u in outputs.items():
+        joint = next(c["joint"] for c in case["controllers"] if c["name"] == name)
+        columns[f"control_{name}"] = u
+        units[f"control_{name}"] = "N m" if case.mechanism.joint(joint).angular else "N"
 
 
 def simulate(case: dict, model: str | None = None, *, dt: float | None = None,

@@ -88,7 +88,8 @@ class RigidBuffer:
         packed = dataclasses.replace(setup.packed, rspec=setup.packed.rspec.copy())
         self.setup = dataclasses.replace(setup, packed=packed)
         sol = prep.case["solver"]
-        self.source = MotionSource(self.setup, rtol=sol["rigid_rtol"], atol=sol["rigid_atol"], hmax=sol["t_end"])
+        self.source = MotionSource(self.setup, rtol=sol["rigid_rtol"], atol=sol["rigid_atol"], hmax=sol["t_end"],
+                                   controls=prep.source.controls)
         self.positions = force_constant_positions(packed)
         self.current = None
         self.ahead = RIGID_AHEAD        # steps sampled ahead: from one after a change of effort, doubling
@@ -107,7 +108,8 @@ class RigidBuffer:
         c, a = self.chunk(i, 0)
         for joint, value in values.items():
             self.setup.packed.rspec[self.positions[joint]] = float(value)
-        self.source.restart_at(float(c.rm.t[a]), c.rm.z[a], c.rm.zd[a])
+        self.source.restart_at(float(c.rm.t[a]), c.rm.z[a], c.rm.zd[a],
+                               (c.rm.integral[a], c.rm.work[a]) if self.source.controls is not None else None)
         self.current, self.ahead = None, 1
 
     def copy(self) -> "RigidBuffer":
