@@ -247,10 +247,10 @@ def saturation() -> dict:
 SHAPER_SPAN = {None: 0.0, "zv": 0.5, "zvd": 1.0}
 
 
-def bricout() -> dict:
+def bricout(model: str | None = None) -> dict:
     """The bundled Bricout PD cases: the residual vibration in the 0.5 s after each (shaped) move
     ends (half the peak-to-peak bending strain at the base and tip height), the peak strain, and
-    whether the base's actuator reached its limit."""
+    whether the base's actuator reached its limit; ``model``: another model than the cases' own."""
     out = {}
     for name in ("manipulator_bricout_pd", "manipulator_bricout_pd_zv", "manipulator_bricout_pd_zvd"):
         case = load_case(case_path(name))
@@ -258,7 +258,7 @@ def bricout() -> dict:
         shaper = ctl.get("shaper")
         span = SHAPER_SPAN[shaper and shaper["kind"]] / shaper["frequency_hz"] if shaper else 0.0
         end = ctl["reference"]["duration"] + span
-        c = run(case)
+        c = run(case, model)
         t, s, tip = c.t, c.columns["root_strain"], c.columns["tip_y"]
         w = (t >= end) & (t <= end + 0.5)
         out[name] = {"move_end_s": end, "residual_strain_amplitude": float((s[w].max() - s[w].min()) / 2),
@@ -290,7 +290,8 @@ def main() -> None:
     for name, fn in (("rigid limit", rigid_limit), ("flexible link energy", flexible_energy),
                      ("saturation", saturation), ("collocated stability", collocated_stability),
                      ("tip feedback, undamped", tip_undamped), ("tip feedback, damped", tip_damped),
-                     ("tip P feedback", tip_proportional), ("bricout", bricout), ("cost", cost)):
+                     ("tip P feedback", tip_proportional), ("bricout", bricout),
+                     ("bricout under hac", lambda: bricout("hac")), ("cost", cost)):
         print(name, fn())
 
 
