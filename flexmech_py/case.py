@@ -296,7 +296,7 @@ def validate_case(raw: dict, source: str = "<case>") -> Case:
     resolve_feedforward(controllers, mech, r["loads"]["gravity"], r["solver"])
     if controllers:
         r["controllers"] = controllers
-        if r["solver"]["model"] == "auto":      # (the superposition models cannot close a loop)
+        if r["solver"]["model"] == "auto":      # (a one-way model misses the loop's action on the deflection)
             r["solver"]["model"] = "nonlinear"
     if "outputs" not in general:
         raise CaseError("outputs", "is missing; add an [outputs] table naming what to record, e.g. "

@@ -13,8 +13,8 @@ from ..case import integrator_coefficients, integrator_of
 from .frames import continue_angles, select_frames
 from .results import Result
 
-__all__ = ["Accumulated", "last_values", "after_first", "coupled_curvature", "drive_column_joints", "drive_columns",
-           "integrator_summary"]
+__all__ = ["Accumulated", "add_control_columns", "last_values", "after_first", "coupled_curvature",
+           "drive_column_joints", "drive_columns", "integrator_summary"]
 
 
 class Accumulated:
@@ -82,6 +82,14 @@ def drive_columns(cm, fr, units: dict) -> dict:
         out[name] = cpl_out.drive_force(cm, fr, joint)
         units[name] = "N m" if cm.case.mechanism.joint(joint).angular else "N"
     return out
+
+
+def add_control_columns(case, outputs: dict, columns: dict, units: dict) -> None:
+    """The feedback controllers' outputs {name: (nf,)} as the columns control_<name> [N m or N]."""
+    for name, u in outputs.items():
+        joint = next(c["joint"] for c in case["controllers"] if c["name"] == name)
+        columns[f"control_{name}"] = u
+        units[f"control_{name}"] = "N m" if case.mechanism.joint(joint).angular else "N"
 
 
 def integrator_summary(sol: dict, model: str) -> dict:

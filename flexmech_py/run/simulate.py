@@ -23,8 +23,8 @@ from ..models.superposition.model import FEModel
 from ..models.motion_tap import MotionTap
 from ..models.superposition.outputs import DeflectionReference, evaluate_outputs, joint_at_joint, output_unit
 from ..models.superposition.reactions import ModelReactions
-from .blocks import (Accumulated, after_first, coupled_curvature, drive_column_joints, drive_columns,
-                     integrator_summary, last_values)
+from .blocks import (Accumulated, add_control_columns, after_first, coupled_curvature, drive_column_joints,
+                     drive_columns, integrator_summary, last_values)
 from ..models.superposition.loads import (axial_stretch, check_elastic_problem, elastic_torque_loads,
                                           superposition_curvature, superposition_node_curvatures)
 from .results import Result
@@ -575,14 +575,6 @@ class Prepared:
                                   "rigid_steps": self.source.stats.get("steps", 0)}
         res.extra["warnings"] = list(st.warnings) + list(res.extra.get("warnings", []))
         res.extra["warning_kinds"] = {**notices.kinds_of(st.warnings, "mechanism"), **res.extra.get("warning_kinds", {})}
-
-
-def add_control_columns(case, outputs: dict, columns: dict, units: dict) -> None:
-    """The feedback controllers' outputs {name: (nf,)} as the columns control_<name> [N m or N]."""
-    for name, u in outputs.items():
-        joint = next(c["joint"] for c in case["controllers"] if c["name"] == name)
-        columns[f"control_{name}"] = u
-        units[f"control_{name}"] = "N m" if case.mechanism.joint(joint).angular else "N"
 
 
 def simulate(case: dict, model: str | None = None, *, dt: float | None = None,

@@ -113,8 +113,13 @@ class RigidBuffer:
         self.current, self.ahead = None, 1
 
     def copy(self) -> "RigidBuffer":
+        """An independent buffer at the same point, with a description of its own (a later effort set
+        on one does not reach the other's force laws)."""
         other = copy.copy(self)
+        packed = dataclasses.replace(self.setup.packed, rspec=self.setup.packed.rspec.copy())
+        other.setup = dataclasses.replace(self.setup, packed=packed)
         other.source = self.source.fork()
+        other.source.setup = other.setup
         return other
 
 
