@@ -105,8 +105,8 @@ def _rigid_refusal(c: dict, model: str):
         x = c.get(key, 0.0)
         if isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0:
             return key, (f"controller {_name(c)!r} has {key} = {x} s; {model!r} closes a continuous loop inside "
-                         f"its rigid-body integration (no sample instants there): remove {key} (and its zero-order "
-                         "hold or delay) or use model = \"coupled\" or \"nonlinear\"")
+                         f"its rigid-body integration (no sample instants there): remove {key} (the loop then acts "
+                         "continuously) or use model = \"coupled\" or \"nonlinear\"")
     return None
 
 
