@@ -263,3 +263,18 @@ def test_probes_take_the_rigid_motion_of_the_run():
 def test_quoted_digits_follow_the_error(value, err, text):
     assert quote(value, err) == text
     assert significant_digits(1.0, 1e-9) == 4
+
+
+def test_a_model_error_checked_over_only_the_start_of_the_run_is_a_warning():
+    """The Bricout PD arm's model-error probe (the coupled model at the probe's coarser step) stops within
+    the first millisecond: the run warns that its model error is checked only up to there (a lower bound)
+    and names the exact model to compare with; a run whose probes reach its end (the seed four-bar) does
+    not."""
+    res = Prepared(fm.load_case("manipulator_bricout_pd", ["solver.t_end=0.02"])).run("coupled")
+    b = res.extra["error_budget"]
+    stopped = [r["stopped_at_s"] for r in b["probes"]["runs"] if r["role"] in ("model", "reference")
+               and r["stopped_at_s"] is not None]
+    assert stopped and min(stopped) < 0.018
+    assert "checked only over [0," in b["model_unchecked"] and "--model nonlinear" in b["model_unchecked"]
+    quiet = Prepared(fm.load_case(CASES / "fourbar_hac.toml", ["solver.t_end=0.01"])).run("hac")
+    assert "model_unchecked" not in quiet.extra["error_budget"]

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import mesh_error, model_error, scales, step_doubling
 from ..base import notices
-from .budget_text import budget_warning
+from .budget_text import budget_warning, unchecked_model_warning
 from ..case import SUPERPOSITION_MODELS, Case
 from ..base.errors import CaseError
 from .probes import SKIP_COLUMNS, Matcher, Probe
@@ -259,6 +259,10 @@ class ErrorBudget:
         if warn is not None:
             out["warning"] = warn
             notices.add(res.extra, warn["message"], "accuracy")
+        unchecked = unchecked_model_warning(out, float(res.t[-1]), self.model)
+        if unchecked is not None:
+            out["model_unchecked"] = unchecked
+            notices.add(res.extra, unchecked, "accuracy")
         return out
 
     def _column(self, name: str, peak: float, est: dict, tiny: str) -> dict:

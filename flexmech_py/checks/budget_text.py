@@ -11,7 +11,7 @@ from . import mesh_error, model_error
 from ..definitions import rigid_in_superposition
 from ..base.families import family, large_deflection_reference
 
-__all__ = ["budget_warning", "budget_lines", "choice_lines", "pct", "significant_digits", "quote"]
+__all__ = ["budget_warning", "unchecked_model_warning", "budget_lines", "choice_lines", "pct", "significant_digits", "quote"]
 
 PART_NAMES = {"time": "time-step", "mesh": "mesh", "model": "model"}
 
@@ -96,6 +96,23 @@ def budget_warning(out: dict, est: dict, prep, model: str, geometric) -> dict | 
            f"tolerance of {pct(out['tolerance'])} (solver.tolerance){more}; the {PART_NAMES[c['dominant']]} error "
            f"dominates: {remedy}")
     return {"column": w, "dominant": c["dominant"], "remedy": remedy, "message": msg}
+
+
+def unchecked_model_warning(out: dict, t_end: float, model: str) -> str | None:
+    """The warning of a budget whose model error covers less than 90 % of the run (a probe run stopped):
+    beyond that time the run's answer is unchecked against the exact model; None otherwise."""
+    if not any("model" in c.get("lower_bound", ()) for c in out["columns"].values() if "negligible" not in c):
+        return None
+    runs = [r for r in out["probes"].get("runs", []) if r["role"] in ("model", "reference")
+            and r.get("stopped_at_s") is not None]
+    if not runs or min(r["stopped_at_s"] for r in runs) >= 0.9 * t_end:
+        return None
+    r = min(runs, key=lambda r: r["stopped_at_s"])
+    exact = large_deflection_reference().name
+    return (f"error budget: the model error of {model} is checked only over [0, {r['stopped_at_s']:.3g}] s of "
+            f"{t_end:.3g} s (its probe run of {r['model']} at dt {r['dt']:.3g} s stopped there), so the table's "
+            f"model column is a lower bound: the answer may be off by more; compare with --model {exact}, at a "
+            "smaller --dt if it stops")
 
 
 def _probe_words(b: dict) -> str:
