@@ -158,7 +158,7 @@ def test_closed_loop_eigenvalues_refuse_a_sampled_law_and_superposition_models()
     raw["controllers"][0]["sample_time"] = 1e-3
     with pytest.raises(CaseError, match="continuous"):
         linearize_loop(validate_case(raw))
-    with pytest.raises(CaseError, match="cannot close a loop"):
+    with pytest.raises(CaseError, match="superposes them on a rigid motion"):
         linearize_loop(validate_case(small_move(1.0)), model="classic")
     with pytest.raises(CaseError, match="no controller named"):
         linearize_loop(validate_case(small_move(1.0)), "elbow")

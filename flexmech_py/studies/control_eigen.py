@@ -205,7 +205,9 @@ def linearize_loop(case, controllers=None, *, model: str | None = None,
     chosen = _controllers(case, controllers)
     model = study_model(model, case)
     if family(model).superposition:
-        raise CaseError("--model", f"{model!r} cannot close a loop (theory.md 23.3); use coupled or nonlinear")
+        raise CaseError("--model", f"the closed-loop eigenvalues linearize a finite-element model with its "
+                                   f"elastic coordinates; {model!r} superposes them on a rigid motion computed "
+                                   "first (theory.md 23.3): use coupled or nonlinear")
     cm = CoupledModel.from_case(case, split=family(model).element_frames)
     rm = motion_source(case)(np.array([0.0]))
     lz = modal.coupled_linearized(cm, rm, 0, case["loads"]["gravity"], case["solver"]["rayleigh"])
