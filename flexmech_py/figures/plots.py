@@ -259,7 +259,8 @@ def line_figure(path, panels, *, title=None, xlabel="t [s]"):
         elif shared:
             ax.tick_params(labelbottom=False)
     if title:   # centred over the axes, not over a figure widened for a legend beside them
-        fig.suptitle(title, fontsize=10.5, x=0.5 * (left + right))
+        fig.suptitle(title, fontsize=10.5, x=0.5 * (left + right), y=1.0 - 0.12 / height, va="top")   # 0.12 in
+        # from the top whatever the height (the default 2 % of a tall figure reached the first panel)
     # fixed margins (tight_layout measures every text and doubles the drawing time)
     fig.subplots_adjust(left=left, right=right, bottom=bottom, top=top, hspace=hspace)
     save_figure(fig, path, dpi=100, pil_kwargs=PNG_OPTIONS)
