@@ -50,10 +50,8 @@ def check_controllers(raw, mech, solver: dict) -> list:
         v.keys(c, KEYS, w)
         joint = v.text(c, "joint", w, required=True)
         _force_driven(mech, joint, f"{w}.joint")
-        if isinstance(c.get("measure"), dict) and "point" in c["measure"]:
-            mech.point(c["measure"]["point"], f"{w}.measure.point")
-        if isinstance(c.get("measure"), dict) and "strain" in c["measure"]:
-            _check_strain_measure(mech, _measure(c, w), f"{w}.measure")
+        measure = _measure(c, w)
+        _check_measured(mech, measure, f"{w}.measure")
         name = v.text(c, "name", w, default=f"{joint}_pid")
         if name in names:
             raise CaseError(f"{w}.name", f"{name!r} names two controllers; give each its own name")
@@ -64,7 +62,7 @@ def check_controllers(raw, mech, solver: dict) -> list:
         resolved = {"name": name, "joint": joint, **gains, "limits": _limits(c, w),
                     "reference": _reference(c.get("reference"), f"{w}.reference"),
                     "feedforward": _feedforward(c.get("feedforward"), f"{w}.feedforward"),
-                    **_timing(c, w, solver["dt"]), "measure": _measure(c, w), **_shaper(c, w)}
+                    **_timing(c, w, solver["dt"]), "measure": measure, **_shaper(c, w)}
         out.append({k: x for k, x in resolved.items() if x is not None})   # (written back as TOML)
     if solver["model"] != "auto":
         refuse_superposition({"controllers": out}, solver["model"])
@@ -274,7 +272,13 @@ def _measure(c: dict, w: str):
     return {"point": point, "direction": [float(x) for x in d / np.linalg.norm(d)]}
 
 
-def _check_strain_measure(mech, m: dict, where: str) -> None:
+def _check_measured(mech, m, where: str) -> None:
+    """The measured point is the mechanism's; a strain gauge's link is flexible, with a half depth."""
+    if m == "joint":
+        return
+    if "point" in m:
+        mech.point(m["point"], f"{where}.point")
+        return
     link = next((ln for ln in mech.links if ln.name == m["strain"]), None)
     if link is None or link.rigid:
         names = ", ".join(ln.name for ln in mech.links if not ln.rigid)
