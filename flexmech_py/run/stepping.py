@@ -78,19 +78,23 @@ class RigidChunk:
         return self.rm.select(np.asarray(idx, int))
 
 
+def _own_description(setup):
+    """The motion set-up with a copy of its packed description's reals (the force laws' constants a
+    stepped run changes), the rest shared."""
+    return dataclasses.replace(setup, packed=dataclasses.replace(setup.packed, rspec=setup.packed.rspec.copy()))
+
+
 class RigidBuffer:
     """The rigid-body motion of a simulation, sampled ahead in chunks from a MotionSource of its own
     (with a description of its own, whose force laws the efforts change)."""
 
     def __init__(self, prep: Prepared):
         self.prep = prep
-        setup = prep.setup
-        packed = dataclasses.replace(setup.packed, rspec=setup.packed.rspec.copy())
-        self.setup = dataclasses.replace(setup, packed=packed)
+        self.setup = _own_description(prep.setup)
         sol = prep.case["solver"]
         self.source = MotionSource(self.setup, rtol=sol["rigid_rtol"], atol=sol["rigid_atol"], hmax=sol["t_end"],
                                    controls=prep.source.controls)
-        self.positions = force_constant_positions(packed)
+        self.positions = force_constant_positions(self.setup.packed)
         self.current = None
         self.ahead = RIGID_AHEAD        # steps sampled ahead: from one after a change of effort, doubling
 
@@ -116,8 +120,7 @@ class RigidBuffer:
         """An independent buffer at the same point, with a description of its own (a later effort set
         on one does not reach the other's force laws)."""
         other = copy.copy(self)
-        packed = dataclasses.replace(self.setup.packed, rspec=self.setup.packed.rspec.copy())
-        other.setup = dataclasses.replace(self.setup, packed=packed)
+        other.setup = _own_description(self.setup)
         other.source = self.source.fork()
         other.source.setup = other.setup
         return other
