@@ -41,8 +41,9 @@ def resolve_feedforward(controllers: list, mech, gravity, solver: dict) -> None:
     n = int(min(FF_SAMPLES, np.ceil(solver["t_end"] / solver["dt"]) + 1))
     t = np.linspace(0.0, solver["t_end"], max(n, 3))
     laws = {c["joint"]: _law_drive(mech, c, f"controllers[{i}]") for i, c in wanted}
-    drives = {c["joint"]: _shaped_drive(mech, c, laws, gravity, t, f"controllers[{i}].feedforward")
-              for i, c in wanted}
+    drives = dict(laws)
+    drives.update(_shaped_drives(mech, [c for _, c in wanted], laws, gravity, t,
+                                 f"controllers[{wanted[0][0]}].feedforward"))
     effort = _drive_efforts(mech, drives, gravity, t, f"controllers[{wanted[0][0]}].feedforward")
     for _, c in wanted:
         own = mech.drive_of(c["joint"]).params.get("constant") or 0.0
@@ -63,18 +64,25 @@ def _law_drive(mech, c: dict, w: str) -> Drive:
     return Drive(joint=c["joint"], law=ref["law"], params={k: x for k, x in ref.items() if k != "law"})
 
 
-def _shaped_drive(mech, c: dict, laws: dict, gravity, t: np.ndarray, w: str) -> Drive:
-    """Controller c's reference drive: its law's, or with a shaper the sum of the law's shifted copies
-    (its values at t - t_i from the motion the unshaped laws prescribe) as a table on t."""
-    if not c.get("shaper"):
-        return laws[c["joint"]]
-    sh = c["shaper"]
-    shaper = design(sh["kind"], sh["frequency_hz"], sh["damping"], sh["tolerance"])
-    shifted = [np.clip(t - ti, 0.0, None) for ti in shaper.times]
-    grid = np.unique(np.concatenate(shifted))
-    values = _joint_values(mech, laws, gravity, grid, w)[c["joint"]]
-    shaped = sum(a * np.interp(s, grid, values) for a, s in zip(shaper.amplitudes, shifted))
-    return Drive(joint=c["joint"], law="table", params={"t": [float(x) for x in t], "value": [float(x) for x in shaped]})
+def _shaped_drives(mech, controllers: list, laws: dict, gravity, t: np.ndarray, w: str) -> dict:
+    """{joint: its reference drive as a table on t} of the controllers with a shaper: the sum of their
+    law's shifted copies, the law's values at every t - t_i read from one motion the unshaped laws
+    prescribe (sampled on the union of those times)."""
+    shifts = {}
+    for c in controllers:
+        if c.get("shaper"):
+            sh = c["shaper"]
+            shaper = design(sh["kind"], sh["frequency_hz"], sh["damping"], sh["tolerance"])
+            shifts[c["joint"]] = [(a, np.clip(t - ti, 0.0, None)) for a, ti in zip(shaper.amplitudes, shaper.times)]
+    if not shifts:
+        return {}
+    grid = np.unique(np.concatenate([s for pairs in shifts.values() for _, s in pairs]))
+    values = _joint_values(mech, laws, gravity, grid, w)
+    out = {}
+    for j, pairs in shifts.items():
+        shaped = sum(a * np.interp(s, grid, values[j]) for a, s in pairs)
+        out[j] = Drive(joint=j, law="table", params={"t": [float(x) for x in t], "value": [float(x) for x in shaped]})
+    return out
 
 
 def _prescribed(mech, drives: dict, gravity, w: str):
