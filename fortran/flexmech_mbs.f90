@@ -35,7 +35,8 @@ module flexmech_mbs
   implicit none
   private
   public :: mbs_system, mbs_build, mbs_constraints, mbs_forces, mbs_accelerations, mbs_joint_coordinates, &
-            mbs_nspec_header, mbs_drive_values, mbs_drive_change, factor_augmented, solve_augmented, joint_coordinate
+            mbs_nspec_header, mbs_drive_values, mbs_drive_change, factor_augmented, solve_augmented, solve_dynamics, &
+            joint_coordinate
 
   integer, parameter :: NPAR = 4                   !< parameters per drive law (flexmech_drivelaw)
   integer, parameter :: mbs_nspec_header = 8       !< integers before the first block of ispec
@@ -322,6 +323,15 @@ contains
     integer, intent(out) :: status
     call mbs_constraints(sys, z, zd, t)
     call mbs_forces(sys, t, sys%q)
+    call solve_dynamics(sys, zdd, lam, status)
+  end subroutine mbs_accelerations
+
+  !> Accelerations zdd and multipliers lam from [M Phi_z^T; Phi_z 0][zdd; lam] = [sys%q; sys%gam] at the
+  !> last mbs_constraints (the applied forces in sys%q as the caller left them).
+  subroutine solve_dynamics(sys, zdd, lam, status)
+    type(mbs_system), intent(inout) :: sys
+    real(dp), intent(out) :: zdd(:), lam(:)
+    integer, intent(out) :: status
     call factor_augmented(sys, status)
     if (status /= STATUS_OK) return
     sys%sol(1:sys%n) = sys%q
@@ -329,7 +339,7 @@ contains
     call solve_augmented(sys, status)
     zdd = sys%sol(1:sys%n)
     lam = sys%sol(sys%n + 1:)
-  end subroutine mbs_accelerations
+  end subroutine solve_dynamics
 
   !> Factor the augmented matrix [M Phi_z^T; Phi_z 0] of the last mbs_constraints for solve_augmented.
   !> M is diagonal: when it is regular (every body has a rotary inertia), through the Gram matrix

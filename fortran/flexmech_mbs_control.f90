@@ -17,7 +17,7 @@ module flexmech_mbs_control
   use flexmech_lapack, only: STATUS_OK
   use flexmech_drivelaw, only: LAW_FORCE
   use flexmech_markers, only: MAXCOL
-  use flexmech_mbs, only: mbs_system, mbs_constraints, mbs_forces, factor_augmented, solve_augmented, joint_coordinate, &
+  use flexmech_mbs, only: mbs_system, mbs_constraints, mbs_forces, solve_dynamics, joint_coordinate, &
                           mbs_drive_values
   use flexmech_control, only: control_bank, ctl_setup, ctl_law, ctl_start, CTL_REF_START
   implicit none
@@ -92,13 +92,8 @@ contains
         sys%q(cols(c)) = sys%q(cols(c)) + u(j)*grad(c)
       end do
     end do
-    call factor_augmented(sys%mbs_system, status)
+    call solve_dynamics(sys%mbs_system, zdd, lam, status)
     if (status /= STATUS_OK) return
-    sys%sol(1:n) = sys%q
-    sys%sol(n + 1:) = sys%gam
-    call solve_augmented(sys%mbs_system, status)
-    zdd = sys%sol(1:n)
-    lam = sys%sol(n + 1:)
     call mbs_drive_values(sys%mbs_system, t, lam, dv)
     do j = 1, sys%nc
       dv(sys%drive(j)) = dv(sys%drive(j)) + u(j)
